@@ -1,0 +1,1 @@
+"""Speed benchmarks (run with ``python -m benchmarks.run_all``); results go in BENCHMARKS.md."""

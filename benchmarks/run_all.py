@@ -1,0 +1,22 @@
+"""Run every benchmark in this package: ``python -m benchmarks.run_all``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from benchmarks import bench_opensees_bridge
+
+BENCHMARKS: dict[str, Callable[[list[str] | None], None]] = {
+    "opensees_bridge": bench_opensees_bridge.main,
+}
+
+
+def main() -> None:
+    """Each benchmark prints its own table; see BENCHMARKS.md for the recorded results."""
+    for name, bench in BENCHMARKS.items():
+        print(f"=== {name} ===", flush=True)
+        bench([])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,43 @@
+"""Drive fresco-bridge from an unmodified OpenSeesPy model (genericClient elements).
+
+1. In one terminal:  fresco-bridge serve --config examples/lab.toml
+2. In another:       python examples/opensees_two_story.py
+   (Linux: OpenSeesPy's wheel needs its bundled BLAS on the loader path, e.g.
+    LD_LIBRARY_PATH=$(python -c "import importlib.util,os;print(os.path.join(list(
+    importlib.util.find_spec('openseespylinux').submodule_search_locations)[0],'lib'))"))
+Units: mm, kN, s. The damper (story 1) and the story-2 frame are served by the bridge.
+"""
+
+import math
+
+import openseespy.opensees as ops
+
+M = 0.0202228  # 20222.8 kg per story, in kN·s²/mm
+DT = 0.01
+
+ops.wipe()
+ops.model("basic", "-ndm", 1, "-ndf", 1)
+for tag in (1, 2, 3):
+    ops.node(tag, 0.0)
+ops.fix(1, 1)
+ops.mass(2, M)
+ops.mass(3, M)
+ops.element("genericClient", 1, "-node", 1, 2, "-dof", 1, "-dof", 1, "-server", 8090, "127.0.0.1")
+ops.element("genericClient", 2, "-node", 2, 3, "-dof", 1, "-dof", 1, "-server", 8091, "127.0.0.1")
+accel = [math.sin(2 * math.pi * 2.0 * DT * i) * math.exp(-0.2 * DT * i) for i in range(1000)]
+ops.timeSeries("Path", 1, "-dt", DT, "-values", *accel, "-factor", 3000.0)  # mm/s²
+ops.pattern("UniformExcitation", 1, 1, "-accel", 1)
+ops.system("FullGeneral")
+ops.numberer("Plain")
+ops.constraints("Plain")
+ops.test("NormDispIncr", 1e-10, 25)
+ops.algorithm("Newton")
+ops.integrator("Newmark", 0.5, 0.25)
+ops.analysis("Transient")
+peak = 0.0
+for step in range(1000):
+    if ops.analyze(1, DT) != 0:
+        raise SystemExit(f"analysis failed at step {step}")
+    peak = max(peak, abs(ops.nodeDisp(2, 1)))
+print(f"peak story-1 drift {peak:.3f} mm")
+ops.wipe()  # sends DIE: the bridge closes the session and waits for the next one

@@ -1,0 +1,98 @@
+"""``fresco-bridge``: serve, demo, export. The only place that turns errors into exit codes."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import signal
+import sys
+from pathlib import Path
+
+from .config import ConfigError, load_config
+
+
+def _setup_logging(verbose: bool) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if verbose else logging.INFO,
+        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+
+
+async def _serve(config_path: Path) -> int:
+    from .daemon import Bridge
+
+    cfg, text = load_config(config_path)
+    bridge = Bridge(cfg, text)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await bridge.start()
+    ports = ", ".join(f"{n}={p}" for n, p in bridge.ports.items())
+    print(f"fresco-bridge ready: {ports}", flush=True)
+    try:
+        await stop.wait()
+    finally:
+        await bridge.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="fresco-bridge", description=__doc__)
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_serve = sub.add_parser("serve", help="run the bridge daemon from a lab config")
+    p_serve.add_argument("--config", type=Path, required=True, help="lab TOML file")
+    p_check = sub.add_parser("check", help="validate a lab config and exit")
+    p_check.add_argument("--config", type=Path, required=True)
+    p_demo = sub.add_parser("demo", help="the source paper's two-story frame, end to end")
+    p_demo.add_argument("--record", type=Path, default=None,
+                        help="PEER .AT2 ground motion (default: seeded Kanai-Tajimi record)")
+    p_demo.add_argument("--pga", type=float, default=3.0, help="PGA in m/s² (default 3.0)")
+    p_demo.add_argument("--duration", type=float, default=20.0, help="seconds of synthetic record")
+    p_demo.add_argument("--seed", type=int, default=1, help="synthetic record seed")
+    p_demo.add_argument("--runs", type=Path, default=Path("runs"), help="run directory root")
+    p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
+    p_exp = sub.add_parser("export", help="export a run record's committed steps to CSV")
+    p_exp.add_argument("run_dir", type=Path)
+    p_exp.add_argument("-o", "--output", type=Path, default=None)
+    p_exp.add_argument("--site", default=None)
+    args = parser.parse_args(argv)
+    _setup_logging(args.verbose)
+    try:
+        if args.command == "serve":
+            return asyncio.run(_serve(args.config))
+        if args.command == "check":
+            cfg, _ = load_config(args.config)
+            print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
+                  + ", ".join(f"{s.name} {s.transport}:{s.port}" for s in cfg.sites) + ")")
+            return 0
+        if args.command == "demo":
+            from .demo import run_demo
+
+            run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
+                     runs=args.runs, transport=args.transport)
+            return 0
+        if args.command == "export":
+            from .record import export_csv
+
+            out = args.output or args.run_dir / "steps.csv"
+            n = export_csv(args.run_dir, out, site=args.site)
+            print(f"{out}: {n} committed step(s)")
+            return 0
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # the CLI boundary: a clear line, no traceback
+        logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
+        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

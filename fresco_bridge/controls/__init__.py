@@ -1,0 +1,1 @@
+"""Controller adapters (OpenFresco: experimental controls): sim, modbus, mts."""

@@ -1,0 +1,66 @@
+"""The controller adapter interface: what a site needs from an actuator controller.
+
+OpenFresco calls this an *experimental control*: it receives *ctrl* signals (actuator
+commands) and returns *daq* signals (measurements). Every method is a coroutine; the caller
+(the site) applies the deadline, so implementations must not wrap themselves in
+``asyncio.timeout`` (the in-process controller completes without suspending and is driven
+eagerly on the hot path).
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+
+class ControllerError(Exception):
+    """A controller failed: lost connection, fault word, bad reply. The site goes to HOLD."""
+
+
+@dataclass(frozen=True, slots=True)
+class Daq:
+    """Measured signals at the control points, one entry per actuator (mm, kN)."""
+
+    disp: tuple[float, ...]
+    force: tuple[float, ...]
+
+
+class Controller(abc.ABC):
+    """One actuator controller serving ``n_actuators`` control points.
+
+    Setpoints are absolute and idempotent: re-sending the same ctrl displacement is harmless,
+    and a motion command is never retried blindly by the adapter.
+    """
+
+    n_actuators: int = 1
+    inline: bool = False
+    """True when every call completes without suspending (in-process); then no deadline task."""
+
+    async def connect(self) -> None:  # noqa: B027 - optional hook
+        """Open the link to the controller (no-op for in-process controllers)."""
+
+    @abc.abstractmethod
+    async def set_ctrl(self, disp: tuple[float, ...]) -> None:
+        """Command absolute actuator displacements and wait until they are reached."""
+
+    @abc.abstractmethod
+    async def get_daq(self) -> Daq:
+        """Acquire the measured displacements and forces for the current command."""
+
+    @abc.abstractmethod
+    async def commit(self) -> None:
+        """The integrator accepted the step: the current state becomes the committed one."""
+
+    @abc.abstractmethod
+    async def tangent_stiffness(self) -> tuple[float, ...]:
+        """Current tangent stiffness in actuator space, n×n column-major (kN/mm)."""
+
+    @abc.abstractmethod
+    async def initial_stiffness(self) -> tuple[float, ...]:
+        """Initial stiffness in actuator space, n×n column-major (kN/mm)."""
+
+    async def hold(self) -> None:  # noqa: B027 - optional hook
+        """Stop motion and keep the last command (called when the site enters HOLD)."""
+
+    async def close(self) -> None:  # noqa: B027 - optional hook
+        """Release the link; the actuator keeps holding its last command."""

@@ -1,0 +1,67 @@
+"""In-process simulated specimen, one model per actuator (OpenFresco: ``SimUniaxialMaterials``).
+
+Material semantics, like OpenSees: every trial is evaluated from the last committed state and
+only a commit (action 5) advances the history. With a ``bilinear`` model the bridge therefore
+returns exactly what ``Steel01`` would inside OpenSees.
+"""
+
+from __future__ import annotations
+
+from sim_actuator.models import HysteresisModel, make_model
+
+from .base import Controller, Daq
+
+
+class SimController(Controller):
+    """A specimen model per actuator, answering without suspending (driven eagerly)."""
+
+    inline = True
+
+    def __init__(self, models: list[HysteresisModel]) -> None:
+        if not models:
+            raise ValueError("SimController needs at least one specimen model")
+        self.n_actuators = len(models)
+        self._models = models
+        self._disp = tuple(0.0 for _ in models)
+        self._force = tuple(m.committed[1] for m in models)
+        self._tangent = tuple(m.initial_tangent for m in models)
+
+    @classmethod
+    def from_params(cls, n_actuators: int, kind: str, params: dict[str, float]) -> SimController:
+        return cls([make_model(kind, **params) for _ in range(n_actuators)])
+
+    async def set_ctrl(self, disp: tuple[float, ...]) -> None:
+        if len(self._models) == 1:
+            f, k = self._models[0].set_trial(disp[0])
+            self._disp, self._force, self._tangent = disp, (f,), (k,)
+            return
+        results = [m.set_trial(d) for m, d in zip(self._models, disp, strict=True)]
+        self._disp = disp
+        self._force = tuple(r[0] for r in results)
+        self._tangent = tuple(r[1] for r in results)
+
+    async def get_daq(self) -> Daq:
+        return Daq(self._disp, self._force)
+
+    async def commit(self) -> None:
+        for m in self._models:
+            m.commit()
+
+    async def tangent_stiffness(self) -> tuple[float, ...]:
+        return _diagonal(self._tangent)
+
+    async def initial_stiffness(self) -> tuple[float, ...]:
+        return _diagonal(tuple(m.initial_tangent for m in self._models))
+
+    def reset(self) -> None:
+        """Back to the virgin specimen (a new integrator session starts from zero)."""
+        for m in self._models:
+            m.revert_to_start()
+        self._disp = tuple(0.0 for _ in self._models)
+        self._force = tuple(m.committed[1] for m in self._models)
+        self._tangent = tuple(m.initial_tangent for m in self._models)
+
+
+def _diagonal(values: tuple[float, ...]) -> tuple[float, ...]:
+    n = len(values)
+    return tuple(values[c] if r == c else 0.0 for c in range(n) for r in range(n))

@@ -1,0 +1,220 @@
+"""The bridge: one listener per configured site, all in one event loop, never exiting on a session.
+
+``Bridge`` owns the run record, the sites and their listeners. A failed session (bad input,
+client killed, controller fault) ends only that session; the listener keeps accepting.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Any, TypeVar
+
+from . import __version__
+from .config import LabConfig, SiteConfig
+from .controls.base import Controller, ControllerError
+from .controls.modbus import ModbusController
+from .controls.mts import MtsController
+from .controls.sim import SimController
+from .indicators import OnlineMonitor
+from .record import RunRecord
+from .server.tcp import TcpConnection
+from .server.udp import UdpSiteEndpoint
+from .setups import make_setup
+from .sites import ExperimentalSite
+from .telemetry import MqttTelemetry
+
+log = logging.getLogger("fresco_bridge")
+T = TypeVar("T")
+
+
+def make_controller(cfg: SiteConfig) -> Controller:
+    """The controller adapter a site's config asks for."""
+    c = cfg.controller
+    if c.kind == "modbus":
+        return ModbusController(c)
+    if c.kind == "mts":
+        return MtsController(c)
+    n_act = make_setup(cfg.setup, cfg.dofs).n_actuators
+    return SimController.from_params(n_act, c.model, dict(c.params))
+
+
+class Bridge:
+    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None) -> None:
+        self.config = config
+        self.config_text = config_text
+        self.run_dir_override = run_dir
+        self.record: RunRecord | None = None
+        self.sites: dict[str, ExperimentalSite] = {}
+        self._servers: list[Any] = []
+        self.ports: dict[str, int] = {}
+        self.telemetry: MqttTelemetry | None = None
+        self._telemetry_task: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        cfg = self.config
+        if cfg.record.enabled:
+            self.record = RunRecord.create(
+                self.run_dir_override or cfg.bridge.run_dir, cfg.bridge.run_name,
+                self.config_text,
+                {"fresco_bridge": __version__, "sites": [s.name for s in cfg.sites]},
+                fsync=cfg.record.fsync,
+            )
+            log.info("run record: %s", self.record.directory)
+        loop = asyncio.get_running_loop()
+        try:
+            for scfg in cfg.sites:
+                site = ExperimentalSite(
+                    scfg, make_controller(scfg), self.record,
+                    controller_timeout=cfg.bridge.controller_timeout,
+                )
+                try:
+                    await asyncio.wait_for(site.controller.connect(), site.timeout)
+                except (ControllerError, TimeoutError) as exc:
+                    # Not fatal: the site serves anyway and HOLDs at the first command if the
+                    # controller is still unreachable (adapters reconnect on reads).
+                    log.error("site %s: controller not reachable at start: %s", scfg.name,
+                              exc or "timeout")
+                self.sites[scfg.name] = site
+                allowed = frozenset(scfg.allowed_clients or cfg.bridge.allowed_clients)
+                mds = cfg.bridge.max_data_size
+                if scfg.transport == "tcp":
+                    server = await loop.create_server(
+                        partial(TcpConnection, site, allowed, mds),
+                        cfg.bridge.host, scfg.port, reuse_address=True,
+                    )
+                    port = server.sockets[0].getsockname()[1]
+                else:
+                    server, _ = await loop.create_datagram_endpoint(
+                        partial(UdpSiteEndpoint, site, allowed, mds),
+                        local_addr=(cfg.bridge.host, scfg.port),
+                    )
+                    port = server.get_extra_info("sockname")[1]
+                self._servers.append(server)
+                self.ports[scfg.name] = port
+                log.info("site %s: listening on %s %s:%d (%s protocol, %d DOF, setup %s)",
+                         scfg.name, scfg.transport.upper(), cfg.bridge.host, port,
+                         scfg.protocol, scfg.dofs, scfg.setup)
+        except OSError:
+            await self.close()
+            raise
+        tcfg = cfg.telemetry
+        if tcfg.mqtt_host is not None:
+            self.telemetry = MqttTelemetry(
+                host=tcfg.mqtt_host, port=tcfg.mqtt_port, prefix=tcfg.prefix, qos=tcfg.qos,
+                queue_size=tcfg.queue_size, compact=tcfg.compact, username=tcfg.username,
+                password=tcfg.password,
+            )
+            self._telemetry_task = loop.create_task(self.telemetry.run(), name="telemetry.mqtt")
+            for site in self.sites.values():
+                site.attach_telemetry(self.telemetry, OnlineMonitor(
+                    tcfg.monitor_dt, tcfg.monitor_window,
+                    warn_tracking_error=tcfg.warn_tracking_error,
+                ))
+            log.info("telemetry: MQTT %s:%d prefix %s", tcfg.mqtt_host, tcfg.mqtt_port,
+                     tcfg.prefix)
+
+    async def close(self) -> None:
+        for server in self._servers:
+            server.close()
+        for server in self._servers:
+            if isinstance(server, asyncio.AbstractServer):
+                await server.wait_closed()
+        self._servers.clear()
+        for site in self.sites.values():
+            site.close_session("bridge shutting down")
+            try:
+                await asyncio.wait_for(site.controller.close(), site.timeout)
+            except Exception as exc:  # closing must go on for the other sites
+                log.warning("site %s: controller close failed: %s", site.name, exc)
+        if self.telemetry is not None and self._telemetry_task is not None:
+            self.telemetry.stop()
+            try:
+                await asyncio.wait_for(self._telemetry_task, 5.0)
+            except (TimeoutError, asyncio.CancelledError):
+                log.warning("telemetry: not drained within 5 s; %s", self.telemetry.stats)
+        if self.record is not None:
+            self.record.close()
+
+    async def serve_forever(self, stop: asyncio.Event | None = None) -> None:
+        await self.start()
+        try:
+            await (stop or asyncio.Event()).wait()
+        finally:
+            await self.close()
+
+
+class BridgeThread:
+    """A bridge on its own event loop in a background thread (demo, benchmarks, tests).
+
+    ``with BridgeThread(cfg, text) as b: b.ports[...]`` — the integrator side can then use
+    plain blocking sockets in the calling thread, as a separate FE process would.
+    """
+
+    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None) -> None:
+        self.bridge = Bridge(config, config_text, run_dir=run_dir)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._main, name="fresco-bridge", daemon=True)
+
+    def _main(self) -> None:
+        async def run() -> None:
+            self._loop = asyncio.get_running_loop()
+            self._stop = asyncio.Event()
+            try:
+                await self.bridge.start()
+            except BaseException as exc:
+                self._error = exc
+                self._ready.set()
+                return
+            self._ready.set()
+            try:
+                await self._stop.wait()
+            finally:
+                await self.bridge.close()
+
+        try:
+            asyncio.run(run())
+        except BaseException as exc:  # reported to the owner by __enter__/stop
+            self._error = self._error or exc
+            self._ready.set()
+
+    def __enter__(self) -> BridgeThread:
+        self._thread.start()
+        if not self._ready.wait(30):
+            raise RuntimeError("the bridge did not start within 30 s")
+        if self._error is not None:
+            raise self._error
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(30)
+
+    @property
+    def ports(self) -> dict[str, int]:
+        return self.bridge.ports
+
+    @property
+    def run_dir(self) -> Path:
+        assert self.bridge.record is not None, "recording is off"
+        return self.bridge.record.directory
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn()`` on the bridge's loop (to inspect site state safely from tests)."""
+        assert self._loop is not None
+
+        async def wrapper() -> T:
+            return fn()
+
+        return asyncio.run_coroutine_threadsafe(wrapper(), self._loop).result(10)

@@ -1,0 +1,312 @@
+"""Hybrid-simulation error indicators: one home for online monitors and offline diagnosis.
+
+Every function compares a *command* displacement history ``cmd`` (x_c, what the integrator
+asked for, i.e. ctrl) with the *measured* one ``meas`` (x_m, daq). Conventions:
+
+- NRMS error = sqrt(Σ(x_m − x_c)² / Σx_c²) (HSCAM).
+- Peak errors: eDM = max|x_m| − max|x_c| (amplitude error of the peaks), eMD = max|x_m − x_c|
+  (worst instant). Both in the units of the inputs.
+- Tracking indicator, OpenFresco Express convention (GUI/Integrator_AlphaOS.m):
+  TI = 0.5·(cumtrapz(U, Um) − cumtrapz(Um, U)) with U = command and Um = measured.
+  A *decreasing* TI means the measurement lags the command (energy is added: destabilising);
+  for x_c = A sin ωt, x_m = B sin ω(t − τ) it changes by −πAB·sin(ωτ) per cycle.
+- FEI (frequency evaluation index, HSCAM): FEI = Σ_j (X_m/X_c)(f_j)·w_j with spectral weights
+  w_j = |X_c(f_j)|^l / Σ|X_c|^l; amplitude ratio A0 = |FEI|, equivalent frequency
+  f_eq = Σ|X_c|^l f_j / Σ|X_c|^l and equivalent delay δ = −arg(FEI)/(2π f_eq). The weights use
+  the *command* spectrum so that a pure gain B/A returns A0 = B/A exactly (HSCAM's page writes
+  |X_m|^l in the numerator, which would return (B/A)^(l+1)).
+- Cross-correlation delay: the lag maximising corr(x_m(t + k), x_c(t)) (RTHS benchmark J1),
+  refined to a fraction of a sample by a parabola through the peak.
+
+Positive delays mean the measurement lags the command. All functions are pure numpy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+Signal = Sequence[float] | npt.NDArray[np.floating]
+
+__all__ = [
+    "IndicatorError",
+    "MonitorSample",
+    "OnlineMonitor",
+    "fei",
+    "nrms_error",
+    "peak_errors",
+    "tracking_indicator",
+    "xcorr_delay",
+]
+
+
+class IndicatorError(ValueError):
+    """An indicator cannot be computed from the given signals (shape, NaN, no content)."""
+
+
+def _pair(
+    cmd: Signal, meas: Signal, *, where: str, min_len: int = 1
+) -> tuple[FloatArray, FloatArray]:
+    """Validate a command/measurement pair: 1-D, equal length, finite, long enough."""
+    c = np.asarray(cmd, dtype=np.float64)
+    m = np.asarray(meas, dtype=np.float64)
+    if c.ndim != 1 or m.ndim != 1:
+        raise IndicatorError(
+            f"{where}: cmd and meas must be 1-D, got shapes {c.shape} and {m.shape}"
+        )
+    if c.shape != m.shape:
+        raise IndicatorError(
+            f"{where}: cmd and meas must have the same length, got {c.size} and {m.size}"
+        )
+    if c.size < min_len:
+        raise IndicatorError(f"{where}: needs at least {min_len} samples, got {c.size}")
+    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(m))):
+        raise IndicatorError(f"{where}: cmd and meas must be finite (found NaN or inf)")
+    return c, m
+
+
+def _positive(value: float, name: str, where: str) -> float:
+    if not (math.isfinite(value) and value > 0.0):
+        raise IndicatorError(f"{where}: {name} must be a positive finite number, got {value!r}")
+    return float(value)
+
+
+def nrms_error(cmd: Signal, meas: Signal) -> float:
+    """Normalised RMS tracking error sqrt(Σ(x_m − x_c)² / Σx_c²); 0 is perfect tracking."""
+    c, m = _pair(cmd, meas, where="nrms_error")
+    energy = float(np.dot(c, c))
+    if energy == 0.0:
+        raise IndicatorError("nrms_error: the command is identically zero, NRMS is undefined")
+    e = m - c
+    return math.sqrt(float(np.dot(e, e)) / energy)
+
+
+def peak_errors(cmd: Signal, meas: Signal) -> tuple[float, float]:
+    """(eDM, eMD): peak-amplitude error max|x_m| − max|x_c| and worst error max|x_m − x_c|."""
+    c, m = _pair(cmd, meas, where="peak_errors")
+    e_dm = float(np.max(np.abs(m)) - np.max(np.abs(c)))
+    e_md = float(np.max(np.abs(m - c)))
+    return e_dm, e_md
+
+
+def tracking_indicator(cmd: Signal, meas: Signal) -> FloatArray:
+    """TI history, same length as the inputs and starting at 0; decreasing TI means lag.
+
+    Trapezoidal TI reduces per increment to 0.5·(U_i·Um_{i−1} − U_{i−1}·Um_i), which is what
+    the online monitor accumulates.
+    """
+    c, m = _pair(cmd, meas, where="tracking_indicator")
+    ti = np.zeros_like(c)
+    if c.size > 1:
+        np.cumsum(0.5 * (c[1:] * m[:-1] - c[:-1] * m[1:]), out=ti[1:])
+    return ti
+
+
+def fei(
+    cmd: Signal, meas: Signal, dt: float, l: int = 2, *, taper: bool = False  # noqa: E741
+) -> tuple[float, float]:
+    """(A0, δ): amplitude ratio |FEI| and equivalent delay in seconds (positive = lag).
+
+    Means are removed and the DC bin is skipped. ``taper=True`` applies a Hann window to both
+    signals first, which limits leakage when the record is not a whole number of periods
+    (the online monitor's sliding window). ``l`` is the spectral weight exponent.
+    """
+    c, m = _pair(cmd, meas, where="fei", min_len=4)
+    step = _positive(dt, "dt", "fei")
+    if l < 1:
+        raise IndicatorError(f"fei: weight exponent l must be >= 1, got {l}")
+    c = c - c.mean()
+    m = m - m.mean()
+    if taper:
+        hann = np.hanning(c.size)
+        c = c * hann
+        m = m * hann
+    xc = np.fft.rfft(c)[1:]
+    xm = np.fft.rfft(m)[1:]
+    freqs = np.fft.rfftfreq(c.size, d=step)[1:]
+    mag = np.abs(xc)
+    weight = mag**l
+    total = float(weight.sum())
+    if not (math.isfinite(total) and total > 0.0):
+        raise IndicatorError("fei: the command has no non-DC spectral content, FEI is undefined")
+    # (X_m / X_c)·|X_c|^l written without the division, so empty bins contribute 0.
+    safe = np.where(mag > 0.0, mag, 1.0)
+    index = complex(np.sum(xm * np.conj(xc) * (weight / (safe * safe)))) / total
+    f_eq = float(np.dot(weight, freqs)) / total
+    amplitude = abs(index)
+    delay = -math.atan2(index.imag, index.real) / (2.0 * math.pi * f_eq)
+    return amplitude, delay
+
+
+def xcorr_delay(cmd: Signal, meas: Signal, dt: float, max_lag: int) -> float:
+    """Delay (s) maximising the correlation of meas(t + k) with cmd(t), |k| <= max_lag samples.
+
+    Each lag uses the Pearson coefficient over the overlapping samples, so short overlaps are
+    not penalised; a parabola through the peak and its neighbours gives sub-sample resolution.
+    """
+    c, m = _pair(cmd, meas, where="xcorr_delay", min_len=3)
+    step = _positive(dt, "dt", "xcorr_delay")
+    if isinstance(max_lag, bool) or not isinstance(max_lag, int | np.integer):
+        raise IndicatorError(f"xcorr_delay: max_lag is a sample count (int), got {max_lag!r}")
+    if not 0 <= max_lag <= c.size - 3:
+        raise IndicatorError(
+            f"xcorr_delay: max_lag must be in [0, {c.size - 3}] for {c.size} samples, got {max_lag}"
+        )
+    lags = np.arange(-max_lag, max_lag + 1)
+    corr = np.array([_pearson(c, m, int(k)) for k in lags])
+    if not np.any(np.isfinite(corr)):
+        raise IndicatorError("xcorr_delay: a signal is constant, correlation is undefined")
+    best = int(np.nanargmax(corr))
+    shift = 0.0
+    if 0 < best < corr.size - 1 and np.all(np.isfinite(corr[best - 1 : best + 2])):
+        left, mid, right = (float(v) for v in corr[best - 1 : best + 2])
+        curvature = left - 2.0 * mid + right
+        if curvature < 0.0:
+            shift = 0.5 * (left - right) / curvature
+    return (float(lags[best]) + shift) * step
+
+
+def _pearson(c: FloatArray, m: FloatArray, k: int) -> float:
+    """corr(m[t + k], c[t]) over the overlap; NaN when either slice is constant."""
+    a, b = (c[: c.size - k], m[k:]) if k >= 0 else (c[-k:], m[: m.size + k])
+    a = a - a.mean()
+    b = b - b.mean()
+    denom = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
+    return float(np.dot(a, b)) / denom if denom > 0.0 else math.nan
+
+
+@dataclass(frozen=True, slots=True)
+class MonitorSample:
+    """The online indicators after one step.
+
+    ``nrms`` is cumulative since the start (None while the command is still all zero);
+    ``fei_amplitude``/``fei_delay`` are recomputed every ``fei_every`` steps over the sliding
+    window (None until the window is full). ``warning`` is edge-triggered: non-None only on
+    the step a threshold is first crossed, so publishing it as an event cannot flood.
+    """
+
+    tracking_error: float
+    ti: float
+    nrms: float | None
+    fei_amplitude: float | None
+    fei_delay: float | None
+    warning: str | None = None
+
+
+class OnlineMonitor:
+    """Per-site online error monitor: O(1) work per step and fixed memory.
+
+    The FEI over the last ``window`` steps is recomputed every ``fei_every`` steps (an rfft of
+    ``window`` points, a few tens of µs at 512) and held in between. ``dt`` is the integration
+    time step, so frequencies and delays are in simulated time.
+
+    Warnings: ``warn_tracking_error`` trips when |x_m − x_c| exceeds it; ``warn_ti_rate``
+    (TI units per second) trips when TI *falls* faster than that over the window (lag adding
+    energy). A tripped condition re-arms after ``window`` steps without it.
+    """
+
+    def __init__(
+        self,
+        dt: float,
+        window: int = 512,
+        warn_tracking_error: float | None = None,
+        warn_ti_rate: float | None = None,
+        *,
+        fei_every: int | None = None,
+    ) -> None:
+        self.dt = _positive(dt, "dt", "OnlineMonitor")
+        if window < 8:
+            raise IndicatorError(f"OnlineMonitor: window must be >= 8 samples, got {window}")
+        for name, value in (("warn_tracking_error", warn_tracking_error),
+                            ("warn_ti_rate", warn_ti_rate)):
+            if value is not None:
+                _positive(value, name, "OnlineMonitor")
+        self.window = window
+        self.fei_every = window // 4 if fei_every is None else fei_every
+        if self.fei_every < 1:
+            raise IndicatorError(f"OnlineMonitor: fei_every must be >= 1, got {self.fei_every}")
+        self.warn_tracking_error = warn_tracking_error
+        self.warn_ti_rate = warn_ti_rate
+        self._cmd = np.zeros(window)
+        self._meas = np.zeros(window)
+        self._ti_ring = np.zeros(window)
+        self._steps = 0
+        self._prev: tuple[float, float] | None = None
+        self._ti = 0.0
+        self._sum_err2 = 0.0
+        self._sum_cmd2 = 0.0
+        self._fei: tuple[float, float] | None = None
+        self._last_seen: dict[str, int] = {}
+
+    @property
+    def steps(self) -> int:
+        """Number of samples seen so far."""
+        return self._steps
+
+    def update(self, cmd: float, meas: float) -> MonitorSample:
+        """Add one (command, measurement) pair and return the indicators after it."""
+        if not (math.isfinite(cmd) and math.isfinite(meas)):
+            raise IndicatorError(
+                f"OnlineMonitor.update: step {self._steps}: cmd={cmd!r}, meas={meas!r} not finite"
+            )
+        err = meas - cmd
+        if self._prev is not None:
+            prev_cmd, prev_meas = self._prev
+            self._ti += 0.5 * (cmd * prev_meas - prev_cmd * meas)
+        self._prev = (cmd, meas)
+        self._sum_err2 += err * err
+        self._sum_cmd2 += cmd * cmd
+        slot = self._steps % self.window
+        ti_window_ago = float(self._ti_ring[slot])  # TI `window` steps ago, once full
+        self._cmd[slot] = cmd
+        self._meas[slot] = meas
+        self._ti_ring[slot] = self._ti
+        self._steps += 1
+        full = self._steps >= self.window
+        if full and (self._steps - self.window) % self.fei_every == 0:
+            self._fei = self._window_fei()
+        nrms = math.sqrt(self._sum_err2 / self._sum_cmd2) if self._sum_cmd2 > 0.0 else None
+        warning = self._check(err, ti_window_ago if self._steps > self.window else None)
+        fei_a, fei_d = self._fei if self._fei is not None else (None, None)
+        return MonitorSample(err, self._ti, nrms, fei_a, fei_d, warning)
+
+    def window_arrays(self) -> tuple[FloatArray, FloatArray]:
+        """The last ``min(steps, window)`` commands and measurements, oldest first."""
+        n = min(self._steps, self.window)
+        start = self._steps % self.window if self._steps >= self.window else 0
+        order = (np.arange(n) + start) % self.window
+        return self._cmd[order], self._meas[order]
+
+    def _window_fei(self) -> tuple[float, float] | None:
+        cmd, meas = self.window_arrays()
+        try:
+            return fei(cmd, meas, self.dt, taper=True)
+        except IndicatorError:  # a constant command (HOLD, quasi-static plateau): no content
+            return None
+
+    def _check(self, err: float, ti_window_ago: float | None) -> str | None:
+        messages: list[str] = []
+        limit = self.warn_tracking_error
+        if limit is not None and abs(err) > limit:
+            messages += self._trip("tracking_error", f"|tracking error| {abs(err):.6g} > {limit:g}")
+        rate_limit = self.warn_ti_rate
+        if rate_limit is not None and ti_window_ago is not None:
+            rate = (self._ti - ti_window_ago) / (self.window * self.dt)
+            if rate < -rate_limit:
+                messages += self._trip(
+                    "ti_rate", f"TI falling at {-rate:.6g}/s > {rate_limit:g}/s (lag)"
+                )
+        return "; ".join(messages) if messages else None
+
+    def _trip(self, condition: str, message: str) -> list[str]:
+        """Record that ``condition`` holds now; return the message only on its rising edge."""
+        last = self._last_seen.get(condition)
+        self._last_seen[condition] = self._steps
+        if last is not None and self._steps - last <= self.window:
+            return []
+        return [f"step {self._steps - 1}: {message}"]

@@ -1,0 +1,124 @@
+"""A blocking genericClient: our integrator's element, byte-for-byte what OpenSees sends.
+
+Used by the built-in demo integrator, the benchmarks and tests. Unlike genericClient it has a
+deadline on every receive and raises ``LinkError`` instead of spinning on a dead peer.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+
+from protocol import (
+    NEED_DATA,
+    Action,
+    ElementClientSession,
+    ReplyReceived,
+    Signals,
+    SizeID,
+    chunk_datagrams,
+)
+
+UDP_HANDSHAKE_REQUEST = b"a"  # OpenSees UDP_Socket: client 'a', server 'b' (spec §2.3)
+UDP_HANDSHAKE_REPLY = b"b"
+
+
+class LinkError(ConnectionError):
+    """The bridge did not answer in time or closed the connection."""
+
+
+class GenericClientLink:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        n_dof: int,
+        *,
+        data_size: int = 256,
+        transport: str = "tcp",
+        timeout: float = 10.0,
+    ) -> None:
+        self.address = (host, port)
+        self.n = n_dof
+        self.size_id = SizeID.for_generic_client(n_dof, data_size)
+        self.session = ElementClientSession(self.size_id)
+        self.transport = transport
+        self.timeout = timeout
+        self.sock: socket.socket | None = None
+
+    # -- connection --------------------------------------------------------------------------
+    def connect(self) -> GenericClientLink:
+        if self.transport == "tcp":
+            sock = socket.create_connection(self.address, timeout=self.timeout)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        else:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock.settimeout(self.timeout)
+            sock.connect(self.address)
+            sock.send(UDP_HANDSHAKE_REQUEST)
+            if sock.recv(16) != UDP_HANDSHAKE_REPLY:
+                raise LinkError(f"bridge at {self.address} did not answer the UDP handshake")
+        self.sock = sock
+        self._send(self.session.start())
+        return self
+
+    def close(self) -> None:
+        if self.sock is None:
+            return
+        with contextlib.suppress(OSError):  # the bridge may already be gone
+            self._send(self.session.send_die())
+        self.sock.close()
+        self.sock = None
+
+    def __enter__(self) -> GenericClientLink:
+        return self.connect()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- messages ----------------------------------------------------------------------------
+    def _send(self, data: bytes) -> None:
+        assert self.sock is not None, "link not connected"
+        if self.transport == "tcp":
+            self.sock.sendall(data)
+        else:
+            for chunk in chunk_datagrams(data):
+                self.sock.send(chunk)
+
+    def _reply(self) -> ReplyReceived:
+        assert self.sock is not None
+        while True:
+            ev = self.session.next_event()
+            if ev is not NEED_DATA:
+                assert isinstance(ev, ReplyReceived)
+                return ev
+            try:
+                data = self.sock.recv(65536)
+            except TimeoutError:
+                raise LinkError(f"no reply from the bridge at {self.address} "
+                                f"within {self.timeout:g} s") from None
+            if not data:
+                raise LinkError(f"the bridge at {self.address} closed the connection")
+            self.session.receive_data(data)
+
+    def set_trial(
+        self, disp: tuple[float, ...], vel: tuple[float, ...] | None = None,
+        accel: tuple[float, ...] | None = None, time: float = 0.0,
+    ) -> None:
+        zeros = (0.0,) * self.n
+        self._send(self.session.send_trial(
+            Signals(disp=disp, vel=vel or zeros, accel=accel or zeros, time=(time,))
+        ))
+
+    def request(self, action: Action) -> ReplyReceived:
+        self._send(self.session.send_request(action))
+        return self._reply()
+
+    def force(self) -> tuple[float, ...]:
+        return self.request(Action.GET_FORCE).values[: self.n]
+
+    def matrix(self, action: Action) -> tuple[tuple[float, ...], ...]:
+        return self.request(action).matrix(self.n)
+
+    def commit(self) -> None:
+        self._send(self.session.send_commit())

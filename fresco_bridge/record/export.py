@@ -1,0 +1,113 @@
+"""Read a run record back and export committed steps as CSV (the diagnosis tool's input).
+
+CSV columns: ``time,step,site,cmd_disp,meas_disp,meas_force`` — with ``_1.._n`` suffixes when a
+site has n > 1 actuators — plus ``session`` last (a run can hold several integrator sessions).
+``cmd_disp`` is the actuator command (ctrl), ``meas_*`` the measurement (daq) of that step, in
+mm and kN; ``time`` is the integrator's pseudo-time of the committed trial.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .writer import RECORD_FILE
+
+
+class RecordFormatError(ValueError):
+    """A record line is not what the writer produces (names file, line and reason)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CommittedStep:
+    site: str
+    session: int
+    step: int
+    time: float
+    cmd_disp: tuple[float, ...]
+    meas_disp: tuple[float, ...]
+    meas_force: tuple[float, ...]
+
+
+def _float(v: Any) -> float:
+    return float(v)  # numbers, and the "nan"/"inf" strings the writer uses for non-finite values
+
+
+def read_record(run_dir: Path) -> Iterator[dict[str, Any]]:
+    """Yield the record's lines as dicts. A torn last line (crash mid-write) is skipped."""
+    path = run_dir / RECORD_FILE if run_dir.is_dir() else run_dir
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise RecordFormatError(f"{path}: cannot read the run record: {exc.strerror}") from exc
+    for i, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as exc:
+            if i == len(lines):
+                return  # torn tail of a killed process: everything before it is intact
+            raise RecordFormatError(f"{path}:{i}: not a JSON record line ({exc.msg})") from exc
+        if not isinstance(obj, dict) or "kind" not in obj:
+            raise RecordFormatError(f"{path}:{i}: record line without a 'kind'")
+        yield obj
+
+
+def committed_steps(run_dir: Path) -> list[CommittedStep]:
+    """Pair each commit with the last trial and measurement before it, per site session."""
+    last_trial: dict[tuple[str, int], dict[str, Any]] = {}
+    last_daq: dict[tuple[str, int], dict[str, Any]] = {}
+    out: list[CommittedStep] = []
+    for rec in read_record(run_dir):
+        key = (rec.get("site", ""), int(rec.get("session", 0)))
+        kind = rec["kind"]
+        if kind == "trial":
+            last_trial[key] = rec
+            last_daq.pop(key, None)
+        elif kind == "daq":
+            last_daq[key] = rec
+        elif kind == "commit":
+            trial, daq = last_trial.get(key), last_daq.get(key)
+            if trial is None or daq is None:
+                continue
+            out.append(
+                CommittedStep(
+                    site=key[0], session=key[1], step=int(rec["step"]),
+                    time=_float(trial["time"]),
+                    cmd_disp=tuple(_float(v) for v in trial["ctrl"]),
+                    meas_disp=tuple(_float(v) for v in daq["disp"]),
+                    meas_force=tuple(_float(v) for v in daq["force"]),
+                )
+            )
+    return out
+
+
+def export_csv(run_dir: Path, out_path: Path, *, site: str | None = None) -> int:
+    """Write the committed steps to ``out_path``; returns the number of rows."""
+    steps = [s for s in committed_steps(run_dir) if site is None or s.site == site]
+    n = max((len(s.cmd_disp) for s in steps), default=1)
+
+    def cols(name: str) -> list[str]:
+        return [name] if n == 1 else [f"{name}_{i}" for i in range(1, n + 1)]
+
+    header = ["time", "step", "site", *cols("cmd_disp"), *cols("meas_disp"), *cols("meas_force")]
+    header.append("session")
+
+    def pad(v: tuple[float, ...]) -> list[str]:
+        return [repr(x) if math.isfinite(x) else str(x) for x in v] + [""] * (n - len(v))
+
+    with out_path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for s in steps:
+            w.writerow(
+                [repr(s.time), s.step, s.site, *pad(s.cmd_disp), *pad(s.meas_disp),
+                 *pad(s.meas_force), s.session]
+            )
+    return len(steps)

@@ -1,0 +1,1 @@
+"""Transports: asyncio TCP and UDP listeners feeding sans-IO protocol sessions."""

@@ -1,0 +1,154 @@
+"""Prometheus metrics for the daemon, in a registry of its own (never the process-global one).
+
+Hot-path calls cost well under a microsecond (``Counter.inc`` ~0.2 µs, ``Histogram.observe``
+~0.5 µs); ``for_site`` binds the label children once so the step loop skips label lookups.
+Telemetry counters are read from the telemetry's own ``stats`` at scrape time, so there is
+a single source of truth for drops.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from wsgiref.simple_server import WSGIServer
+
+from prometheus_client import CollectorRegistry, Counter, Histogram, start_http_server
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+
+from fresco_bridge.telemetry.mqtt import TelemetryStats
+
+NAMESPACE = "fresco"
+# Per-message latency on the bridge: tens of µs in-process, ms over a network controller.
+LATENCY_BUCKETS = (25e-6, 50e-6, 100e-6, 250e-6, 500e-6, 1e-3, 2.5e-3, 5e-3, 10e-3, 25e-3,
+                   50e-3, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
+UPDATER_BUCKETS = (1e-4, 5e-4, 1e-3, 5e-3, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
+
+__all__ = ["LATENCY_BUCKETS", "Metrics", "MetricsServer", "SiteMetrics"]
+
+
+@dataclass(slots=True)
+class SiteMetrics:
+    """One site's pre-bound metric children for the step loop."""
+
+    site: str
+    steps: Counter
+    holds: Counter
+    _latency: Histogram
+    _limits: Counter
+    _latency_children: dict[str, Histogram] = field(default_factory=dict)
+    _limit_children: dict[str, Counter] = field(default_factory=dict)
+
+    def step(self) -> None:
+        self.steps.inc()
+
+    def hold(self) -> None:
+        self.holds.inc()
+
+    def latency(self, action: str, seconds: float) -> None:
+        child = self._latency_children.get(action)
+        if child is None:
+            child = self._latency_children[action] = self._latency.labels(self.site, action)
+        child.observe(seconds)
+
+    def limit_event(self, signal: str) -> None:
+        child = self._limit_children.get(signal)
+        if child is None:
+            child = self._limit_children[signal] = self._limits.labels(self.site, signal)
+        child.inc()
+
+
+class _TelemetryCollector(Collector):
+    """Exposes a telemetry's ``stats`` at scrape time (called from the HTTP thread)."""
+
+    def __init__(self, source: Callable[[], TelemetryStats]) -> None:
+        self._source = source
+
+    def collect(self) -> Iterator[Metric]:
+        s = self._source()
+        for name, doc, value in (
+            ("telemetry_dropped", "Telemetry messages dropped (queue full or broker down)",
+             s.dropped),
+            ("telemetry_published", "Telemetry messages published", s.published),
+            ("telemetry_reconnects", "Reconnections to the MQTT broker", s.reconnects),
+            ("telemetry_commands_rejected", "Inbound MQTT command messages ignored",
+             s.commands_rejected),
+        ):
+            yield CounterMetricFamily(f"{NAMESPACE}_{name}", doc, value=value)
+        yield GaugeMetricFamily(f"{NAMESPACE}_telemetry_connected", "1 while connected",
+                                value=float(s.connected))
+        yield GaugeMetricFamily(f"{NAMESPACE}_telemetry_queued", "Messages waiting to publish",
+                                value=s.queued)
+
+    def describe(self) -> Iterator[Metric]:
+        return iter(())  # values are only known at scrape time
+
+
+@dataclass(frozen=True, slots=True)
+class MetricsServer:
+    """A running /metrics endpoint; ``close()`` stops it."""
+
+    server: WSGIServer
+    thread: threading.Thread
+
+    @property
+    def port(self) -> int:
+        return int(self.server.server_address[1])
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+        self.thread.join(timeout=5.0)
+
+
+class Metrics:
+    """All daemon metrics, prefixed ``fresco_``.
+
+    ``steps_total{site}``, ``message_latency_seconds{site,action}``, ``holds_total{site}``,
+    ``limit_events_total{site,signal}``, ``updater_step_seconds`` and, once ``track_telemetry``
+    is called, ``telemetry_dropped_total`` and friends.
+    """
+
+    def __init__(self, registry: CollectorRegistry | None = None) -> None:
+        self.registry = registry if registry is not None else CollectorRegistry(auto_describe=True)
+        r = self.registry
+        self.steps_total = Counter("steps", "Steps answered per site", ["site"],
+                                   namespace=NAMESPACE, registry=r)
+        self.message_latency_seconds = Histogram(
+            "message_latency_seconds", "Time from request received to reply sent, per action",
+            ["site", "action"], namespace=NAMESPACE, registry=r, buckets=LATENCY_BUCKETS)
+        self.holds_total = Counter("holds", "Times a site entered HOLD", ["site"],
+                                   namespace=NAMESPACE, registry=r)
+        self.limit_events_total = Counter("limit_events", "Limit checks that tripped",
+                                          ["site", "signal"], namespace=NAMESPACE, registry=r)
+        self.updater_step_seconds = Histogram(
+            "updater_step_seconds", "Wall time of one model-updater step",
+            namespace=NAMESPACE, registry=r, buckets=UPDATER_BUCKETS)
+        self._sites: dict[str, SiteMetrics] = {}
+        self._telemetry: _TelemetryCollector | None = None
+
+    def for_site(self, site: str) -> SiteMetrics:
+        """Label children bound to ``site`` (created once, then cached)."""
+        bound = self._sites.get(site)
+        if bound is None:
+            bound = SiteMetrics(
+                site=site, steps=self.steps_total.labels(site), holds=self.holds_total.labels(site),
+                _latency=self.message_latency_seconds, _limits=self.limit_events_total)
+            self._sites[site] = bound
+        return bound
+
+    def observe_updater_step(self, seconds: float) -> None:
+        self.updater_step_seconds.observe(seconds)
+
+    def track_telemetry(self, source: Callable[[], TelemetryStats]) -> None:
+        """Export a telemetry's counters, e.g. ``metrics.track_telemetry(lambda: tel.stats)``."""
+        if self._telemetry is not None:
+            self.registry.unregister(self._telemetry)
+        self._telemetry = _TelemetryCollector(source)
+        self.registry.register(self._telemetry)
+
+    def start_http_server(self, host: str = "127.0.0.1", port: int = 9464) -> MetricsServer:
+        """Serve ``/metrics`` from a daemon thread; ``port=0`` picks a free port."""
+        server, thread = start_http_server(port, addr=host, registry=self.registry)
+        return MetricsServer(server, thread)

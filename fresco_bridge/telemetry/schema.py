@@ -1,0 +1,208 @@
+"""Telemetry messages: frozen records and their JSON payloads (full or compact).
+
+The payload layout is documented in ``README.md`` next to this file; ``SCHEMA_VERSION`` is
+the first thing in every payload and changes whenever a field moves. Non-finite floats are
+written as the strings ``"nan"``, ``"inf"``, ``"-inf"`` (as in the run record), so payloads
+are always strict JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time as _time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from fresco_bridge.indicators import MonitorSample
+
+SCHEMA_VERSION = 1
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+RESERVED_SITE_NAMES = frozenset({"_bridge"})
+
+__all__ = [
+    "RESERVED_SITE_NAMES",
+    "SCHEMA_VERSION",
+    "SiteEvent",
+    "SiteStatus",
+    "StepSample",
+    "TelemetrySchemaError",
+    "check_site_name",
+]
+
+
+class TelemetrySchemaError(ValueError):
+    """A telemetry record has a field that cannot be published (name, type, value)."""
+
+
+def check_site_name(site: str) -> str:
+    """Site names become MQTT topic levels: no '/', '+', '#', no leading '$' or '_'."""
+    if not isinstance(site, str) or not _NAME.fullmatch(site):
+        raise TelemetrySchemaError(
+            f"site name {site!r} cannot be an MQTT topic level: use 1-64 characters from "
+            "[A-Za-z0-9_.-], starting with a letter or digit"
+        )
+    return site
+
+
+def _num(value: float | None) -> float | str | None:
+    if value is None:
+        return None
+    v = float(value)
+    return v if math.isfinite(v) else str(v)
+
+
+def _nums(values: Sequence[float]) -> list[float | str]:
+    return [v if math.isfinite(v) else str(v) for v in map(float, values)]
+
+
+def _dumps(obj: object) -> bytes:
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+
+
+def _monitor_full(m: MonitorSample) -> dict[str, Any]:
+    return {
+        "tracking_error": _num(m.tracking_error),
+        "ti": _num(m.ti),
+        "nrms": _num(m.nrms),
+        "fei_amplitude": _num(m.fei_amplitude),
+        "fei_delay": _num(m.fei_delay),
+        "warning": m.warning,
+    }
+
+
+def _monitor_compact(m: MonitorSample) -> list[Any]:
+    return [_num(m.tracking_error), _num(m.ti), _num(m.nrms), _num(m.fei_amplitude),
+            _num(m.fei_delay), m.warning]
+
+
+@dataclass(frozen=True, slots=True)
+class StepSample:
+    """One committed or answered step of a site: what the integrator asked and what was measured.
+
+    ``trial`` is in the element's basic DOFs, ``ctrl``/``daq_*`` in actuator space;
+    ``predicted_force`` is the updated model's prediction on updatable sites.
+    """
+
+    site: str
+    session: int
+    step: int
+    time: float
+    trial: tuple[float, ...]
+    ctrl: tuple[float, ...]
+    daq_disp: tuple[float, ...]
+    daq_force: tuple[float, ...]
+    state: str
+    predicted_force: float | None = None
+    monitor: MonitorSample | None = None
+
+    def to_json(self, compact: bool = False) -> bytes:
+        """Full: a keyed object. Compact: a positional array (site/session are in the topic)."""
+        if compact:
+            return _dumps([
+                SCHEMA_VERSION, self.session, self.step, _num(self.time), self.state,
+                _nums(self.trial), _nums(self.ctrl), _nums(self.daq_disp), _nums(self.daq_force),
+                _num(self.predicted_force),
+                None if self.monitor is None else _monitor_compact(self.monitor),
+            ])
+        return _dumps({
+            "v": SCHEMA_VERSION,
+            "site": self.site,
+            "session": self.session,
+            "step": self.step,
+            "time": _num(self.time),
+            "state": self.state,
+            "trial": _nums(self.trial),
+            "ctrl": _nums(self.ctrl),
+            "daq": {"disp": _nums(self.daq_disp), "force": _nums(self.daq_force)},
+            "predicted_force": _num(self.predicted_force),
+            "monitor": None if self.monitor is None else _monitor_full(self.monitor),
+        })
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SiteStatus:
+    """The retained "how is this site now" message, republished on every state change."""
+
+    site: str
+    state: str
+    session: int = 0
+    step: int = 0
+    time: float | None = None
+    reason: str = ""
+    holds: int = 0
+    wall_time: float = field(default_factory=_time.time)
+
+    def __post_init__(self) -> None:
+        check_site_name(self.site)
+
+    def to_json(self, compact: bool = False) -> bytes:
+        """Status is rare and retained: always the keyed object (``compact`` drops empties)."""
+        body: dict[str, Any] = {
+            "v": SCHEMA_VERSION, "site": self.site, "state": self.state,
+            "session": self.session, "step": self.step, "time": _num(self.time),
+            "reason": self.reason, "holds": self.holds, "wall_time": self.wall_time,
+        }
+        if compact:
+            body = {k: v for k, v in body.items() if v not in (None, "")}
+        return _dumps(body)
+
+
+_Scalar = str | int | float | bool | None
+
+
+def _plain(value: object) -> object:
+    if isinstance(value, float):
+        return _num(value)
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _check_extra(extra: Mapping[str, object], where: str) -> Mapping[str, object]:
+    for key, value in extra.items():
+        items = value if isinstance(value, list | tuple) else (value,)
+        if not isinstance(key, str) or not all(isinstance(v, _Scalar) for v in items):
+            raise TelemetrySchemaError(
+                f"{where}: extra field {key!r}={value!r} must be a JSON scalar or a list of them"
+            )
+    return MappingProxyType(dict(extra))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SiteEvent:
+    """Something an operator must see: a limit hit, HOLD, a fault, a monitor warning.
+
+    ``kind`` is a short slug (``hold``, ``limit``, ``fault``, ``monitor-warning``,
+    ``session-open``...); ``extra`` carries kind-specific JSON scalars (signal, value, limit).
+    """
+
+    site: str
+    kind: str
+    reason: str
+    session: int = 0
+    step: int | None = None
+    time: float | None = None
+    extra: Mapping[str, object] = field(default_factory=dict)
+    wall_time: float = field(default_factory=_time.time)
+
+    def __post_init__(self) -> None:
+        check_site_name(self.site)
+        if not isinstance(self.kind, str) or not _NAME.fullmatch(self.kind):
+            raise TelemetrySchemaError(f"event kind {self.kind!r} must be a short slug")
+        object.__setattr__(self, "extra", _check_extra(self.extra, f"event {self.kind!r}"))
+
+    def to_json(self, compact: bool = False) -> bytes:
+        """The keyed object; ``extra`` values are plain JSON (non-finite floats as strings)."""
+        extra = {k: _plain(v) for k, v in self.extra.items()}
+        body: dict[str, Any] = {
+            "v": SCHEMA_VERSION, "site": self.site, "kind": self.kind, "reason": self.reason,
+            "session": self.session, "step": self.step, "time": _num(self.time),
+            "extra": extra, "wall_time": self.wall_time,
+        }
+        if compact:
+            body = {k: v for k, v in body.items() if v not in (None, "", {})}
+        return _dumps(body)

@@ -1,0 +1,66 @@
+"""Byte accumulator with exact-length reads (items have no length prefix, spec §2.2)."""
+
+from __future__ import annotations
+
+from protocol.errors import LocalProtocolError
+from protocol.wire import ReadableBuffer
+
+__all__ = ["ReceiveBuffer"]
+
+_COMPACT_AT = 1 << 16
+
+
+class ReceiveBuffer:
+    """Bytes fed so far; items are taken by count, segment boundaries mean nothing."""
+
+    __slots__ = ("_buf", "_pos", "consumed", "eof")
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._pos = 0
+        self.consumed = 0
+        """Stream offset of the next unread byte (for error messages)."""
+        self.eof = False
+
+    def feed(self, data: ReadableBuffer) -> None:
+        """Append *data*; ``b""`` records EOF."""
+        if not data:
+            self.eof = True
+            return
+        if self.eof:
+            raise LocalProtocolError(
+                f"receive_data() got {len(data)} bytes after EOF (b'') was already fed"
+            )
+        if self._pos:
+            if self._pos == len(self._buf):
+                self._buf.clear()
+                self._pos = 0
+            elif self._pos >= _COMPACT_AT:
+                del self._buf[: self._pos]
+                self._pos = 0
+        self._buf += data
+
+    @property
+    def available(self) -> int:
+        """Unread bytes."""
+        return len(self._buf) - self._pos
+
+    def take(self, count: int) -> int:
+        """Consume *count* bytes; return their start offset in :attr:`data` (read at once)."""
+        start = self._pos
+        self._pos = start + count
+        self.consumed += count
+        return start
+
+    @property
+    def data(self) -> bytearray:
+        """The underlying buffer; valid for offsets from :meth:`take` until the next feed."""
+        return self._buf
+
+    def discard(self) -> int:
+        """Drop every unread byte; return how many were dropped."""
+        dropped = self.available
+        self._buf.clear()
+        self._pos = 0
+        self.consumed += dropped
+        return dropped

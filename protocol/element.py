@@ -1,0 +1,357 @@
+"""Element-level ("generic") protocol: OpenSees genericClient <-> startSimAppElemServer.
+
+Sans-IO, h11 style: feed received bytes with ``receive_data`` (``b""`` = EOF), pull
+events with ``next_event``, and get the bytes to write from the ``send_*`` methods.
+The wire has no framing (spec §2.1): after the 44-byte size ID every vector is exactly
+``dataSize`` little-endian doubles in both directions, so sizes come from the ID only.
+
+Reply buffers follow OpenFresco's server loop (spec §3.8): one buffer of ``dataSize``
+doubles, zero at the start, in which each reply overwrites only the slots it uses. The
+captures (made against the real OpenFresco server) depend on those left-overs; clients
+ignore every slot past the ones they read. ``keep_reply_leftovers=False`` zeroes the
+buffer before each reply instead.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from collections.abc import Sequence
+from typing import Final, Literal, NoReturn, TypeAlias
+
+from protocol._buffer import ReceiveBuffer
+from protocol.element_client import ClientState, ElementClientEvent, ElementClientSession
+from protocol.errors import LocalProtocolError, RemoteProtocolError
+from protocol.events import (
+    NEED_DATA,
+    PAUSED,
+    CommitReceived,
+    ConnectionClosed,
+    DieReceived,
+    Ignored,
+    ReplyReceived,
+    ReplyRequested,
+    Sentinel,
+    SizeReceived,
+    TrialReceived,
+)
+from protocol.wire import (
+    ACTION_BY_CODE,
+    DOUBLE_BYTES,
+    Action,
+    BlockLayout,
+    ReadableBuffer,
+    Signals,
+    SignalSizes,
+    SizeID,
+    doubles_struct,
+    pack_blocks,
+    unpack_blocks,
+)
+
+__all__ = [
+    "NEED_DATA",
+    "PAUSED",
+    "Action",
+    "ClientState",
+    "CommitReceived",
+    "ConnectionClosed",
+    "DieReceived",
+    "ElementClientEvent",
+    "ElementClientSession",
+    "ElementServerEvent",
+    "ElementServerSession",
+    "Ignored",
+    "ReplyReceived",
+    "ReplyRequested",
+    "ServerState",
+    "SignalSizes",
+    "Signals",
+    "SizeID",
+    "SizeReceived",
+    "TrialReceived",
+    "pack_blocks",
+    "unpack_blocks",
+]
+
+ElementServerEvent: TypeAlias = (
+    SizeReceived
+    | TrialReceived
+    | CommitReceived
+    | ReplyRequested
+    | DieReceived
+    | Ignored
+    | ConnectionClosed
+)
+
+_SLOT0: Final = struct.Struct("<d")
+_REPLY_ACTIONS: Final = frozenset(a for a in Action if 6 <= a <= 15)
+_DAQ_ACTIONS: Final = frozenset(a for a in Action if 6 <= a <= 11)
+_MATRIX_ACTIONS: Final = frozenset(a for a in Action if 12 <= a <= 15)
+_DAQ_BLOCK_OF_ACTION: Final = {
+    Action.GET_DISP: 0,
+    Action.GET_VEL: 1,
+    Action.GET_ACCEL: 2,
+    Action.GET_FORCE: 3,
+    Action.GET_TIME: 4,
+}
+_REPLY_EVENTS: Final = {a: ReplyRequested(a) for a in _REPLY_ACTIONS}
+_COMMIT_EVENT: Final = CommitReceived()
+_DIE_EVENT: Final = DieReceived()
+
+
+class ServerState(enum.Enum):
+    """States of :class:`ElementServerSession`."""
+
+    AWAIT_ID = "AWAIT_ID"
+    READY = "READY"
+    MUST_REPLY = "MUST_REPLY"
+    CLOSED = "CLOSED"
+    ERROR = "ERROR"
+
+
+def _check_data_size_cap(max_data_size: int) -> None:
+    if max_data_size < 1:
+        raise ValueError(f"max_data_size must be at least 1, got {max_data_size}")
+
+
+class ElementServerSession:
+    """The server role of OpenFresco's ``startSimAppElemServer`` (spec §3.8).
+
+    After DIE the session is CLOSED and silently drops any further bytes (ECSimFEAdapter
+    sends DIE twice); EOF then yields ``ConnectionClosed(clean=True)``.
+    """
+
+    __slots__ = (
+        "_closed",
+        "_daq_layout",
+        "_error",
+        "_in",
+        "_keep_leftovers",
+        "_max_data_size",
+        "_owed",
+        "_reply",
+        "_size_id",
+        "_state",
+        "_trial_layout",
+        "_vector_bytes",
+        "_zeros",
+        "bytes_after_die",
+        "vectors_received",
+    )
+
+    def __init__(self, *, max_data_size: int = 65536, keep_reply_leftovers: bool = True) -> None:
+        _check_data_size_cap(max_data_size)
+        self._max_data_size = max_data_size
+        self._keep_leftovers = keep_reply_leftovers
+        self._in = ReceiveBuffer()
+        self._state = ServerState.AWAIT_ID
+        self._size_id: SizeID | None = None
+        self._vector_bytes = 0
+        self._trial_layout: BlockLayout | None = None
+        self._daq_layout: BlockLayout | None = None
+        self._reply = bytearray()
+        self._zeros = b""
+        self._owed: Action | None = None
+        self._closed: ConnectionClosed | None = None
+        self._error = ""
+        self.vectors_received = 0
+        """Vectors decoded so far (the ID not counted)."""
+        self.bytes_after_die = 0
+        """Bytes dropped because they followed a DIE."""
+
+    # -- introspection -------------------------------------------------------------
+    @property
+    def state(self) -> ServerState:
+        """Current protocol state."""
+        return self._state
+
+    @property
+    def size_id(self) -> SizeID | None:
+        """The accepted size ID, None before it arrived."""
+        return self._size_id
+
+    @property
+    def owed_action(self) -> Action | None:
+        """The request that must be answered next (state MUST_REPLY), else None."""
+        return self._owed
+
+    # -- receiving -----------------------------------------------------------------
+    def receive_data(self, data: ReadableBuffer) -> None:
+        """Feed bytes from the peer; ``b""`` means EOF.
+
+        Raises LocalProtocolError for non-empty data after EOF was fed.
+        """
+        if self._state is ServerState.CLOSED and data and not self._in.eof:
+            self.bytes_after_die += len(data)
+            return
+        self._in.feed(data)
+
+    def next_event(self) -> ElementServerEvent | Literal[Sentinel.NEED_DATA, Sentinel.PAUSED]:
+        """Decode the next event, or NEED_DATA / PAUSED (a reply is owed)."""
+        state = self._state
+        if state is ServerState.READY:
+            buffered = self._in
+            if buffered.available >= self._vector_bytes:
+                start = buffered.take(self._vector_bytes)
+                return self._decode_vector(buffered.data, start)
+            if buffered.eof:
+                return self._close()
+            return NEED_DATA
+        if state is ServerState.MUST_REPLY:
+            return PAUSED
+        if state is ServerState.AWAIT_ID:
+            return self._next_in_await_id()
+        if state is ServerState.CLOSED:
+            if self._closed is not None:
+                return self._closed
+            return self._close() if self._in.eof else NEED_DATA
+        raise RemoteProtocolError(f"session is in ERROR state: {self._error}")
+
+    def _next_in_await_id(self) -> SizeReceived | ConnectionClosed | Literal[Sentinel.NEED_DATA]:
+        buffered = self._in
+        if buffered.available >= SizeID.SIZE_BYTES:
+            start = buffered.take(SizeID.SIZE_BYTES)
+            try:
+                size_id = SizeID.decode(
+                    buffered.data, max_data_size=self._max_data_size, offset=start
+                )
+            except RemoteProtocolError as exc:
+                self._fail(str(exc))
+            self._configure(size_id)
+            return SizeReceived(size_id)
+        if buffered.eof:
+            return self._close()
+        return NEED_DATA
+
+    def _configure(self, size_id: SizeID) -> None:
+        data_size = size_id.data_size
+        self._size_id = size_id
+        self._vector_bytes = DOUBLE_BYTES * data_size
+        self._trial_layout = BlockLayout(
+            size_id.ctrl, 1, data_size, allow_missing_time=True, role="trial"
+        )
+        self._daq_layout = BlockLayout(size_id.daq, 0, data_size, role="daq")
+        self._reply = bytearray(self._vector_bytes)
+        self._zeros = bytes(self._vector_bytes)
+        self._state = ServerState.READY
+
+    def _decode_vector(self, data: bytearray, start: int) -> ElementServerEvent:
+        self.vectors_received += 1
+        code: float = _SLOT0.unpack_from(data, start)[0]
+        action = ACTION_BY_CODE.get(code)
+        if action is Action.SET_TRIAL_RESPONSE:
+            assert self._trial_layout is not None
+            return TrialReceived(self._trial_layout.unpack_from(data, start))
+        if action is None:
+            if not math.isfinite(code):
+                offset = self._in.consumed - self._vector_bytes
+                self._fail(
+                    f"vector #{self.vectors_received} (stream offset {offset}): slot 0 "
+                    f"(action code) is {code!r}, not a finite number"
+                )
+            return Ignored(code)
+        if action in _REPLY_ACTIONS:
+            self._owed = action
+            self._state = ServerState.MUST_REPLY
+            return _REPLY_EVENTS[action]
+        if action is Action.COMMIT_STATE:
+            return _COMMIT_EVENT
+        if action is Action.DIE:
+            self._state = ServerState.CLOSED
+            self.bytes_after_die += self._in.discard()
+            return _DIE_EVENT
+        return Ignored(code)
+
+    def _close(self) -> ConnectionClosed:
+        pending = self._in.discard()
+        event = ConnectionClosed(clean=pending == 0, pending_bytes=pending)
+        self._closed = event
+        self._state = ServerState.CLOSED
+        self._owed = None
+        return event
+
+    def _fail(self, message: str) -> NoReturn:
+        self._state = ServerState.ERROR
+        self._error = message
+        raise RemoteProtocolError(message)
+
+    # -- sending -------------------------------------------------------------------
+    def _require_owed(self, method: str, allowed: frozenset[Action], hint: str) -> Action:
+        owed = self._owed
+        if self._state is not ServerState.MUST_REPLY or owed is None:
+            raise LocalProtocolError(
+                f"{method}() called but no reply is owed (state {self._state.name})"
+            )
+        if owed not in allowed:
+            raise LocalProtocolError(
+                f"{method}() cannot answer {owed.name} (code {owed.value}); {hint}"
+            )
+        if not self._keep_leftovers:
+            self._reply[:] = self._zeros
+        return owed
+
+    def _finish_reply(self) -> bytes:
+        self._owed = None
+        self._state = ServerState.READY
+        return bytes(self._reply)
+
+    def send_daq(self, daq: Signals) -> bytes:
+        """Reply to codes 6..11 with daq blocks at their packed offsets from slot 0.
+
+        Code 6 writes every daq block (all lengths must equal the daq sizes). Codes 7..11
+        write the requested block (its length must equal its daq size) plus any other
+        non-empty block given, each at its packed offset: an ECSimFEAdapter client reads
+        its whole daq vector from a code-10 reply (spec §5), genericClient only slot 0..n-1.
+        """
+        action = self._require_owed(
+            "send_daq", _DAQ_ACTIONS, "use send_matrix for 12..15 or send_values"
+        )
+        layout = self._daq_layout
+        assert layout is not None
+        if action is Action.GET_DAQ_RESPONSE:
+            layout.pack_into(self._reply, daq, "daq")
+            return self._finish_reply()
+        requested = _DAQ_BLOCK_OF_ACTION[action]
+        blocks = daq.as_tuple()
+        sizes = layout.sizes.as_tuple()
+        for index, block in enumerate(blocks):
+            if (index == requested or block) and len(block) != sizes[index]:
+                layout.check(daq, f"{action.name} reply: daq")
+        for index, block in enumerate(blocks):
+            if index == requested or block:
+                layout.pack_block_into(self._reply, index, block, "daq")
+        return self._finish_reply()
+
+    def send_matrix(self, column_major: Sequence[float]) -> bytes:
+        """Reply to codes 12..15: n*n values (n = sizeCtrl disp), column-major from slot 0."""
+        action = self._require_owed(
+            "send_matrix", _MATRIX_ACTIONS, "use send_daq for 6..11 or send_values"
+        )
+        assert self._size_id is not None
+        n = self._size_id.ctrl.disp
+        count = n * n
+        if len(column_major) != count:
+            raise LocalProtocolError(
+                f"send_matrix() got {len(column_major)} values but {action.name} needs "
+                f"n*n = {count} (n = sizeCtrl disp = {n})"
+            )
+        if count > self._size_id.data_size:
+            raise LocalProtocolError(
+                f"send_matrix(): the {n}x{n} matrix needs {count} slots but dataSize is "
+                f"{self._size_id.data_size}"
+            )
+        doubles_struct(count).pack_into(self._reply, 0, *column_major)
+        return self._finish_reply()
+
+    def send_values(self, values: Sequence[float]) -> bytes:
+        """Escape hatch: answer the owed request with raw *values* from slot 0."""
+        self._require_owed("send_values", _REPLY_ACTIONS, "")
+        assert self._size_id is not None
+        if len(values) > self._size_id.data_size:
+            raise LocalProtocolError(
+                f"send_values() got {len(values)} values but dataSize is {self._size_id.data_size}"
+            )
+        doubles_struct(len(values)).pack_into(self._reply, 0, *values)
+        return self._finish_reply()

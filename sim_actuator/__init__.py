@@ -1,0 +1,1 @@
+"""A simulated structural test rig: specimen hysteresis, actuator dynamics, unmodelled effects."""

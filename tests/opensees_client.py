@@ -1,0 +1,112 @@
+"""Scenarios run inside a real OpenSeesPy process (started by bridge_harness.run_opensees).
+
+Usage: python opensees_client.py SCENARIO JSON_PARAMS — prints one ``RESULT {json}`` line.
+Each scenario builds the model either with ``genericClient`` elements pointed at the bridge
+(``ports`` given) or with the equivalent pure-OpenSees reference elements (``ports`` null).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any
+
+import openseespy.opensees as ops
+
+
+def _gc_args(port: int, p: dict[str, Any]) -> list[Any]:
+    args: list[Any] = ["-server", port, "127.0.0.1"]
+    if p.get("udp"):
+        args.append("-udp")
+    if p.get("data_size") is not None:
+        args += ["-dataSize", p["data_size"]]
+    if p.get("no_rayleigh"):
+        args.append("-noRayleigh")
+    return args
+
+
+def static_1dof(p: dict[str, Any]) -> dict[str, Any]:
+    """Grounded 1-DOF spring under a static load ramp (spec fixture gc_1dof_static_tcp)."""
+    ops.wipe()
+    ops.model("basic", "-ndm", 1, "-ndf", 1)
+    ops.node(1, 0.0)
+    if p.get("port") is not None:
+        ops.element("genericClient", 1, "-node", 1, "-dof", 1, *_gc_args(p["port"], p))
+    else:
+        ops.node(0, 0.0)
+        ops.fix(0, 1)
+        ops.uniaxialMaterial(*p["material"])
+        ops.element("zeroLength", 1, 0, 1, "-mat", p["material"][1], "-dir", 1)
+    ops.timeSeries("Linear", 1)
+    ops.pattern("Plain", 1, 1)
+    ops.load(1, float(p["load"]))
+    ops.system("BandGeneral")
+    ops.numberer("Plain")
+    ops.constraints("Plain")
+    ops.test("NormDispIncr", 1e-12, 50)
+    ops.algorithm("Newton")
+    ops.integrator("LoadControl", 1.0 / p["nsteps"])
+    ops.analysis("Static")
+    u, f = [], []
+    for _ in range(p["nsteps"]):
+        if ops.analyze(1) != 0:
+            raise RuntimeError("static analysis failed")
+        u.append(ops.nodeDisp(1, 1))
+        f.append(ops.eleResponse(1, "force")[-1])  # force on node 1 (zeroLength: [f0, f1])
+    ops.wipe()
+    return {"u": u, "force": f}
+
+
+def _build_frame(p: dict[str, Any]) -> None:
+    ops.wipe()
+    ops.model("basic", "-ndm", 1, "-ndf", 1)
+    for tag in (1, 2, 3):
+        ops.node(tag, 0.0)
+    ops.fix(1, 1)
+    ops.mass(2, p["masses"][0])
+    ops.mass(3, p["masses"][1])
+    ports = p.get("ports")
+    if ports is not None:
+        for ele, (ni, nj), port in ((1, (1, 2), ports[0]), (2, (2, 3), ports[1])):
+            ops.element("genericClient", ele, "-node", ni, nj, "-dof", 1, "-dof", 1,
+                        *_gc_args(port, p))
+    else:
+        ops.uniaxialMaterial(*p["story1"])
+        ops.uniaxialMaterial(*p["story2"])
+        ray = [] if p.get("no_rayleigh") or not p.get("rayleigh") else ["-doRayleigh", 1]
+        ops.element("zeroLength", 1, 1, 2, "-mat", p["story1"][1], "-dir", 1, *ray)
+        ops.element("zeroLength", 2, 2, 3, "-mat", p["story2"][1], "-dir", 1, *ray)
+    ops.timeSeries("Path", 1, "-dt", p["dt"], "-values", *p["accel"], "-factor", p["factor"])
+    ops.pattern("UniformExcitation", 1, 1, "-accel", 1)
+    if p.get("rayleigh"):
+        ops.rayleigh(*p["rayleigh"])
+    ops.system("FullGeneral")
+    ops.numberer("Plain")
+    ops.constraints("Plain")
+    ops.test("NormDispIncr", 1e-12, 50)
+    ops.algorithm(*p.get("algorithm", ["Newton"]))
+    ops.integrator("Newmark", 0.5, 0.25)
+    ops.analysis("Transient")
+
+
+def frame2(p: dict[str, Any]) -> dict[str, Any]:
+    """Two-story shear frame under base excitation; optionally wiped and rebuilt and run again."""
+    runs = []
+    for _ in range(2 if p.get("rebuild") else 1):
+        _build_frame(p)
+        eig = ops.eigen("-fullGenLapack", 2) if p.get("eigen_first") else None
+        u2, u3 = [], []
+        for _ in range(p["nsteps"]):
+            if ops.analyze(1, p["dt"]) != 0:
+                raise RuntimeError("transient analysis failed")
+            u2.append(ops.nodeDisp(2, 1))
+            u3.append(ops.nodeDisp(3, 1))
+        runs.append({"u2": u2, "u3": u3, "eigen": eig})
+        ops.wipe()
+    return {"runs": runs}
+
+
+if __name__ == "__main__":
+    scenario, params = sys.argv[1], json.loads(sys.argv[2])
+    result = {"static_1dof": static_1dof, "frame2": frame2}[scenario](params)
+    print("RESULT " + json.dumps(result), flush=True)
