@@ -3,7 +3,7 @@ PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean apt-test-deps
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -20,7 +20,18 @@ $(VENV)/.test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.runtime
 	$(BIN)/fresco-bridge demo
 
-test: $(VENV)/.test
+# Debian packages the tests drive as independent peers (mbpoll: a libmodbus Modbus master).
+# Idempotent and quiet; `apt-get update` only when the package lists do not know the package.
+APT_TEST_PACKAGES := mbpoll
+apt-test-deps:
+	@for p in $(APT_TEST_PACKAGES); do command -v $$p >/dev/null 2>&1 && continue; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get install -y -qq $$p >/dev/null 2>&1 \
+	  || { apt-get update -qq >/dev/null && apt-get install -y -qq $$p >/dev/null; } \
+	  || { echo "make: cannot install Debian package $$p (needed by the tests)" >&2; exit 1; }; \
+	done
+
+test: $(VENV)/.test apt-test-deps
 	$(BIN)/ruff check protocol fresco_bridge sim_actuator tests benchmarks
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
