@@ -20,9 +20,10 @@ $(VENV)/.test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.runtime
 	$(BIN)/fresco-bridge demo
 
-# Debian packages the tests drive as independent peers (mbpoll: a libmodbus Modbus master).
+# Debian packages the tests drive as independent peers (mbpoll: a libmodbus Modbus master;
+# mosquitto: the broker `fresco-bridge lab up` starts).
 # Idempotent and quiet; `apt-get update` only when the package lists do not know the package.
-APT_TEST_PACKAGES := mbpoll
+APT_TEST_PACKAGES := mbpoll mosquitto
 apt-test-deps:
 	@for p in $(APT_TEST_PACKAGES); do command -v $$p >/dev/null 2>&1 && continue; \
 	  export DEBIAN_FRONTEND=noninteractive; \

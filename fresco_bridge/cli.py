@@ -10,6 +10,10 @@ import sys
 from pathlib import Path
 
 from .config import ConfigError, load_config
+from .lab import LabError, add_lab_parser, lab_command
+from .report.cli import COMMANDS as REPORT_COMMANDS
+from .report.cli import add_report_parsers, report_command
+from .runs import RunDirError
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -55,10 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--seed", type=int, default=1, help="synthetic record seed")
     p_demo.add_argument("--runs", type=Path, default=Path("runs"), help="run directory root")
     p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
-    p_exp = sub.add_parser("export", help="export a run record's committed steps to CSV")
-    p_exp.add_argument("run_dir", type=Path)
-    p_exp.add_argument("-o", "--output", type=Path, default=None)
-    p_exp.add_argument("--site", default=None)
+    add_report_parsers(sub)  # report, runs list|show|export, export (alias)
+    add_lab_parser(sub)
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
     try:
@@ -75,14 +77,11 @@ def main(argv: list[str] | None = None) -> int:
             run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
                      runs=args.runs, transport=args.transport)
             return 0
-        if args.command == "export":
-            from .record import export_csv
-
-            out = args.output or args.run_dir / "steps.csv"
-            n = export_csv(args.run_dir, out, site=args.site)
-            print(f"{out}: {n} committed step(s)")
-            return 0
-    except ConfigError as exc:
+        if args.command == "lab":
+            return lab_command(args)
+        if args.command in REPORT_COMMANDS:
+            return report_command(args)
+    except (ConfigError, LabError, RunDirError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
