@@ -130,7 +130,8 @@ class RecordConfig(_Strict):
 
 
 class TelemetryConfig(_Strict):
-    """Live telemetry over MQTT (off unless ``mqtt_host`` is set) and online error monitors."""
+    """Live telemetry over MQTT (off unless ``mqtt_host`` is set), Prometheus metrics (off unless
+    ``metrics_port`` is set) and online error monitors."""
 
     mqtt_host: str | None = None
     mqtt_port: int = Field(default=1883, ge=1, le=65535)
@@ -145,6 +146,13 @@ class TelemetryConfig(_Strict):
     monitor_window: int = Field(default=512, ge=16)
     warn_tracking_error: float | None = Field(default=None, gt=0)
     """|measured − command| (mm) past which a ``monitor-warning`` event is raised."""
+    monitors: bool = True
+    """Run the online error monitors per committed step: published with MQTT telemetry and
+    written to the run record (``monitor`` lines) when recording is on (~10 µs per step)."""
+    metrics_port: int | None = Field(default=None, ge=0, le=65535)
+    """Serve Prometheus ``/metrics`` on this port (off when unset; 0 picks a free port)."""
+    metrics_host: str = "127.0.0.1"
+    """Bind address of the metrics endpoint (loopback by default: it has no authentication)."""
 
 
 class LabConfig(_Strict):

@@ -27,6 +27,8 @@ from .server.udp import UdpSiteEndpoint
 from .setups import make_setup
 from .sites import ExperimentalSite
 from .telemetry import MqttTelemetry
+from .telemetry.metrics import Metrics, MetricsServer
+from .telemetry.taps import SiteTaps
 
 log = logging.getLogger("fresco_bridge")
 T = TypeVar("T")
@@ -54,6 +56,8 @@ class Bridge:
         self.ports: dict[str, int] = {}
         self.telemetry: MqttTelemetry | None = None
         self._telemetry_task: asyncio.Task[None] | None = None
+        self.metrics: Metrics | None = None
+        self.metrics_server: MetricsServer | None = None
 
     async def start(self) -> None:
         cfg = self.config
@@ -110,13 +114,41 @@ class Bridge:
                 password=tcfg.password,
             )
             self._telemetry_task = loop.create_task(self.telemetry.run(), name="telemetry.mqtt")
-            for site in self.sites.values():
-                site.attach_telemetry(self.telemetry, OnlineMonitor(
-                    tcfg.monitor_dt, tcfg.monitor_window,
-                    warn_tracking_error=tcfg.warn_tracking_error,
-                ))
             log.info("telemetry: MQTT %s:%d prefix %s", tcfg.mqtt_host, tcfg.mqtt_port,
                      tcfg.prefix)
+        if tcfg.metrics_port is not None:
+            try:
+                self._start_metrics(tcfg.metrics_host, tcfg.metrics_port)
+            except OSError:
+                await self.close()
+                raise
+        self._attach_taps()
+
+    def _start_metrics(self, host: str, port: int) -> None:
+        """The /metrics endpoint (its own thread); a port in use fails start() cleanly."""
+        self.metrics = Metrics()
+        telemetry = self.telemetry
+        if telemetry is not None:
+            self.metrics.track_telemetry(lambda: telemetry.stats)
+        try:
+            self.metrics_server = self.metrics.start_http_server(host, port)
+        except OSError as exc:
+            raise OSError(exc.errno, f"metrics endpoint {host}:{port}: {exc.strerror}") from exc
+        for site in self.sites.values():
+            site.metrics = self.metrics.for_site(site.name)
+        log.info("metrics: http://%s:%d/metrics", host, self.metrics_server.port)
+
+    def _attach_taps(self) -> None:
+        """Give each site its taps: MQTT, metrics and/or monitor lines in the run record."""
+        tcfg = self.config.telemetry
+        record = self.record if tcfg.monitors else None
+        if self.telemetry is None and self.metrics is None and record is None:
+            return  # nothing to feed: the site skips building step samples altogether
+        for site in self.sites.values():
+            monitor = OnlineMonitor(
+                tcfg.monitor_dt, tcfg.monitor_window, warn_tracking_error=tcfg.warn_tracking_error,
+            ) if tcfg.monitors else None
+            site.attach_telemetry(SiteTaps(self.telemetry, site.metrics, record), monitor)
 
     async def close(self) -> None:
         for server in self._servers:
@@ -131,6 +163,9 @@ class Bridge:
                 await asyncio.wait_for(site.controller.close(), site.timeout)
             except Exception as exc:  # closing must go on for the other sites
                 log.warning("site %s: controller close failed: %s", site.name, exc)
+        if self.metrics_server is not None:
+            self.metrics_server.close()
+            self.metrics_server = None
         if self.telemetry is not None and self._telemetry_task is not None:
             self.telemetry.stop()
             try:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,20 @@ class CommittedStep:
     cmd_disp: tuple[float, ...]
     meas_disp: tuple[float, ...]
     meas_force: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class MonitorLine:
+    """The online error monitors after one committed step (``monitor`` record lines)."""
+
+    site: str
+    session: int
+    step: int
+    tracking_error: float
+    ti: float
+    nrms: float | None
+    fei_amplitude: float | None
+    fei_delay: float | None
 
 
 def _float(v: Any) -> float:
@@ -59,12 +73,31 @@ def read_record(run_dir: Path) -> Iterator[dict[str, Any]]:
         yield obj
 
 
+def record_is_torn(run_dir: Path) -> bool:
+    """True when the record's last line was cut short (the writer was killed mid-write)."""
+    path = run_dir / RECORD_FILE if run_dir.is_dir() else run_dir
+    try:
+        with path.open("rb") as fh:
+            size = fh.seek(0, 2)
+            if size == 0:
+                return False
+            fh.seek(size - 1)
+            return fh.read(1) != b"\n"
+    except OSError as exc:
+        raise RecordFormatError(f"{path}: cannot read the run record: {exc.strerror}") from exc
+
+
 def committed_steps(run_dir: Path) -> list[CommittedStep]:
     """Pair each commit with the last trial and measurement before it, per site session."""
+    return pair_commits(read_record(run_dir))
+
+
+def pair_commits(records: Iterable[dict[str, Any]]) -> list[CommittedStep]:
+    """``committed_steps`` over already-read record lines (one read serves several uses)."""
     last_trial: dict[tuple[str, int], dict[str, Any]] = {}
     last_daq: dict[tuple[str, int], dict[str, Any]] = {}
     out: list[CommittedStep] = []
-    for rec in read_record(run_dir):
+    for rec in records:
         key = (rec.get("site", ""), int(rec.get("session", 0)))
         kind = rec["kind"]
         if kind == "trial":
@@ -88,9 +121,30 @@ def committed_steps(run_dir: Path) -> list[CommittedStep]:
     return out
 
 
+def monitor_lines(records: Iterable[dict[str, Any]]) -> list[MonitorLine]:
+    """The ``monitor`` lines among ``records``, in record order."""
+
+    def opt(v: Any) -> float | None:
+        return None if v is None else float(v)
+
+    return [
+        MonitorLine(
+            site=rec.get("site", ""), session=int(rec.get("session", 0)), step=int(rec["step"]),
+            tracking_error=_float(rec["err"]), ti=_float(rec["ti"]), nrms=opt(rec.get("nrms")),
+            fei_amplitude=opt(rec.get("fei_amp")), fei_delay=opt(rec.get("fei_delay")),
+        )
+        for rec in records if rec["kind"] == "monitor"
+    ]
+
+
 def export_csv(run_dir: Path, out_path: Path, *, site: str | None = None) -> int:
     """Write the committed steps to ``out_path``; returns the number of rows."""
-    steps = [s for s in committed_steps(run_dir) if site is None or s.site == site]
+    return write_csv(committed_steps(run_dir), out_path, site=site)
+
+
+def write_csv(steps: Iterable[CommittedStep], out_path: Path, *, site: str | None = None) -> int:
+    """``export_csv`` for steps already read; returns the number of rows."""
+    steps = [s for s in steps if site is None or s.site == site]
     n = max((len(s.cmd_disp) for s in steps), default=1)
 
     def cols(name: str) -> list[str]:

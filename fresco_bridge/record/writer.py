@@ -169,6 +169,18 @@ class RunRecord:
         self._line("event", site, session, body)
         self.flush(sync=True)
 
+    def monitor(
+        self, site: str, session: int, step: int, tracking_error: float, ti: float,
+        nrms: float | None, fei_amplitude: float | None, fei_delay: float | None,
+    ) -> None:
+        """Online error monitors after committed ``step`` (derived data: buffered, not flushed;
+        it goes to the file with the next commit or event)."""
+        self._line(
+            "monitor", site, session,
+            f',"step":{step},"err":{_num(tracking_error)},"ti":{_num(ti)},'
+            f'"nrms":{_opt(nrms)},"fei_amp":{_opt(fei_amplitude)},"fei_delay":{_opt(fei_delay)}',
+        )
+
     # -- durability ------------------------------------------------------------------------
     def flush(self, *, sync: bool = False) -> None:
         if self.closed:
@@ -212,3 +224,7 @@ class RunRecord:
 
 def _num(v: float) -> str:
     return repr(float(v)) if math.isfinite(v) else f'"{v}"'
+
+
+def _opt(v: float | None) -> str:
+    return "null" if v is None else _num(v)

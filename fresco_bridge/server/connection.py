@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
+from time import perf_counter
 from typing import Protocol
 
 from protocol import NEED_DATA, PAUSED, ActorSession, ElementServerSession, ProtocolError
@@ -44,6 +45,7 @@ class SessionPump:
         self._close = close
         self._pause = pause
         self._pending: asyncio.Task[None] | None = None
+        self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
         self.session: ElementServerSession | ActorSession
         self.handler: _Handler
@@ -62,7 +64,7 @@ class SessionPump:
             self._run()
 
     def _run(self) -> None:
-        session, handle = self.session, self.handler.handle
+        session, handle, metrics = self.session, self.handler.handle, self.site.metrics
         while not self.closed:
             try:
                 ev = session.next_event()
@@ -71,6 +73,7 @@ class SessionPump:
                 return
             if ev is NEED_DATA or ev is PAUSED:
                 return
+            t0 = perf_counter() if metrics is not None else 0.0
             try:
                 r = start_eager(handle(ev))
             except SessionEnded as exc:
@@ -87,7 +90,11 @@ class SessionPump:
                 self._pause(True)
                 self._pending = r.task(name=f"{self.site.name}.request")
                 self._pending.add_done_callback(self._resumed)
+                if metrics is not None:
+                    self._timing = (ev, t0)
                 return
+            if metrics is not None:
+                metrics.message(ev, perf_counter() - t0)
 
     def _resumed(self, task: asyncio.Task[None]) -> None:
         self._pending = None
@@ -101,6 +108,9 @@ class SessionPump:
         if exc is not None:
             self._end(f"{type(exc).__name__}: {exc}", error=exc is not None)
             return
+        if self._timing is not None and self.site.metrics is not None:
+            self.site.metrics.message(self._timing[0], perf_counter() - self._timing[1])
+        self._timing = None
         self._pause(False)
         self._run()
 

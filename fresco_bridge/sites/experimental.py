@@ -25,6 +25,7 @@ from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
 
 if TYPE_CHECKING:
     from ..indicators import OnlineMonitor
+    from ..telemetry.metrics import SiteMetrics
     from ..telemetry.mqtt import Telemetry
 
 log = logging.getLogger("fresco_bridge.site")
@@ -79,6 +80,7 @@ class ExperimentalSite:
         self.holds = 0
         self.telemetry: Telemetry = NullTelemetry()
         self.monitor: OnlineMonitor | None = None
+        self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
         self._live = False  # telemetry on: publish steps, status and events
         self._reset_signals()
 

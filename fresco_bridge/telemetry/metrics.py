@@ -18,6 +18,15 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from fresco_bridge.telemetry.mqtt import TelemetryStats
+from protocol import (
+    Action,
+    CommitReceived,
+    DaqRequested,
+    OpenReceived,
+    ReplyRequested,
+    SetupReceived,
+    TrialReceived,
+)
 
 NAMESPACE = "fresco"
 # Per-message latency on the bridge: tens of µs in-process, ms over a network controller.
@@ -25,7 +34,27 @@ LATENCY_BUCKETS = (25e-6, 50e-6, 100e-6, 250e-6, 500e-6, 1e-3, 2.5e-3, 5e-3, 10e
                    50e-3, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
 UPDATER_BUCKETS = (1e-4, 5e-4, 1e-3, 5e-3, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
 
-__all__ = ["LATENCY_BUCKETS", "Metrics", "MetricsServer", "SiteMetrics"]
+__all__ = ["ACTION_NAMES", "LATENCY_BUCKETS", "Metrics", "MetricsServer", "SiteMetrics"]
+
+ACTION_NAMES: dict[Action, str] = {
+    Action.OPEN: "open", Action.SETUP: "setup", Action.SET_TRIAL_RESPONSE: "setTrialResponse",
+    Action.EXECUTE: "execute", Action.COMMIT_STATE: "commitState",
+    Action.GET_DAQ_RESPONSE: "getDaqResponse", Action.GET_DISP: "getDisp",
+    Action.GET_VEL: "getVel", Action.GET_ACCEL: "getAccel", Action.GET_FORCE: "getForce",
+    Action.GET_TIME: "getTime", Action.GET_INITIAL_STIFF: "getInitialStiff",
+    Action.GET_TANGENT_STIFF: "getTangentStiff", Action.GET_DAMP: "getDamp",
+    Action.GET_MASS: "getMass", Action.SHUTDOWN: "shutdown", Action.DIE: "DIE",
+}
+"""The ``action`` label: OpenFresco's ``OF_RemoteTest_<name>`` for each action code."""
+
+# Protocol events that carry their action in their type (element and site protocol alike).
+_EVENT_ACTIONS: dict[type, str] = {
+    TrialReceived: ACTION_NAMES[Action.SET_TRIAL_RESPONSE],
+    CommitReceived: ACTION_NAMES[Action.COMMIT_STATE],
+    DaqRequested: ACTION_NAMES[Action.GET_DAQ_RESPONSE],
+    OpenReceived: ACTION_NAMES[Action.OPEN],
+    SetupReceived: ACTION_NAMES[Action.SETUP],
+}
 
 
 @dataclass(slots=True)
@@ -37,8 +66,10 @@ class SiteMetrics:
     holds: Counter
     _latency: Histogram
     _limits: Counter
+    _events: Counter
     _latency_children: dict[str, Histogram] = field(default_factory=dict)
     _limit_children: dict[str, Counter] = field(default_factory=dict)
+    _event_children: dict[str, Counter] = field(default_factory=dict)
 
     def step(self) -> None:
         self.steps.inc()
@@ -57,6 +88,28 @@ class SiteMetrics:
         if child is None:
             child = self._limit_children[signal] = self._limits.labels(self.site, signal)
         child.inc()
+
+    def message(self, event: object, seconds: float) -> None:
+        """Latency of one handled protocol event, labelled by its action; others are ignored."""
+        kind = type(event)
+        if kind is ReplyRequested:
+            action = ACTION_NAMES.get(event.action)  # type: ignore[attr-defined]
+        else:
+            action = _EVENT_ACTIONS.get(kind)
+        if action is not None:
+            self.latency(action, seconds)
+
+    def event(self, kind: str, signal: object = None) -> None:
+        """A site event (the run record's ``event`` lines): counted per kind; ``hold`` and
+        ``limit*`` kinds also feed ``holds_total`` and ``limit_events_total{signal}``."""
+        child = self._event_children.get(kind)
+        if child is None:
+            child = self._event_children[kind] = self._events.labels(self.site, kind)
+        child.inc()
+        if kind == "hold":
+            self.holds.inc()
+        elif kind.startswith("limit"):
+            self.limit_event(str(signal) if signal is not None else kind)
 
 
 class _TelemetryCollector(Collector):
@@ -106,7 +159,8 @@ class Metrics:
     """All daemon metrics, prefixed ``fresco_``.
 
     ``steps_total{site}``, ``message_latency_seconds{site,action}``, ``holds_total{site}``,
-    ``limit_events_total{site,signal}``, ``updater_step_seconds`` and, once ``track_telemetry``
+    ``limit_events_total{site,signal}``, ``events_total{site,kind}``, ``updater_step_seconds``
+    (present, with zero counts, before any updater runs) and, once ``track_telemetry``
     is called, ``telemetry_dropped_total`` and friends.
     """
 
@@ -122,6 +176,8 @@ class Metrics:
                                    namespace=NAMESPACE, registry=r)
         self.limit_events_total = Counter("limit_events", "Limit checks that tripped",
                                           ["site", "signal"], namespace=NAMESPACE, registry=r)
+        self.events_total = Counter("events", "Site events (as in the run record) per kind",
+                                    ["site", "kind"], namespace=NAMESPACE, registry=r)
         self.updater_step_seconds = Histogram(
             "updater_step_seconds", "Wall time of one model-updater step",
             namespace=NAMESPACE, registry=r, buckets=UPDATER_BUCKETS)
@@ -134,7 +190,8 @@ class Metrics:
         if bound is None:
             bound = SiteMetrics(
                 site=site, steps=self.steps_total.labels(site), holds=self.holds_total.labels(site),
-                _latency=self.message_latency_seconds, _limits=self.limit_events_total)
+                _latency=self.message_latency_seconds, _limits=self.limit_events_total,
+                _events=self.events_total)
             self._sites[site] = bound
         return bound
 

@@ -1,0 +1,91 @@
+"""The ``report``, ``runs list|show|export`` and ``export`` sub-commands (parsers and actions).
+
+``export RUN_DIR`` is an alias of ``runs export RUN_DIR``: one code path for both. Errors are
+raised (``RunDirError``) for ``fresco_bridge.cli`` to turn into an exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..record.export import write_csv
+from ..runs import (
+    RunDirError,
+    format_listing,
+    format_show,
+    list_runs,
+    load_run,
+    resolve_run,
+    summarise,
+)
+
+COMMANDS = frozenset({"report", "runs", "export"})
+HDF5_SUFFIXES = (".h5", ".hdf5")
+
+
+def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``report``, ``runs`` and ``export`` to the top-level sub-parsers."""
+    runs_root = argparse.ArgumentParser(add_help=False)
+    runs_root.add_argument("--runs", type=Path, default=Path("runs"),
+                           help="directory holding the run directories (default: runs)")
+    p_rep = sub.add_parser("report", parents=[runs_root],
+                           help="write a self-contained HTML report of a recorded run")
+    p_rep.add_argument("run", help="run directory (or a run name/prefix under --runs)")
+    p_rep.add_argument("-o", "--output", type=Path, default=None,
+                       help="output file (default: RUN_DIR/report.html)")
+
+    p_runs = sub.add_parser("runs", help="list, show and export recorded runs")
+    rs = p_runs.add_subparsers(dest="runs_command", required=True)
+    rs.add_parser("list", parents=[runs_root], help="one line per run directory")
+    p_show = rs.add_parser("show", parents=[runs_root], help="metadata and per-site summary")
+    p_show.add_argument("run", help="run directory (or a run name/prefix under --runs)")
+    for p_exp in (rs.add_parser("export", parents=[runs_root],
+                                help="committed steps to CSV, or the whole run to HDF5"),
+                  sub.add_parser("export", parents=[runs_root],
+                                 help="alias of 'runs export'")):
+        p_exp.add_argument("run", help="run directory (or a run name/prefix under --runs)")
+        p_exp.add_argument("-o", "--output", type=Path, default=None,
+                           help="output file (default: RUN_DIR/steps.csv or RUN_DIR/run.h5)")
+        p_exp.add_argument("--format", choices=("csv", "hdf5"), default=None,
+                           help="default: hdf5 for a .h5/.hdf5 output, else csv")
+        p_exp.add_argument("--site", default=None, help="only this site")
+
+
+def _export(args: argparse.Namespace) -> int:
+    run = load_run(resolve_run(args.run, args.runs))
+    fmt = args.format or (
+        "hdf5" if args.output is not None and args.output.suffix in HDF5_SUFFIXES else "csv")
+    if args.site is not None and args.site not in run.sites:
+        raise RunDirError(f"{run.directory}: no site {args.site!r} in this run (sites: "
+                          f"{', '.join(run.sites) or 'none'})")
+    if fmt == "hdf5":
+        from .hdf5 import export_hdf5
+
+        out = args.output or run.directory / "run.h5"
+        n = export_hdf5(run, out, site=args.site)
+    else:
+        out = args.output or run.directory / "steps.csv"
+        n = write_csv(run.steps, out, site=args.site)
+    print(f"{out}: {n} committed step(s)")
+    return 0
+
+
+def report_command(args: argparse.Namespace) -> int:
+    """Run the parsed ``report``/``runs``/``export`` command; returns the exit code."""
+    if args.command == "report":
+        from .html import write_report
+
+        run_dir = resolve_run(args.run, args.runs)
+        path = write_report(run_dir, args.output)
+        print(f"{path}: report of {run_dir}")
+        return 0
+    if args.command == "export" or args.runs_command == "export":
+        return _export(args)
+    if args.runs_command == "list":
+        runs = list_runs(args.runs)
+        print(format_listing(runs) if runs else f"{args.runs}: no runs")
+        return 0
+    run = load_run(resolve_run(args.run, args.runs))
+    print(format_show(run, summarise(run)))
+    return 0

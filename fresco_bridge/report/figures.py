@@ -1,0 +1,183 @@
+"""The report's figures, rendered to PNG bytes with matplotlib's Agg backend.
+
+Only the report imports this module, so matplotlib never loads in the daemon. Figures are
+built on ``matplotlib.figure.Figure`` (no pyplot global state). Long records are thinned to
+about ``MAX_POINTS`` points per line for drawing; the numbers in the report use every step.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from ..record.export import MonitorLine
+from ..runs import SessionSignals
+
+MAX_POINTS = 20_000
+DPI = 100
+
+
+def _png(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
+
+
+def _stride(n: int) -> int:
+    return max(1, math.ceil(n / MAX_POINTS))
+
+
+def _label(sig: SessionSignals, a: int, many_sessions: bool) -> str:
+    parts = []
+    if sig.cmd.shape[1] > 1:
+        parts.append(f"actuator {a + 1}")
+    if many_sessions:
+        parts.append(f"session {sig.session}")
+    return ", ".join(parts)
+
+
+def _legend(ax: Axes) -> None:
+    _handles, labels = ax.get_legend_handles_labels()
+    if any(labels):
+        ax.legend(fontsize="small")
+
+
+def _no_data(ax: Axes, text: str) -> None:
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
+
+
+def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
+    """Measured force against measured displacement, per actuator and session."""
+    fig = Figure(figsize=(6.4, 4.8))
+    ax = fig.add_subplot()
+    many = len(signals) > 1
+    for sig in signals:
+        k = _stride(sig.step.size)
+        for a in range(sig.cmd.shape[1]):
+            ax.plot(sig.meas[::k, a], sig.force[::k, a], lw=0.8,
+                    label=_label(sig, a, many) or None)
+    if not signals:
+        _no_data(ax, "no committed steps")
+    ax.set_xlabel("measured displacement (mm)")
+    ax.set_ylabel("measured force (kN)")
+    ax.set_title(f"{site}: hysteresis")
+    ax.grid(alpha=0.3)
+    _legend(ax)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def command_vs_measured(site: str, signals: Sequence[SessionSignals]) -> bytes:
+    """Command and measured displacement over the integrator's time."""
+    fig = Figure(figsize=(9.6, 4.0))
+    ax = fig.add_subplot()
+    many = len(signals) > 1
+    for sig in signals:
+        k = _stride(sig.step.size)
+        for a in range(sig.cmd.shape[1]):
+            label = _label(sig, a, many)
+            sep = ", " if label else ""
+            ax.plot(sig.time[::k], sig.cmd[::k, a], lw=0.9, label=f"command{sep}{label}")
+            ax.plot(sig.time[::k], sig.meas[::k, a], lw=0.9, ls="--",
+                    label=f"measured{sep}{label}")
+    if not signals:
+        _no_data(ax, "no committed steps")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("displacement (mm)")
+    ax.set_title(f"{site}: command vs measured displacement")
+    ax.grid(alpha=0.3)
+    _legend(ax)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def error_monitors(
+    site: str,
+    signals: Sequence[SessionSignals],
+    ti: Sequence[np.ndarray],
+    monitors: Sequence[MonitorLine],
+    warn_tracking_error: float | None,
+) -> bytes:
+    """Tracking error and TI (offline, every committed step) and the recorded online monitors.
+
+    ``ti`` holds the offline TI of actuator 1 per session (same order as ``signals``).
+    """
+    fig = Figure(figsize=(9.6, 8.0))
+    ax_e, ax_ti, ax_fei = fig.subplots(3, 1, sharex=True)
+    many = len(signals) > 1
+    times: dict[tuple[int, int], float] = {}
+    for sig, ti_s in zip(signals, ti, strict=True):
+        k = _stride(sig.step.size)
+        for a in range(sig.cmd.shape[1]):
+            err = sig.meas[:, a] - sig.cmd[:, a]
+            ax_e.plot(sig.time[::k], err[::k], lw=0.8, label=_label(sig, a, many) or None)
+        ax_ti.plot(sig.time[::k], ti_s[::k], lw=0.9,
+                   label="offline (committed steps)" + (f", session {sig.session}" if many else ""))
+        times.update({(sig.session, int(s)): float(t)
+                      for s, t in zip(sig.step, sig.time, strict=True)})
+    if warn_tracking_error is not None:
+        for sign in (1.0, -1.0):
+            ax_e.axhline(sign * warn_tracking_error, color="tab:red", lw=0.8, ls=":",
+                         label="warning threshold" if sign > 0 else None)
+    ax_e.set_ylabel("measured − command (mm)")
+    ax_e.set_title(f"{site}: tracking error and error monitors")
+    mons = [m for m in monitors if (m.session, m.step) in times]
+    if mons:
+        t = np.array([times[(m.session, m.step)] for m in mons])
+        k = _stride(t.size)
+        ax_ti.plot(t[::k], np.array([m.ti for m in mons])[::k], lw=0.9, ls="--",
+                   label="online monitor (recorded)")
+        amp = np.array([math.nan if m.fei_amplitude is None else m.fei_amplitude for m in mons])
+        delay = np.array([math.nan if m.fei_delay is None else m.fei_delay for m in mons])
+        ax_fei.plot(t[::k], amp[::k], color="tab:blue", lw=0.9, label="FEI amplitude")
+        ax_fei.set_ylabel("FEI amplitude (1)", color="tab:blue")
+        ax_delay = ax_fei.twinx()
+        ax_delay.plot(t[::k], 1000.0 * delay[::k], color="tab:orange", lw=0.9,
+                      label="FEI delay")
+        ax_delay.set_ylabel("FEI delay (ms)", color="tab:orange")
+        if not np.isfinite(amp).any():
+            _no_data(ax_fei, "FEI window not yet full (fewer steps than telemetry.monitor_window)")
+    else:
+        _no_data(ax_fei, "no online monitor samples in the record (telemetry.monitors = false?)")
+        ax_fei.set_ylabel("FEI")
+    ax_ti.set_ylabel("tracking indicator (mm²)")
+    ax_fei.set_xlabel("time (s)")
+    for ax in (ax_e, ax_ti, ax_fei):
+        ax.grid(alpha=0.3)
+    _legend(ax_e)
+    _legend(ax_ti)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
+    """Measured against command displacement (the synchronization subspace plot)."""
+    fig = Figure(figsize=(5.6, 5.6))
+    ax = fig.add_subplot()
+    many = len(signals) > 1
+    lo, hi = math.inf, -math.inf
+    for sig in signals:
+        k = _stride(sig.step.size)
+        for a in range(sig.cmd.shape[1]):
+            ax.plot(sig.cmd[::k, a], sig.meas[::k, a], lw=0.8, label=_label(sig, a, many) or None)
+            both = np.concatenate([sig.cmd[:, a], sig.meas[:, a]])
+            both = both[np.isfinite(both)]
+            if both.size:
+                lo, hi = min(lo, float(both.min())), max(hi, float(both.max()))
+    if math.isfinite(lo):
+        ax.plot([lo, hi], [lo, hi], color="0.5", lw=0.8, ls="--", label="perfect tracking")
+    else:
+        _no_data(ax, "no committed steps")
+    ax.set_xlabel("command displacement (mm)")
+    ax.set_ylabel("measured displacement (mm)")
+    ax.set_title(f"{site}: synchronization subspace")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    _legend(ax)
+    fig.tight_layout()
+    return _png(fig)

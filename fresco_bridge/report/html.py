@@ -1,0 +1,214 @@
+"""``fresco-bridge report RUN_DIR``: one self-contained HTML file per run (PNGs inlined).
+
+Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
+and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
+synchronization subspace), ``events`` and ``config`` (the snapshot). The same summary numbers
+are embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a
+curation pipeline can read them without scraping the tables.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..indicators import IndicatorError, tracking_indicator
+from ..runs import Run, SiteSummary, fmt, human_size, load_run, session_signals, summarise
+from . import figures
+
+REPORT_FILE = "report.html"
+MAX_EVENT_ROWS = 2000
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2em auto;max-width:72em;color:#222;padding:0 1em}
+h1{font-size:1.5em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
+table{border-collapse:collapse;font-size:.9em;margin:.5em 0}
+td,th{border:1px solid #ddd;padding:.25em .5em;text-align:left;vertical-align:top}
+th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
+pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:.85em}
+img{max-width:100%;display:block;margin:.5em 0}.note{background:#fff4d6;padding:.5em 1em}
+figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+"""
+
+# (key, header, unit) of the summary table; keys are SessionSummary fields.
+_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("session", "session", ""), ("actuator", "actuator", ""), ("steps", "steps", ""),
+    ("time_end", "end time", "s"), ("peak_cmd", "peak |command|", "mm"),
+    ("peak_meas", "peak |measured|", "mm"), ("force_min", "min force", "kN"),
+    ("force_max", "max force", "kN"), ("max_tracking_error", "max |error|", "mm"),
+    ("peak_amplitude_error", "peak amplitude error", "mm"), ("nrms", "NRMS", ""),
+    ("ti_final", "final TI", "mm²"), ("fei_amplitude", "FEI amplitude", ""),
+    ("fei_delay", "FEI delay", "s"), ("xcorr_delay", "xcorr delay", "s"),
+)
+
+
+def _e(v: object) -> str:
+    return html.escape(str(v), quote=True)
+
+
+def _img(png: bytes, alt: str, caption: str) -> str:
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure><img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+
+def _json_safe(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def _meta_section(run: Run) -> str:
+    rows = [("run directory", str(run.directory)), ("size", human_size(run.size_bytes))]
+    for key, value in run.meta.items():
+        rows.append((key, json.dumps(value) if isinstance(value, dict | list) else str(value)))
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)
+    notes = "".join(f'<p class="note">{_e(n)}</p>' for n in run.notes)
+    return f'<section id="run"><h2>Run</h2><table>{body}</table>{notes}</section>'
+
+
+def _summary_section(summaries: list[SiteSummary]) -> str:
+    parts = ['<section id="summary"><h2>Summary</h2>']
+    site_rows = "".join(
+        f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>'
+        f'<td class="n" data-key="steps">{s.steps}</td>'
+        f'<td class="n" data-key="sessions">{s.sessions}</td>'
+        f'<td class="n" data-key="holds">{s.holds}</td>'
+        f'<td class="n" data-key="limit_events">{s.limit_events}</td>'
+        f"<td>{_e(', '.join(f'{k} {n}' for k, n in sorted(s.events.items())) or 'none')}</td>"
+        "</tr>"
+        for s in summaries
+    )
+    parts.append("<table><tr><th>site</th><th>committed steps</th><th>sessions</th>"
+                 f"<th>holds</th><th>limit events</th><th>events</th></tr>{site_rows}</table>")
+    head = "".join(f"<th>{_e(h)}{f' ({_e(u)})' if u else ''}</th>" for _, h, u in _COLUMNS)
+    rows = []
+    for s in summaries:
+        for d in s.sessions_detail:
+            cells = "".join(
+                f'<td class="n" data-key="{k}">{_e(fmt(getattr(d, k), digits=6))}</td>'
+                for k, _, _ in _COLUMNS
+            )
+            rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
+    if rows:
+        parts.append(f"<table><tr><th>site</th>{head}</tr>{''.join(rows)}</table>")
+        parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
+                     "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
+                     "(positive delay: the measurement lags). TI decreasing means lag "
+                     "(energy added).</p>")
+    else:
+        parts.append('<p class="note">No committed steps in this run.</p>')
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _site_section(run: Run, site: str, warn: float | None) -> str:
+    signals = [s for s in session_signals(run.steps) if s.site == site]
+    ti = []
+    for sig in signals:
+        try:
+            ti.append(tracking_indicator(sig.cmd[:, 0], sig.meas[:, 0]))
+        except IndicatorError:  # non-finite samples: no TI line for this session
+            ti.append(np.full(sig.step.size, math.nan))
+    monitors = [m for m in run.monitors if m.site == site]
+    n = sum(s.step.size for s in signals)
+    thin = "" if n <= figures.MAX_POINTS else (
+        f" Lines are drawn from every {math.ceil(n / figures.MAX_POINTS)}th step.")
+    return "".join([
+        f'<section id="site-{_e(site)}"><h2>Site {_e(site)}</h2>',
+        _img(figures.hysteresis(site, signals), f"{site} hysteresis",
+             "Measured force against measured displacement (actuator space)." + thin),
+        _img(figures.command_vs_measured(site, signals), f"{site} command vs measured",
+             "Command (ctrl) and measured (daq) displacement of each committed step." + thin),
+        _img(figures.error_monitors(site, signals, ti, monitors, warn),
+             f"{site} error monitors",
+             "Top: tracking error. Middle: tracking indicator computed from the committed steps "
+             "(actuator 1) and, dashed, the online monitor recorded during the run (it runs "
+             "across sessions). Bottom: the online monitor's FEI amplitude and delay over its "
+             "sliding window." + thin),
+        _img(figures.synchronization(site, signals), f"{site} synchronization subspace",
+             "Measured against command displacement; the dashed line is perfect tracking."),
+        "</section>",
+    ])
+
+
+def _events_section(run: Run) -> str:
+    shown = run.events[:MAX_EVENT_ROWS]
+    rows = []
+    for ev in shown:
+        extra = {k: v for k, v in ev.items()
+                 if k not in ("seq", "t", "kind", "site", "session", "event", "reason", "step")}
+        rows.append(
+            f'<tr data-event="{_e(ev.get("event", ""))}"><td class="n">{_e(ev.get("seq", ""))}'
+            f'</td><td class="n">{_e(fmt(ev.get("t"), digits=6))}</td>'
+            f'<td>{_e(ev.get("site", ""))}</td><td class="n">{_e(ev.get("session", ""))}</td>'
+            f'<td class="n">{_e(ev.get("step", ""))}</td><td>{_e(ev.get("event", ""))}</td>'
+            f'<td>{_e(ev.get("reason", ""))}</td>'
+            f"<td>{_e(json.dumps(extra)) if extra else ''}</td></tr>"
+        )
+    more = (f'<p class="note">{len(run.events) - len(shown)} more event(s) not shown; '
+            "see record.jsonl.</p>" if len(run.events) > len(shown) else "")
+    table = ("<table><tr><th>seq</th><th>t (s)</th><th>site</th><th>session</th><th>step</th>"
+             f"<th>event</th><th>reason</th><th>details</th></tr>{''.join(rows)}</table>"
+             if rows else "<p>No events.</p>")
+    return (f'<section id="events"><h2>Events ({len(run.events)})</h2><p>Holds, limit hits, '
+            "faults, monitor warnings and integrator sessions; t is seconds since the bridge "
+            f"started.</p>{table}{more}</section>")
+
+
+def _config_section(run: Run) -> str:
+    body = (f"<pre>{_e(run.config_text)}</pre>" if run.config_text is not None
+            else '<p class="note">No configuration snapshot (config.toml missing).</p>')
+    return f'<section id="config"><h2>Configuration snapshot</h2>{body}</section>'
+
+
+def render_report(run: Run) -> str:
+    """The whole report as one HTML string."""
+    summaries = summarise(run)
+    warn = run.config_value("telemetry", "warn_tracking_error", None)
+    data = {
+        "run": run.name,
+        "sites": {s.site: {"steps": s.steps, "sessions": s.sessions, "holds": s.holds,
+                           "limit_events": s.limit_events, "events": s.events,
+                           "detail": [{k: _json_safe(v) for k, v in d.as_dict().items()}
+                                      for d in s.sessions_detail]}
+                  for s in summaries},
+    }
+    generated = datetime.now(UTC).isoformat(timespec="seconds")
+    started = run.meta.get("started_utc", "?")
+    return "".join([
+        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">',
+        f"<title>fresco-bridge run {_e(run.name)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>Hybrid simulation run {_e(run.name)}</h1>",
+        f"<p>Started {_e(started)} (UTC); sites: {_e(', '.join(run.sites) or 'none')}. "
+        f"Report generated {_e(generated)} by fresco-bridge {_e(__version__)}. "
+        "Units: mm, kN, s.</p>",
+        _meta_section(run),
+        _summary_section(summaries),
+        *(_site_section(run, site, float(warn) if warn is not None else None)
+          for site in run.sites),
+        _events_section(run),
+        _config_section(run),
+        '<script type="application/json" id="summary-data">',
+        json.dumps(data).replace("</", "<\\/"),
+        "</script></body></html>\n",
+    ])
+
+
+def write_report(run_dir: Path, out: Path | None = None) -> Path:
+    """Write the report of ``run_dir`` (default ``RUN_DIR/report.html``); returns its path."""
+    run = load_run(run_dir)
+    path = out if out is not None else run_dir / REPORT_FILE
+    text = render_report(run)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+    return path
