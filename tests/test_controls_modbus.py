@@ -111,14 +111,16 @@ def test_server_stopped_mid_move_raises_and_the_move_is_not_retried() -> None:
             await s.stop()
             with pytest.raises(ControllerError, match=r"link lost.*it is not retried"):
                 await move
-            with pytest.raises(ControllerError, match="link is down"):
-                await ctl.set_ctrl((1.0,))  # no motion on a lost link
+            with pytest.raises(ControllerError, match="cannot connect"):
+                await ctl.set_ctrl((1.0,))  # the controller is gone: nothing is sent
             await s.start()  # same controller, same port
             await s.controller.wait(5.0)
             daq = await ctl.get_daq()  # a read reconnects
             assert daq.disp == (pytest.approx(1.0, abs=1e-6),)
             assert s.controller.move_id == 1  # the move was never re-sent
             assert await ctl.sequence() == 1
+            await ctl.set_ctrl((1.5,))  # a new absolute command, on a link re-validated first
+            assert s.controller.move_id == 2 and s.controller.target == 1.5
 
     run(scenario)
 
@@ -175,11 +177,18 @@ def test_hold_engages_the_interlock_and_release_frees_it() -> None:
         async with serving(preset("ideal-bilinear")) as (s, ctl):
             await ctl.hold()
             assert s.controller.interlock
-            with pytest.raises(ControllerError, match="INTERLOCK"):
-                await ctl.set_ctrl((1.0,))
             await ctl.release()
+            assert not s.controller.interlock
+            await ctl.hold()
+            # the site forwards a command again (new session): the bridge's own interlock goes
             await ctl.set_ctrl((1.0,))
-            assert s.controller.sequence == 1
+            assert not s.controller.interlock and s.controller.sequence == 1
+            # an interlock the bridge did not engage (operator, another master) stays
+            s.controller.set_interlock(True)
+            with pytest.raises(ControllerError, match="interlock is engaged and not by this "
+                               "bridge"):
+                await ctl.set_ctrl((2.0,))
+            assert s.controller.interlock and s.controller.sequence == 1
 
     run(scenario)
 

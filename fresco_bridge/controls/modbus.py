@@ -3,7 +3,14 @@
 One actuator. A move is one FC23 transaction: write COMMAND, RAMP_TIME and EXECUTE=1 and read
 the status block back; then poll STATE until it leaves MOVING. A motion command whose outcome
 is unknown (timeout, lost link, cancelled by the site's deadline) raises ``ControllerError`` and
-is never re-sent: the site goes to HOLD. Reads reconnect after a loss, with jittered backoff.
+is never re-sent: the site goes to HOLD. Every call reconnects after a loss, with jittered
+backoff; a *new* command is sent on a fresh link only after the status read shows the controller
+healthy and idle (so the lost command is never replayed, and setpoints are absolute).
+
+``hold`` engages the program interlock. The next motion command the site forwards (the site
+forwards nothing while it holds, so this is a new session or an operator's resume) releases it
+again, but only if this adapter engaged it: an interlock engaged by an operator or another
+master, or a latched fault, is reported and left alone.
 
 Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
 changing (checked on every status read); a physical rig cannot report its stiffness, so the
@@ -106,6 +113,8 @@ class ModbusController(Controller):
         self._heartbeat = HeartbeatWatch(config.heartbeat_timeout, self.where)
         self._backoff = Backoff(config.reconnect_min, max(config.reconnect_min,
                                                           config.reconnect_max))
+        self._interlock_ours = False
+        """This adapter engaged the program interlock (``hold``) and has not released it."""
 
     # -- link ----------------------------------------------------------------------------------
 
@@ -231,12 +240,20 @@ class ModbusController(Controller):
             raise ControllerError(f"{self.where}: ctrl displacement {target!r} is not finite; "
                                   "not sent")
         async with self._lock:
-            if not self.connected:
-                self._drop()
-                raise ControllerError(f"{self.where}: link is down; the move to {target!r} mm "
-                                      "is not sent (a read reconnects first)")
+            await self._ensure_link()  # a fresh link reads the status before any motion
             before = await self._read_status()
+            if before.state == _INTERLOCK and self._interlock_ours:
+                await self._write_control_locked(0, "release the interlock it engaged at HOLD")
+                self._interlock_ours = False
+                before = await self._read_status()
+            if before.state != _INTERLOCK:
+                self._interlock_ours = False  # released elsewhere, or a restarted controller
             if before.state in (_FAULT, _INTERLOCK, _MOVING):
+                if before.state == _INTERLOCK:
+                    raise ControllerError(
+                        f"{self.where}: cannot move to {target!r} mm: the program interlock is "
+                        "engaged and not by this bridge (operator or another master); release "
+                        "it at the controller")
                 raise ControllerError(f"{self.where}: cannot move to {target!r} mm: "
                                       f"{before.describe()}")
             cfg = self.config
@@ -296,19 +313,24 @@ class ModbusController(Controller):
     async def hold(self) -> None:
         """Engage the program interlock (stops a running move where it is)."""
         await self._write_control(CONTROL_HOLD, "engage the interlock")
+        self._interlock_ours = True
 
     async def release(self, *, reset_fault: bool = False) -> None:
         """Release the program interlock (and optionally reset a latched fault)."""
         await self._write_control(CONTROL_RESET if reset_fault else 0, "release the interlock")
+        self._interlock_ours = False
 
     async def _write_control(self, word: int, what: str) -> None:
         async with self._lock:
             await self._ensure_link()  # safe on a fresh link: it never starts motion
-            response = await self._request(what, lambda c: c.write_register(
-                Reg.CONTROL, word, device_id=self.config.device_id))
-            problem = self._exception(response, what)
-            if problem is not None:
-                raise ControllerError(problem)
+            await self._write_control_locked(word, what)
+
+    async def _write_control_locked(self, word: int, what: str) -> None:
+        response = await self._request(what, lambda c: c.write_register(
+            Reg.CONTROL, word, device_id=self.config.device_id))
+        problem = self._exception(response, what)
+        if problem is not None:
+            raise ControllerError(problem)
 
     async def sequence(self) -> int:
         """Completed moves as the controller counts them (diagnostics, tests)."""

@@ -4,7 +4,10 @@ One actuator. The adapter owns the test (``OPEN``) and sends each move as one ``
 <wait_timeout>`` request (command + execute + wait + acquire in a round trip), after a
 ``STATUS`` that checks the state and the heartbeat. A request whose reply does not come (lost
 link, timeout, cancelled by the site's deadline) drops the link and raises ``ControllerError``;
-a motion command is never re-sent. Reads reconnect after a loss, with jittered backoff.
+a motion command is never re-sent. Every call reconnects after a loss, with jittered backoff;
+a *new* command goes out on a fresh link only after ``STATUS`` shows the controller healthy
+and idle. ``hold`` engages the program interlock; the next motion command the site forwards
+releases it only if this adapter engaged it (never an operator's interlock or a fault).
 A physical rig cannot report its stiffness: tangent and initial stiffness are a configured
 estimate.
 """
@@ -67,6 +70,8 @@ class MtsController(Controller):
         self._backoff = Backoff(config.reconnect_min, max(config.reconnect_min,
                                                           config.reconnect_max))
         self._ramp: int | None = None
+        self._interlock_ours = False
+        """This adapter engaged the program interlock (``hold``) and has not released it."""
         """Id of the last ramp this adapter completed (for ``ACQUIRE <id>``)."""
 
     # -- link ----------------------------------------------------------------------------------
@@ -199,11 +204,19 @@ class MtsController(Controller):
             raise ControllerError(f"{self.where}: ctrl displacement {target!r} is not finite; "
                                   "not sent")
         async with self._lock:
-            if not self.connected:
-                self._drop()
-                raise ControllerError(f"{self.where}: link is down; the move to {target!r} mm "
-                                      "is not sent (a read reconnects first)")
+            await self._ensure_link()  # a fresh link reads STATUS before any motion
             status = await self._status()
+            if status.get("state") == "INTERLOCK" and self._interlock_ours:
+                await self._ask_control(["INTERLOCK OFF"])
+                self._interlock_ours = False
+                status = await self._status()
+            if status.get("state") != "INTERLOCK":
+                self._interlock_ours = False  # released elsewhere, or a restarted controller
+            else:
+                raise ControllerError(
+                    f"{self.where}: cannot move to {target!r} mm: the program interlock is "
+                    "engaged and not by this bridge (operator or another master); release it "
+                    "at the controller")
             if status.get("state") in ("FAULT", "INTERLOCK", "MOVING"):
                 raise ControllerError(
                     f"{self.where}: cannot move to {target!r} mm: state {status.get('state')}, "
@@ -251,16 +264,21 @@ class MtsController(Controller):
     async def hold(self) -> None:
         """Engage the program interlock (stops a running ramp where it is)."""
         await self._control(["INTERLOCK ON"])
+        self._interlock_ours = True
 
     async def release(self, *, reset_fault: bool = False) -> None:
         """Release the program interlock (and optionally reset a latched fault)."""
         await self._control(["INTERLOCK OFF", *(["RESET"] if reset_fault else [])])
+        self._interlock_ours = False
 
     async def _control(self, lines: list[str]) -> None:
         async with self._lock:
             await self._ensure_link()  # safe on a fresh link: it never starts motion
-            try:
-                await self._ask(lines)
-            except _Refused as exc:
-                raise ControllerError(f"{self.where}: {' / '.join(lines)} refused: {exc}"
-                                      ) from None
+            await self._ask_control(lines)
+
+    async def _ask_control(self, lines: list[str]) -> None:
+        try:
+            await self._ask(lines)
+        except _Refused as exc:
+            raise ControllerError(f"{self.where}: {' / '.join(lines)} refused: {exc}"
+                                  ) from None
