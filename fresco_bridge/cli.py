@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from .config import ConfigError, load_config
+from .ctl import ControlError, add_ctl_parser, ctl_command
 from .lab import LabError, add_lab_parser, lab_command
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
@@ -61,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
     add_report_parsers(sub)  # report, runs list|show|export, export (alias)
     add_lab_parser(sub)
+    add_ctl_parser(sub)
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
     try:
@@ -79,9 +81,11 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "lab":
             return lab_command(args)
+        if args.command == "ctl":
+            return ctl_command(args)
         if args.command in REPORT_COMMANDS:
             return report_command(args)
-    except (ConfigError, LabError, RunDirError) as exc:
+    except (ConfigError, LabError, RunDirError, ControlError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

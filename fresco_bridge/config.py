@@ -24,6 +24,7 @@ from sim_actuator.models import MODEL_PARAMETERS, ModelParameterError, make_mode
 
 from .controls.modbus import ModbusControllerConfig
 from .controls.mts import MtsControllerConfig
+from .safety import ControlPointLimitsConfig
 
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
 
@@ -93,6 +94,8 @@ class SiteConfig(_Strict):
     """Client IPv4 addresses allowed to connect; default: the bridge-wide list."""
     actor_tag: int = 1
     """Tag this site reports to a ShadowExpSite (site protocol only)."""
+    limits: list[ControlPointLimitsConfig] = Field(default_factory=list)
+    """``[[sites.limits]]``, one per control point (actuator after the setup); default none."""
 
     @model_validator(mode="after")
     def _matrices_fit(self) -> SiteConfig:
@@ -109,6 +112,13 @@ class SiteConfig(_Strict):
             )
         if self.setup == "OneActuator" and self.dofs > 2:
             raise ValueError("setup OneActuator serves dofs = 1 or 2 (two nodes, -dof 1 -dof 1)")
+        actuators = [lim.actuator for lim in self.limits]
+        if any(a > n_act for a in actuators):
+            raise ValueError(f"limits: actuator {max(actuators)} does not exist (setup "
+                             f"{self.setup} with {self.dofs} DOF(s) drives {n_act} actuator(s))")
+        if len(set(actuators)) != len(actuators):
+            raise ValueError(f"limits: one [[sites.limits]] table per actuator; repeated: "
+                             f"{sorted({a for a in actuators if actuators.count(a) > 1})}")
         return self
 
 
@@ -122,6 +132,9 @@ class BridgeConfig(_Strict):
     """Deadline in seconds for every controller call; past it the site goes to HOLD."""
     run_dir: Path = Path("runs")
     run_name: Name = "run"
+    control_socket: Path | None = None
+    """Operator control socket (``fresco-bridge ctl``); default ``control.sock`` in the run
+    directory (no socket when recording is off unless this is set)."""
 
 
 class RecordConfig(_Strict):
@@ -141,6 +154,11 @@ class TelemetryConfig(_Strict):
     queue_size: int = Field(default=10000, ge=10)
     username: str | None = None
     password: str | None = None
+    accept_commands: bool = False
+    """Accept operator commands (pause/resume/abort) on ``<prefix>/<site>/cmd``; needs
+    ``username``/``password`` and ``command_token`` (see README, threat model)."""
+    command_token: str | None = None
+    """Shared secret every command message must carry (at least 16 characters)."""
     monitor_dt: float = Field(default=0.01, gt=0)
     """Integration time step (s) the monitors assume for FEI frequencies and delays."""
     monitor_window: int = Field(default=512, ge=16)
@@ -153,6 +171,24 @@ class TelemetryConfig(_Strict):
     """Serve Prometheus ``/metrics`` on this port (off when unset; 0 picks a free port)."""
     metrics_host: str = "127.0.0.1"
     """Bind address of the metrics endpoint (loopback by default: it has no authentication)."""
+
+
+    @model_validator(mode="after")
+    def _commands_need_credentials(self) -> TelemetryConfig:
+        if not self.accept_commands:
+            return self
+        problems = []
+        if self.mqtt_host is None:
+            problems.append("mqtt_host is not set")
+        if not (self.username and self.password):
+            problems.append("broker credentials (username and password) are required")
+        if self.command_token is None or len(self.command_token) < 16:
+            problems.append("command_token of at least 16 characters is required")
+        if problems:
+            raise ValueError("accept_commands = true is refused: " + "; ".join(problems)
+                             + " (anyone able to publish on the command topic could move an "
+                             "actuator)")
+        return self
 
 
 class LabConfig(_Strict):

@@ -20,6 +20,7 @@ from .controls.base import Controller, ControllerError
 from .controls.modbus import ModbusController
 from .controls.mts import MtsController
 from .controls.sim import SimController
+from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
 from .record import RunRecord
 from .server.tcp import TcpConnection
@@ -58,6 +59,8 @@ class Bridge:
         self._telemetry_task: asyncio.Task[None] | None = None
         self.metrics: Metrics | None = None
         self.metrics_server: MetricsServer | None = None
+        self.desk = OperatorDesk(self.sites)
+        self.control: ControlServer | None = None
 
     async def start(self) -> None:
         cfg = self.config
@@ -106,12 +109,15 @@ class Bridge:
         except OSError:
             await self.close()
             raise
+        await self._start_control()
         tcfg = cfg.telemetry
         if tcfg.mqtt_host is not None:
             self.telemetry = MqttTelemetry(
                 host=tcfg.mqtt_host, port=tcfg.mqtt_port, prefix=tcfg.prefix, qos=tcfg.qos,
                 queue_size=tcfg.queue_size, compact=tcfg.compact, username=tcfg.username,
-                password=tcfg.password,
+                password=tcfg.password, accept_commands=tcfg.accept_commands,
+                command_handler=self.desk.handle_mqtt if tcfg.accept_commands else None,
+                command_token=tcfg.command_token,
             )
             self._telemetry_task = loop.create_task(self.telemetry.run(), name="telemetry.mqtt")
             log.info("telemetry: MQTT %s:%d prefix %s", tcfg.mqtt_host, tcfg.mqtt_port,
@@ -150,7 +156,28 @@ class Bridge:
             ) if tcfg.monitors else None
             site.attach_telemetry(SiteTaps(self.telemetry, site.metrics, record), monitor)
 
+    async def _start_control(self) -> None:
+        """The operator control socket (``fresco-bridge ctl``); a failure stops start()."""
+        path = self.config.bridge.control_socket
+        run_dir = self.record.directory if self.record is not None else None
+        if path is None and run_dir is not None:
+            path = socket_path_for(run_dir)
+        if path is None:
+            log.warning("no operator control socket: recording is off and [bridge] "
+                        "control_socket is not set")
+            return
+        self.control = ControlServer(self.desk, path, pointer_dir=run_dir)
+        try:
+            await self.control.start()
+        except (ControlError, OSError):
+            self.control = None
+            await self.close()
+            raise
+
     async def close(self) -> None:
+        if self.control is not None:
+            await self.control.close()
+            self.control = None
         for server in self._servers:
             server.close()
         for server in self._servers:

@@ -1,5 +1,6 @@
 """Sites: where trial signals meet a setup and a controller (OpenFresco: experimental sites)."""
 
-from .experimental import ExperimentalSite, SiteError, SiteState
+from ..safety import SiteState
+from .experimental import ExperimentalSite, SiteError
 
 __all__ = ["ExperimentalSite", "SiteError", "SiteState"]

@@ -1,17 +1,20 @@
-"""An experimental site: trial → setup → controller → daq → out, with HOLD on any fault.
+"""An experimental site: trial → setup → safety → controller → daq → out.
 
-The site outlives connections: it owns the controller and the state machine
-IDLE → RUNNING → (HOLD) → IDLE. A non-finite trial, a controller failure or timeout puts it in
-HOLD: nothing more is forwarded to the controller, requests are answered from the last good
-measurement, and the reason is logged and recorded. The next integrator session starts it again.
+The site outlives connections: it owns the controller, the limits and the state machine of
+``safety.states`` (IDLE / RUNNING / PAUSED / HOLD / FAULT, one table). A non-finite trial, a
+limit violation under ``reject``, a measured force past its daq limit, a controller failure or
+timeout, or an integrator lost with an uncommitted command puts it in HOLD: nothing more is
+forwarded, requests are answered from the last good measurement, and the reason is logged,
+recorded and published. PAUSED makes the integrator's next command wait for an operator;
+FAULT (operator abort) ends the session at its next request and refuses new ones until resumed.
 """
 
 from __future__ import annotations
 
 import asyncio
-import enum
 import logging
 import math
+import time as _time
 from collections.abc import Awaitable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -20,6 +23,7 @@ from protocol import Signals, SignalSizes
 from ..config import SiteConfig
 from ..controls.base import Controller, ControllerError, Daq
 from ..record import RunRecord
+from ..safety import Limiter, LimitHit, SiteState, TransitionRefused, Trigger, next_state
 from ..setups import LinearSetup, make_setup
 from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
 
@@ -31,16 +35,14 @@ if TYPE_CHECKING:
 log = logging.getLogger("fresco_bridge.site")
 T = TypeVar("T")
 
+PAUSE_LOG_INTERVAL = 30.0
+"""While a command waits for an operator, a warning is logged this often (s)."""
+
+RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
+
 
 class SiteError(Exception):
-    """A session cannot be served by this site (sizes that do not fit, site busy)."""
-
-
-class SiteState(enum.StrEnum):
-    IDLE = "IDLE"
-    RUNNING = "RUNNING"
-    HOLD = "HOLD"
-    FAULT = "FAULT"
+    """A session cannot be served by this site (sizes that do not fit, site busy, aborted)."""
 
 
 def _column_major(rows: list[list[float]] | None, n: int) -> tuple[float, ...]:
@@ -50,7 +52,7 @@ def _column_major(rows: list[list[float]] | None, n: int) -> tuple[float, ...]:
 
 
 class ExperimentalSite:
-    """One site: config, setup, controller, state, and the current session's signals."""
+    """One site: config, setup, limits, controller, state, and the current session's signals."""
 
     def __init__(
         self,
@@ -72,7 +74,7 @@ class ExperimentalSite:
             )
         self.timeout = controller_timeout
         self.state = SiteState.IDLE
-        self.hold_reason = ""
+        self.reason = ""
         self.session = 0
         self.peer = ""
         self.damping = _column_major(cfg.damping, cfg.dofs)
@@ -82,16 +84,34 @@ class ExperimentalSite:
         self.monitor: OnlineMonitor | None = None
         self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
         self._live = False  # telemetry on: publish steps, status and events
+        limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
+            if cfg.limits else None
+        self.limiter = limiter
+        self._ctrl_limiter = limiter if limiter is not None and limiter.has_ctrl else None
+        self._daq_limiter = limiter if limiter is not None and limiter.has_daq else None
+        self.limit_counts: dict[str, int] = {}
+        self._reference: tuple[float, ...] | None = None  # last command the controller got
+        self._interlocked = False  # controller.hold() engaged an interlock to release later
+        self._wake: asyncio.Event | None = None
+        self.paused_since: float | None = None
+        self.pending: tuple[float, ...] | None = None  # a command waiting for an operator
         self._reset_signals()
+
+    @property
+    def hold_reason(self) -> str:
+        return self.reason
 
     # -- sessions ------------------------------------------------------------------------------
     def _reset_signals(self) -> None:
         n, na = self.cfg.dofs, self.setup.n_actuators
         self.step = 0
         self.time = 0.0
+        self._commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
-        self.ctrl: tuple[float, ...] = (0.0,) * na
+        self.target: tuple[float, ...] = (0.0,) * na  # what the integrator asked for (ctrl)
+        self.ctrl: tuple[float, ...] = (0.0,) * na  # what the controller was sent last
         self._sent_ctrl: tuple[float, ...] | None = None
+        self._uncommitted = False
         self.daq = Daq((0.0,) * na, (0.0,) * na)
         self._daq_valid = False
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
@@ -99,23 +119,25 @@ class ExperimentalSite:
 
     @property
     def busy(self) -> bool:
-        return self.state in (SiteState.RUNNING, SiteState.HOLD) and self.peer != ""
+        return self.peer != ""
 
     def open_session(self, peer: str) -> int:
         if self.busy:
             raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
-        if self.state is SiteState.FAULT:
-            raise SiteError(f"site {self.name} is in FAULT ({self.hold_reason}); not accepting")
+        try:
+            next_state(self.state, Trigger.SESSION_OPEN, False)
+        except TransitionRefused as exc:
+            raise SiteError(f"site {self.name} is in {self.state} ({self.reason}); not accepting "
+                            f"client {peer}: {exc}") from None
         self.session += 1
-        self.peer = peer
-        self.state = SiteState.RUNNING
-        self.hold_reason = ""
         self._reset_signals()
         reset = getattr(self.controller, "reset", None)
         if reset is not None and getattr(self.cfg.controller, "reset_on_new_session", False):
             reset()
+            self._reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)
-        self._event("session-open", f"client {peer} connected", peer=peer)
+        self._transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
+        self.peer = peer
         return self.session
 
     def close_session(self, reason: str, *, error: bool = False) -> None:
@@ -125,10 +147,12 @@ class ExperimentalSite:
             "site %s: session %d closed after %d step(s): %s", self.name, self.session,
             self.step, reason,
         )
-        self._event("session-close", reason, steps=self.step, error=error)
+        if self._uncommitted and self.state in (RUNNING, PAUSED):
+            self._enter(Trigger.INTEGRATOR_LOST,
+                        f"integrator session ended with an uncommitted command at step "
+                        f"{self.step + 1} ({reason})")
+        self._transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
         self.peer = ""
-        if self.state is not SiteState.FAULT:
-            self.state = SiteState.IDLE
 
     def check_sizes(self, ctrl: SignalSizes, daq: SignalSizes, who: str) -> None:
         """OpenFresco's rule: every non-zero size equals the element's DOFs, time sizes are 1."""
@@ -149,21 +173,127 @@ class ExperimentalSite:
         if problems:
             raise SiteError(f"{who} sizes do not fit site {self.name}: " + "; ".join(problems))
 
-    # -- safety ----------------------------------------------------------------------------------
-    def enter_hold(self, reason: str) -> None:
-        if self.state is SiteState.HOLD:
+    # -- states --------------------------------------------------------------------------------
+    def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
+        """Move along ``safety.states.TRANSITIONS``; record and publish it with its reason."""
+        old = self.state
+        new = next_state(old, trigger, self.peer != "")
+        self.state = new
+        if new is not old:
+            self.reason = reason if new in (PAUSED, HOLD, FAULT) else ""
+            self.paused_since = _time.monotonic() if new is PAUSED else None
+        kind = "hold" if new is HOLD and old is not HOLD else str(trigger)
+        self._event(kind, reason, cause=str(trigger), **{"from": str(old), "to": str(new)},
+                    **extra)
+        return new
+
+    def _enter(self, trigger: Trigger, reason: str) -> None:
+        """A fault trigger (HOLD, integrator lost): never raises, HOLDs the controller."""
+        if self.state is HOLD or self.state is FAULT:
+            log.warning("site %s: %s while in %s: %s", self.name, trigger, self.state, reason)
             return
-        self.state = SiteState.HOLD
-        self.hold_reason = reason
-        self.holds += 1
-        log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason)
-        self._event("hold", reason, step=self.step)
+        try:
+            new = self._transition(trigger, reason, step=self.step)
+        except TransitionRefused as exc:
+            log.error("site %s: %s (%s)", self.name, exc, reason)
+            return
+        if new is HOLD:
+            self.holds += 1
+            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason)
+            self._controller_hold()
+        else:
+            log.warning("site %s: %s at step %d: %s (stays %s)", self.name, trigger, self.step,
+                        reason, new)
+
+    def enter_hold(self, reason: str) -> None:
+        self._enter(Trigger.HOLD, reason)
+
+    def _controller_hold(self) -> None:
         hold = self.controller.hold()
+        self._interlocked = hasattr(self.controller, "release")
         if self.controller.inline:
             _run_inline(hold)
         else:
-            asyncio.get_running_loop().create_task(self._call(hold), name=f"{self.name}.hold")
+            asyncio.get_running_loop().create_task(asyncio.wait_for(hold, self.timeout),
+                                                   name=f"{self.name}.hold")
 
+    def _wake_waiter(self) -> None:
+        if self._wake is not None:
+            self._wake.set()
+
+    # -- operator ------------------------------------------------------------------------------
+    def operator_pause(self, source: str) -> str:
+        """Stop forwarding at the next trial; the integrator's request waits for resume/abort."""
+        if self.state is PAUSED:
+            return f"site {self.name} is already PAUSED ({self.reason})"
+        self._transition(Trigger.PAUSE, f"operator pause ({source})")
+        log.warning("site %s: PAUSED by the operator (%s) at step %d; the next command waits "
+                    "for 'fresco-bridge ctl resume' or 'abort'", self.name, source, self.step)
+        return f"site {self.name} PAUSED at step {self.step}"
+
+    def operator_resume(self, source: str) -> str:
+        """PAUSED → RUNNING (the waiting command is checked again) or FAULT → IDLE."""
+        old = self.state
+        new = self._transition(Trigger.RESUME, f"operator resume ({source})")
+        log.warning("site %s: %s → %s by the operator (%s)", self.name, old, new, source)
+        self._wake_waiter()
+        return f"site {self.name} {old} → {new}"
+
+    def operator_abort(self, source: str) -> str:
+        """FAULT: hold the controller, end the session at its next request, refuse new ones."""
+        old = self.state
+        self._transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
+        log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
+                  "sessions refused until 'fresco-bridge ctl resume'", self.name, source,
+                  self.step, old)
+        self._controller_hold()
+        self._wake_waiter()
+        return f"site {self.name} {old} → FAULT"
+
+    def status(self) -> dict[str, object]:
+        """A JSON-able snapshot for ``fresco-bridge ctl status``."""
+        since = self.paused_since
+        return {
+            "site": self.name, "state": str(self.state), "reason": self.reason,
+            "session": self.session, "peer": self.peer or None, "step": self.step,
+            "time": self.time, "target": list(self.target), "ctrl": list(self.ctrl),
+            "daq_disp": list(self.daq.disp), "daq_force": list(self.daq.force),
+            "pending": None if self.pending is None else list(self.pending),
+            "paused_for": None if since is None else round(_time.monotonic() - since, 3),
+            "holds": self.holds, "limit_events": dict(self.limit_counts),
+            "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
+        }
+
+    def _fault_error(self) -> SiteError:
+        return SiteError(f"site {self.name} was aborted by the operator ({self.reason}); "
+                         "session ended")
+
+    async def _wait_for_operator(self, command: tuple[float, ...]) -> None:
+        """Wait (logging every PAUSE_LOG_INTERVAL s) until resumed; abort raises SiteError."""
+        self.pending = command
+        log.warning("site %s: command %s at step %d waits for an operator (%s): "
+                    "'fresco-bridge ctl resume --site %s' or 'abort'", self.name, list(command),
+                    self.step + 1, self.reason, self.name)
+        await asyncio.sleep(0)  # leave the eager path: asyncio.timeout needs a task
+        waited = 0.0
+        try:
+            while self.state is PAUSED:
+                self._wake = wake = asyncio.Event()
+                try:
+                    async with asyncio.timeout(PAUSE_LOG_INTERVAL):
+                        await wake.wait()
+                except TimeoutError:
+                    waited += PAUSE_LOG_INTERVAL
+                    log.warning("site %s: still PAUSED after %.0f s (%s); client %s waits for "
+                                "step %d", self.name, waited, self.reason, self.peer,
+                                self.step + 1)
+        finally:
+            self.pending = None
+            self._wake = None
+        if self.state is FAULT:
+            raise self._fault_error()
+
+    # -- telemetry -----------------------------------------------------------------------------
     def attach_telemetry(self, telemetry: Telemetry, monitor: OnlineMonitor | None) -> None:
         self.telemetry, self.monitor, self._live = telemetry, monitor, True
         self._publish_status()
@@ -172,7 +302,7 @@ class ExperimentalSite:
         if self._live:
             self.telemetry.publish_status(SiteStatus(
                 site=self.name, state=str(self.state), session=self.session, step=self.step,
-                time=self.time, reason=self.hold_reason, holds=self.holds,
+                time=self.time, reason=self.reason, holds=self.holds,
             ))
 
     def _event(self, kind: str, reason: str, **extra: object) -> None:
@@ -186,6 +316,14 @@ class ExperimentalSite:
             ))
             self._publish_status()
 
+    def _limit_event(self, hit: LimitHit, action: str) -> None:
+        """Every limit hit is counted, logged, recorded and published (also when clamped)."""
+        self.limit_counts[hit.limit] = self.limit_counts.get(hit.limit, 0) + 1
+        log.warning("site %s: LIMIT at step %d: %s (policy %s: %s)", self.name, self.step + 1,
+                    hit.describe(), hit.policy, action)
+        self._event("limit", hit.describe(), **hit.as_record(), action=action, step=self.step)
+
+    # -- controller calls ----------------------------------------------------------------------
     def _call(self, coro: Coroutine[Any, Any, T]) -> Awaitable[T]:
         """Every controller call gets the deadline; in-process ones complete at once."""
         if self.controller.inline:
@@ -203,10 +341,12 @@ class ExperimentalSite:
 
     # -- the step ------------------------------------------------------------------------------
     async def set_trial(self, trial: Signals) -> None:
-        """Code 3: validate, transform, forward. Never forwards a non-finite command."""
+        """Code 3: validate, transform, check limits, forward. Never forwards an unsafe command."""
+        if self.state is FAULT:
+            raise self._fault_error()
         values = trial.disp + trial.vel + trial.accel + trial.time
         if not all(math.isfinite(v) for v in values):
-            if self.state is not SiteState.HOLD:
+            if self.state is not HOLD:
                 bad = [v for v in values if not math.isfinite(v)]
                 self.enter_hold(f"non-finite trial value(s) {bad} (disp {list(trial.disp)}); "
                                 "not forwarded to the controller")
@@ -214,20 +354,88 @@ class ExperimentalSite:
         self.trial = trial
         if trial.time:
             self.time = trial.time[0]
-        ctrl = self.setup.ctrl_disp(trial.disp)
-        if self.state is SiteState.HOLD:
+        target = self.target = self.setup.ctrl_disp(trial.disp)
+        if self.state is HOLD:
             return
-        self.ctrl = ctrl
         self._daq_valid = False
+        while True:
+            if self.state is PAUSED:
+                await self._wait_for_operator(target)
+            if self._interlocked:
+                await self._release_interlock()
+            if self._ctrl_limiter is None:
+                commands: tuple[tuple[float, ...], ...] | None = (target,)
+            else:
+                commands = await self._limited(target)
+            if commands is None or self.state is HOLD:
+                return
+            if self.state is RUNNING:
+                break
+            if self.state is FAULT:
+                raise self._fault_error()
+            # paused by the operator while the limits were being checked: wait, check again
+        ctrl = commands[-1]
+        self.ctrl = ctrl
         if self.record is not None:
             self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
-        if ctrl != self._sent_ctrl:
-            await self._guard(self.controller.set_ctrl(ctrl), "set_ctrl")
-            self._sent_ctrl = ctrl
+        for command in commands:
+            if command != self._sent_ctrl:
+                self._uncommitted = True
+                await self._guard(self.controller.set_ctrl(command), "set_ctrl")
+                if self.state is HOLD or self.state is FAULT:
+                    self._reference = None  # where the actuator stopped is not known
+                    return
+                self._sent_ctrl = self._reference = command
+
+    async def _limited(self, target: tuple[float, ...]) -> tuple[tuple[float, ...], ...] | None:
+        """The commands to send for ``target`` under the limits, or None (HOLD)."""
+        limiter = self._ctrl_limiter
+        assert limiter is not None
+        if self._reference is None and limiter.needs_reference:
+            daq = await self._guard(self.controller.get_daq(), "get_daq (reference position)")
+            if daq is None:
+                return None
+            self._reference = daq.disp
+        approved = False
+        while True:
+            verdict = limiter.check_ctrl(target, self._reference, self.time - self._commit_time,
+                                         approved=approved)
+            if verdict is None:
+                return (target,)
+            action = verdict.action
+            for hit in verdict.hits:
+                self._limit_event(hit, action)
+            if action == "reject":
+                self.enter_hold(f"limit exceeded, command {list(target)} not forwarded: "
+                                f"{verdict.describe()}")
+                return None
+            if action == "pause":
+                self._transition(Trigger.PAUSE, f"limit exceeded, command {list(target)} "
+                                 f"waits for an operator: {verdict.describe()}", step=self.step)
+                await self._wait_for_operator(target)
+                approved = True  # the operator saw it: increment/velocity waived, absolute not
+                continue
+            if action == "substep":
+                log.info("site %s: step %d sent as %d sub-commands (velocity limit)",
+                         self.name, self.step + 1, len(verdict.commands))
+                self._event("substep", f"{len(verdict.commands)} sub-commands within the "
+                            "velocity limit", substeps=len(verdict.commands),
+                            target=list(verdict.commands[-1]), step=self.step)
+            return verdict.commands
+
+    async def _release_interlock(self) -> None:
+        """A HOLD engaged the controller's interlock; a new RUNNING session releases it."""
+        release = getattr(self.controller, "release", None)
+        self._interlocked = False
+        if release is None:
+            return
+        self._event("release", "controller interlock released for the new command",
+                    step=self.step)
+        await self._guard(release(), "release (interlock)")
 
     async def acquire(self) -> Daq:
         """The measurement for the current command, acquired once per trial."""
-        if self._daq_valid or self.state is SiteState.HOLD:
+        if self._daq_valid or self.state is HOLD:
             return self.daq
         daq = await self._guard(self.controller.get_daq(), "get_daq")
         if daq is None:
@@ -235,6 +443,15 @@ class ExperimentalSite:
         if not all(math.isfinite(v) for v in daq.disp + daq.force):
             self.enter_hold(f"controller returned non-finite measurements {daq}")
             return self.daq
+        if self._daq_limiter is not None:
+            hit = self._daq_limiter.check_daq(daq.force)
+            if hit is not None:
+                if self.record is not None:  # a real measurement: keep it in the record
+                    self.record.measurement(self.name, self.session, self.step, daq.disp,
+                                            daq.force)
+                self._limit_event(hit, "hold")
+                self.enter_hold(f"daq limit exceeded: {hit.describe()}")
+                return self.daq
         self.daq = daq
         self._daq_valid = True
         if self.record is not None:
@@ -242,11 +459,18 @@ class ExperimentalSite:
         return daq
 
     async def commit(self) -> None:
-        if self.state is SiteState.HOLD:
+        """Code 5 (also while PAUSED: it completes a step already forwarded)."""
+        if self.state is HOLD:
             return
+        if self.state is FAULT:
+            raise self._fault_error()
         await self.acquire()  # every committed step has its measurement in the record
+        if self.state is HOLD:
+            return
         await self._guard(self.controller.commit(), "commit")
         self.step += 1
+        self._uncommitted = False
+        self._commit_time = self.time
         if self.record is not None:
             self.record.commit(self.name, self.session, self.step, self.time)
         if self._live:
@@ -266,8 +490,10 @@ class ExperimentalSite:
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
         """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them."""
+        if self.state is FAULT:
+            raise self._fault_error()
         daq = await self.acquire()
-        disp = self.setup.out_disp(self.trial.disp, self.ctrl, daq.disp)
+        disp = self.setup.out_disp(self.trial.disp, self.target, daq.disp)
         force = self.setup.basic_force(daq.force)
         return Signals(
             disp=disp if sizes.disp else (),
@@ -279,14 +505,18 @@ class ExperimentalSite:
 
     async def tangent(self) -> tuple[float, ...]:
         """Tangent in basic DOFs; in HOLD (or on failure) the last good one."""
-        if self.state is not SiteState.HOLD:
+        if self.state is FAULT:
+            raise self._fault_error()
+        if self.state is not HOLD:
             k = await self._guard(self.controller.tangent_stiffness(), "tangent_stiffness")
             if k is not None:
                 self._k_tangent = self.setup.basic_matrix(k)
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
-        if self._k_initial is None or self.state is not SiteState.HOLD:
+        if self.state is FAULT:
+            raise self._fault_error()
+        if self._k_initial is None or self.state is not HOLD:
             k = await self._guard(self.controller.initial_stiffness(), "initial_stiffness")
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)

@@ -1,0 +1,314 @@
+"""The operator interface: one command handler, served on a local control socket and over MQTT.
+
+``OperatorDesk`` turns ``status | pause | resume | abort`` (optionally for one site) into site
+transitions; the control socket (a Unix domain socket, JSON lines, mode 0600) and authenticated
+MQTT command messages both call it, so the two paths cannot disagree. ``request`` is the
+blocking client behind ``fresco-bridge ctl``.
+
+Wire format, one JSON object per line each way::
+
+    → {"command": "pause", "site": "damper", "id": "optional"}
+    ← {"ok": true, "command": "pause", "id": ...,
+       "results": [{"site": .., "ok": .., "message": ..}], "sites": [<status of every site>]}
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import json
+import logging
+import os
+import socket
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from .safety import TransitionRefused
+from .sites import ExperimentalSite
+from .telemetry import OperatorCommand
+
+log = logging.getLogger("fresco_bridge.ctl")
+
+COMMANDS = ("status", "pause", "resume", "abort")
+SOCKET_NAME = "control.sock"
+POINTER_NAME = "control.path"
+"""Written in the run directory when the socket had to live elsewhere (path too long)."""
+READ_TIMEOUT = 10.0
+"""Deadline (s) for a control client to send its next request line."""
+MAX_LINE = 4096
+_SUN_PATH_MAX = 107  # bytes usable in sockaddr_un.sun_path on Linux
+
+
+class ControlError(Exception):
+    """A control request that cannot be served: unknown site or command, socket problems."""
+
+
+class OperatorDesk:
+    """The one handler behind every operator path (control socket, MQTT)."""
+
+    def __init__(self, sites: Mapping[str, ExperimentalSite]) -> None:
+        self.sites = sites
+
+    def execute(self, command: str, site: str | None = None, *, source: str) -> dict[str, Any]:
+        """Run one command for one site (or all when ``site`` is None); never raises for a
+        refused transition: each site's result says ``ok`` and why."""
+        if command not in COMMANDS:
+            raise ControlError(f"unknown command {command!r}; expected one of {list(COMMANDS)}")
+        targets = self._targets(site)
+        results: list[dict[str, Any]] = []
+        if command != "status":
+            for s in targets:
+                try:
+                    message = getattr(s, f"operator_{command}")(source)
+                    results.append({"site": s.name, "ok": True, "message": message})
+                except TransitionRefused as exc:
+                    log.warning("ctl: %s for site %s refused (%s): %s", command, s.name, source,
+                                exc)
+                    results.append({"site": s.name, "ok": False, "message": str(exc)})
+        return {
+            "ok": all(r["ok"] for r in results), "command": command, "results": results,
+            "sites": [s.status() for s in targets],
+        }
+
+    def _targets(self, site: str | None) -> list[ExperimentalSite]:
+        if site is None:
+            return list(self.sites.values())
+        found = self.sites.get(site)
+        if found is None:
+            raise ControlError(f"no site {site!r}; sites: {', '.join(self.sites)}")
+        return [found]
+
+    def handle_mqtt(self, command: OperatorCommand) -> None:
+        """``MqttTelemetry``'s command handler: raise so a refusal is logged and counted."""
+        source = f"mqtt{' id ' + command.request_id if command.request_id else ''}"
+        result = self.execute(command.command, command.site, source=source)
+        if not result["ok"]:
+            raise ControlError("; ".join(r["message"] for r in result["results"] if not r["ok"]))
+
+
+# -- the server ----------------------------------------------------------------------------------
+def socket_path_for(run_dir: Path) -> Path:
+    """``<run_dir>/control.sock``, or a short path under the temp dir when that is too long
+    for AF_UNIX (then ``<run_dir>/control.path`` names it)."""
+    path = run_dir / SOCKET_NAME
+    if len(os.fsencode(path.absolute())) <= _SUN_PATH_MAX:
+        return path
+    digest = hashlib.sha256(os.fsencode(run_dir.absolute())).hexdigest()[:16]
+    short = Path(tempfile.gettempdir()) / f"fresco-bridge-{os.getuid()}" / f"{digest}.sock"
+    return short
+
+
+class ControlServer:
+    """The daemon's control socket: JSON lines, a read deadline, one task per client."""
+
+    def __init__(self, desk: OperatorDesk, path: Path, *, pointer_dir: Path | None = None) -> None:
+        self.desk = desk
+        self.path = path
+        self._pointer = None if pointer_dir is None or path.parent == pointer_dir else \
+            pointer_dir / POINTER_NAME
+        self._server: asyncio.AbstractServer | None = None
+        self._clients: set[asyncio.Task[None]] = set()
+
+    async def start(self) -> None:
+        path = self.path
+        if len(os.fsencode(path.absolute())) > _SUN_PATH_MAX:
+            raise ControlError(f"control socket path {path} is longer than the {_SUN_PATH_MAX} "
+                               "bytes AF_UNIX allows; set [bridge] control_socket to a shorter one")
+        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        if path.exists() or path.is_symlink():
+            if _answers(path):
+                raise ControlError(f"control socket {path} is served by another running bridge")
+            path.unlink()  # a stale socket from a bridge that did not shut down cleanly
+        self._server = await asyncio.start_unix_server(self._client, path=str(path),
+                                                       limit=MAX_LINE)
+        os.chmod(path, 0o600)  # only this user may move the specimen
+        if self._pointer is not None:
+            self._pointer.write_text(f"{path}\n", encoding="utf-8")
+        log.info("control socket: %s (fresco-bridge ctl status --socket %s)", path, path)
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            for task in list(self._clients):
+                task.cancel()
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(2.0):
+                    await self._server.wait_closed()
+            self._server = None
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        if self._pointer is not None:
+            with contextlib.suppress(OSError):
+                self._pointer.unlink()
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        self._clients.add(task)
+        try:
+            while True:
+                try:
+                    async with asyncio.timeout(READ_TIMEOUT):
+                        line = await reader.readline()
+                except TimeoutError:
+                    log.info("ctl: client sent nothing for %g s; closing", READ_TIMEOUT)
+                    return
+                except ValueError:  # longer than MAX_LINE
+                    await _reply(writer, {"ok": False, "error": f"request longer than "
+                                                               f"{MAX_LINE} bytes"})
+                    return
+                if not line:
+                    return
+                await _reply(writer, self.answer(line))
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            self._clients.discard(task)
+            writer.close()
+
+    def answer(self, line: bytes) -> dict[str, Any]:
+        """One request line → one response object (errors are responses, never exceptions)."""
+        try:
+            body = json.loads(line.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            return {"ok": False, "error": f"request is not a JSON line: {exc}"}
+        if not isinstance(body, dict):
+            return {"ok": False, "error": "request must be a JSON object"}
+        unknown = sorted(set(body) - {"command", "site", "id"})
+        command, site, rid = body.get("command"), body.get("site"), body.get("id")
+        if unknown:
+            return {"ok": False, "id": rid, "error": f"unknown key(s) {unknown}"}
+        if not isinstance(command, str) or not (site is None or isinstance(site, str)):
+            return {"ok": False, "id": rid, "error": "command must be a string and site a "
+                                                     "string or null"}
+        try:
+            result = self.desk.execute(command, site, source="control socket")
+        except ControlError as exc:
+            return {"ok": False, "id": rid, "error": str(exc)}
+        return {**result, "id": rid}
+
+
+async def _reply(writer: asyncio.StreamWriter, body: dict[str, Any]) -> None:
+    writer.write(json.dumps(body).encode() + b"\n")
+    async with asyncio.timeout(READ_TIMEOUT):
+        await writer.drain()
+
+
+def _answers(path: Path) -> bool:
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(1.0)
+        try:
+            s.connect(str(path))
+        except OSError:
+            return False
+        return True
+
+
+# -- the client ----------------------------------------------------------------------------------
+def find_socket(socket_path: Path | None, run_dir: Path | None, runs_root: Path) -> Path:
+    """The socket to talk to: explicit, in a run directory, or the newest live one under
+    ``runs_root``."""
+    if socket_path is not None:
+        return socket_path
+    candidates = [run_dir] if run_dir is not None else \
+        sorted((d for d in runs_root.glob("*") if d.is_dir()), key=_mtime, reverse=True)
+    for d in candidates:
+        for path in (d / SOCKET_NAME, _pointed(d / POINTER_NAME)):
+            if path is not None and path.exists():
+                return path
+    where = f"run directory {run_dir}" if run_dir is not None else f"{runs_root}/*"
+    raise ControlError(f"no control socket in {where} (is the bridge running? pass --socket "
+                       "PATH or --run-dir DIR)")
+
+
+def _mtime(p: Path) -> float:
+    try:
+        return p.stat().st_mtime
+    except OSError:
+        return 0.0
+
+
+def _pointed(pointer: Path) -> Path | None:
+    try:
+        return Path(pointer.read_text(encoding="utf-8").strip())
+    except OSError:
+        return None
+
+
+def request(path: Path, command: str, site: str | None = None, *,
+            timeout: float = 5.0) -> dict[str, Any]:
+    """Send one request and wait (with a deadline) for its response line."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(timeout)
+        try:
+            s.connect(str(path))
+            s.sendall(json.dumps({"command": command, "site": site}).encode() + b"\n")
+            data = b""
+            while not data.endswith(b"\n"):
+                chunk = s.recv(65536)
+                if not chunk:
+                    break
+                data += chunk
+        except TimeoutError:
+            raise ControlError(f"control socket {path}: no answer within {timeout:g} s") from None
+        except OSError as exc:
+            raise ControlError(f"control socket {path}: {exc.strerror or exc}") from None
+    if not data:
+        raise ControlError(f"control socket {path} closed without an answer")
+    answer: dict[str, Any] = json.loads(data)
+    return answer
+
+
+def format_answer(answer: dict[str, Any]) -> str:
+    """Human-readable lines for ``fresco-bridge ctl``."""
+    if "error" in answer:
+        return f"error: {answer['error']}"
+    lines = [f"{r['site']}: {'ok' if r['ok'] else 'REFUSED'}: {r['message']}"
+             for r in answer.get("results", [])]
+    for st in answer.get("sites", []):
+        lines.append(
+            f"{st['site']}: {st['state']}" + (f" ({st['reason']})" if st["reason"] else "")
+            + f"  session {st['session']}" + (f" client {st['peer']}" if st["peer"] else "")
+            + f"  step {st['step']}  time {st['time']:g}")
+        lines.append(f"    ctrl {_vec(st['ctrl'])} mm (target {_vec(st['target'])})  daq disp "
+                     f"{_vec(st['daq_disp'])} mm force {_vec(st['daq_force'])} kN")
+        counts = ", ".join(f"{k} {v}" for k, v in sorted(st["limit_events"].items())) or "none"
+        lines.append(f"    holds {st['holds']}  limit events: {counts}"
+                     + (f"  limits {len(st['limits'])} control point(s)" if st["limits"] else
+                        "  no limits configured"))
+        if st["pending"] is not None:
+            lines.append(f"    command {_vec(st['pending'])} waiting for an operator for "
+                         f"{st['paused_for'] or 0.0:.1f} s")
+    return "\n".join(lines)
+
+
+def _vec(values: list[float]) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
+
+
+# -- the CLI -------------------------------------------------------------------------------------
+def add_ctl_parser(sub: Any) -> None:
+    """``fresco-bridge ctl status|pause|resume|abort [--site S] [--socket P | --run-dir D]``."""
+    p = sub.add_parser("ctl", help="operator control of a running bridge (status, pause, "
+                                   "resume, abort)")
+    p.add_argument("action", choices=COMMANDS)
+    p.add_argument("--site", default=None, help="one site (default: every site)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--socket", type=Path, default=None, help="control socket path")
+    where.add_argument("--run-dir", type=Path, default=None,
+                       help="run directory of the bridge (its control.sock)")
+    p.add_argument("--runs", type=Path, default=Path("runs"),
+                   help="run root searched for the newest live bridge (default: runs)")
+    p.add_argument("--json", action="store_true", help="print the raw JSON answer")
+    p.add_argument("--timeout", type=float, default=5.0, help="answer deadline in s")
+
+
+def ctl_command(args: Any) -> int:
+    """0: done; 1: refused by a site (or an error answer). Raises ControlError (no bridge)."""
+    path = find_socket(args.socket, args.run_dir, args.runs)
+    answer = request(path, args.action, args.site, timeout=args.timeout)
+    print(json.dumps(answer, indent=2) if args.json else format_answer(answer))
+    return 0 if answer.get("ok") else 1

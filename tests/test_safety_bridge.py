@@ -1,0 +1,325 @@
+"""Limits on a real bridge over real sockets: each limit under each policy, sub-stepping, force
+limits, and an integrator killed mid-step. What reaches the controller is observed with a spy on
+the real in-process specimen's ``set_ctrl``; ``pause`` is resumed through the real control socket.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fresco_bridge.cli import main as cli_main
+from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.record import read_record
+from fresco_bridge.record.export import committed_steps
+from fresco_bridge.sites import SiteState
+
+from .bridge_harness import RunningBridge, run_opensees
+
+K = 10.0  # kN/mm, elastic specimen: force = K * ctrl
+
+LIMITS = {
+    "absolute": "disp_min = -1.0\ndisp_max = 1.0\n",
+    "increment": "disp_increment = 0.5\n",
+    "velocity": "velocity = 5.0\n",  # mm/s; trials 0.1 s apart: 0.5 mm per step
+}
+WITHIN = 0.4  # first step: within every limit above
+BEYOND = {"absolute": 1.3, "increment": 1.3, "velocity": 1.3}
+CLAMPED = {"absolute": 1.0, "increment": 0.9, "velocity": 0.9}
+
+
+def config(limits: str, policy: str, extra: str = "") -> str:
+    return textwrap.dedent(f"""
+        [bridge]
+        run_name = "safety"
+        [[sites]]
+        name = "spec"
+        port = 0
+        [sites.controller]
+        model = "elastic"
+        params = {{ k = {K} }}
+        [[sites.limits]]
+        policy = "{policy}"
+        """) + limits + extra
+
+
+def spy(bridge: BridgeThread, site: str = "spec") -> list[tuple[float, ...]]:
+    """Every command that reaches the (real, in-process) controller, in order."""
+    calls: list[tuple[float, ...]] = []
+    controller = bridge.bridge.sites[site].controller
+    original = controller.set_ctrl
+
+    async def set_ctrl(disp: tuple[float, ...]) -> None:
+        calls.append(disp)
+        await original(disp)
+
+    bridge.call(lambda: setattr(controller, "set_ctrl", set_ctrl))
+    return calls
+
+
+def events(bridge: BridgeThread, kind: str) -> list[dict[str, Any]]:
+    return [r for r in read_record(bridge.run_dir) if r.get("event") == kind]
+
+
+def state(bridge: BridgeThread, site: str = "spec") -> SiteState:
+    return bridge.call(lambda: bridge.bridge.sites[site].state)
+
+
+def wait_for(predicate: Callable[[], bool], what: str, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.01)
+
+
+def first_step(link: GenericClientLink) -> None:
+    link.set_trial((WITHIN,), time=0.1)
+    assert link.force()[0] == pytest.approx(K * WITHIN)
+    link.commit()
+
+
+def good_session(port: int, steps: int = 3) -> None:
+    with GenericClientLink("127.0.0.1", port, 1, data_size=1) as link:
+        for i in range(1, steps + 1):
+            link.set_trial((0.1 * i,), time=0.1 * i)
+            assert link.force()[0] == pytest.approx(K * 0.1 * i)
+            link.commit()
+
+
+@pytest.fixture
+def run_root(tmp_path: Path) -> Path:
+    return tmp_path
+
+
+@pytest.mark.parametrize("kind", list(LIMITS))
+def test_reject_holds_and_never_forwards(run_root: Path, kind: str) -> None:
+    with RunningBridge(config(LIMITS[kind], "reject"), run_root) as bridge:
+        sent = spy(bridge)
+        with GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1) as link:
+            first_step(link)
+            link.set_trial((BEYOND[kind],), time=0.2)
+            # answered from the last good measurement, never from the rejected command
+            assert link.force()[0] == pytest.approx(K * WITHIN)
+            assert state(bridge) is SiteState.HOLD
+            link.set_trial((0.45,), time=0.3)  # nothing at all is forwarded in HOLD
+            assert link.force()[0] == pytest.approx(K * WITHIN)
+        assert sent == [(WITHIN,)]
+        (limit,) = events(bridge, "limit")
+        assert (limit["limit"], limit["policy"], limit["action"]) == (kind, "reject", "reject")
+        assert limit["signal"] == "ctrl disp[1]"
+        (hold,) = events(bridge, "hold")
+        assert "not forwarded" in hold["reason"] and kind in hold["reason"]
+        wait_for(lambda: state(bridge) is SiteState.IDLE, "IDLE after the session")
+        good_session(bridge.ports["spec"])  # the next client is served
+
+
+@pytest.mark.parametrize("kind", list(LIMITS))
+def test_clamp_forwards_the_clamped_command_and_records_every_hit(run_root: Path,
+                                                                  kind: str) -> None:
+    with RunningBridge(config(LIMITS[kind], "clamp"), run_root) as bridge:
+        sent = spy(bridge)
+        with GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1) as link:
+            first_step(link)
+            link.set_trial((BEYOND[kind],), time=0.2)
+            # the integrator sees what the specimen really did: the force at the clamped stroke
+            assert link.force()[0] == pytest.approx(K * CLAMPED[kind])
+            link.commit()
+            assert state(bridge) is SiteState.RUNNING
+        assert sent == [(WITHIN,), (pytest.approx(CLAMPED[kind]),)]
+        hits = events(bridge, "limit")
+        assert [(h["limit"], h["action"]) for h in hits] == [(kind, "clamp")]
+        steps = [s for s in committed_steps(bridge.run_dir) if s.site == "spec"]
+        assert [s.cmd_disp[0] for s in steps] == pytest.approx([WITHIN, CLAMPED[kind]])
+
+
+def _resume_via_cli(bridge: BridgeThread, capsys: pytest.CaptureFixture[str]) -> str:
+    assert cli_main(["ctl", "resume", "--site", "spec", "--run-dir", str(bridge.run_dir)]) == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("kind", ["increment", "velocity"])
+def test_pause_waits_for_ctl_resume_then_forwards(run_root: Path, kind: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    with RunningBridge(config(LIMITS[kind], "pause"), run_root) as bridge:
+        sent = spy(bridge)
+        link = GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1,
+                                 timeout=30.0).connect()
+        first_step(link)
+        replies: list[float] = []
+        link.set_trial((BEYOND[kind],), time=0.2)
+        waiter = threading.Thread(target=lambda: replies.append(link.force()[0]))
+        waiter.start()
+        wait_for(lambda: state(bridge) is SiteState.PAUSED, "PAUSED")
+        time.sleep(0.2)
+        assert replies == [] and sent == [(WITHIN,)]  # the integrator waits, nothing moved
+        assert cli_main(["ctl", "status", "--run-dir", str(bridge.run_dir)]) == 0
+        status = capsys.readouterr().out
+        assert "PAUSED" in status and "waiting for an operator" in status and kind in status
+        out = _resume_via_cli(bridge, capsys)
+        assert "PAUSED → RUNNING" in out
+        waiter.join(10)
+        assert replies == [pytest.approx(K * BEYOND[kind])]  # approved: forwarded as asked
+        assert sent == [(WITHIN,), (BEYOND[kind],)]
+        link.commit()
+        link.close()
+        kinds = [r.get("event") for r in read_record(bridge.run_dir) if r["kind"] == "event"]
+        assert kinds.index("limit") < kinds.index("pause") < kinds.index("resume")
+
+
+def test_pause_on_an_absolute_limit_is_never_forwarded_even_after_resume(
+    run_root: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with RunningBridge(config(LIMITS["absolute"], "pause"), run_root) as bridge:
+        sent = spy(bridge)
+        link = GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1,
+                                 timeout=30.0).connect()
+        first_step(link)
+        replies: list[float] = []
+        link.set_trial((1.3,), time=0.2)
+        waiter = threading.Thread(target=lambda: replies.append(link.force()[0]))
+        waiter.start()
+        wait_for(lambda: state(bridge) is SiteState.PAUSED, "PAUSED")
+        _resume_via_cli(bridge, capsys)
+        waiter.join(10)
+        assert replies == [pytest.approx(K * WITHIN)] and sent == [(WITHIN,)]
+        assert state(bridge) is SiteState.HOLD
+        link.close()
+        assert "absolute limit" in events(bridge, "hold")[0]["reason"]
+
+
+def test_substeps_reach_the_controller_in_order(run_root: Path) -> None:
+    limits = "disp_min = -5.0\ndisp_max = 5.0\nvelocity = 2.0\nstep_time = 0.1\n" \
+             "max_substeps = 8\n"
+    with RunningBridge(config(limits, "reject"), run_root) as bridge:
+        sent = spy(bridge)
+        with GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1) as link:
+            link.set_trial((0.15,), time=0.1)  # within 0.2 mm per step
+            assert link.force()[0] == pytest.approx(K * 0.15)
+            link.commit()
+            link.set_trial((0.95,), time=0.2)  # 0.8 mm: 4 sub-commands of 0.2 mm
+            assert link.force()[0] == pytest.approx(K * 0.95)
+            link.commit()
+            link.set_trial((2.95,), time=0.3)  # 2 mm = 10 sub-steps > 8: rejected
+            assert link.force()[0] == pytest.approx(K * 0.95)
+        assert [c[0] for c in sent] == pytest.approx([0.15, 0.35, 0.55, 0.75, 0.95])
+        assert sent[-1] == (0.95,)  # the last sub-command is exactly the target
+        (sub,) = events(bridge, "substep")
+        assert sub["substeps"] == 4
+        assert [h["limit"] for h in events(bridge, "limit")] == ["velocity"]
+
+
+def test_force_limit_holds_and_keeps_the_measurement_in_the_record(run_root: Path) -> None:
+    with RunningBridge(config("force_min = -5.0\nforce_max = 5.0\n", "reject"),
+                       run_root) as bridge:
+        with GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1) as link:
+            first_step(link)  # 4 kN
+            link.set_trial((0.6,), time=0.2)  # 6 kN measured: beyond the daq limit
+            assert link.force()[0] == pytest.approx(K * WITHIN)  # last good measurement
+            assert state(bridge) is SiteState.HOLD
+        (hit,) = events(bridge, "limit")
+        assert (hit["limit"], hit["signal"], hit["value"]) == ("force", "daq force[1]", 6.0)
+        daqs = [r for r in read_record(bridge.run_dir) if r["kind"] == "daq"]
+        assert daqs[-1]["force"] == [pytest.approx(6.0)]
+
+
+KILLED_CLIENT = """
+import sys, time
+from fresco_bridge.integrator.link import GenericClientLink
+link = GenericClientLink("127.0.0.1", int(sys.argv[1]), 1, data_size=1).connect()
+for i in range(1, 4):
+    link.set_trial((0.1 * i,), time=0.1 * i)
+    link.force()
+    link.commit()
+link.set_trial((0.35,), time=0.4)
+link.force()
+print("MID-STEP", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.opensees
+def test_integrator_killed_mid_step_holds_then_idles_and_the_next_client_is_served(
+    run_root: Path,
+) -> None:
+    with RunningBridge(config(LIMITS["absolute"], "reject"), run_root) as bridge:
+        proc = subprocess.Popen([sys.executable, "-c", KILLED_CLIENT, str(bridge.ports["spec"])],
+                                stdout=subprocess.PIPE, text=True)
+        try:
+            assert proc.stdout is not None and proc.stdout.readline().strip() == "MID-STEP"
+            proc.kill()
+        finally:
+            proc.wait(10)
+        wait_for(lambda: state(bridge) is SiteState.IDLE, "IDLE after the lost integrator")
+        records = list(read_record(bridge.run_dir))  # every line parses: the record is intact
+        (hold,) = [r for r in records if r.get("event") == "hold"]
+        assert hold["cause"] == "integrator-lost" and "uncommitted command at step 4" in \
+            hold["reason"]
+        close = [r for r in records if r.get("event") == "session-close"][-1]
+        assert (close["from"], close["to"]) == ("HOLD", "IDLE")
+        steps = [s for s in committed_steps(bridge.run_dir) if s.site == "spec"]
+        assert [s.step for s in steps] == [1, 2, 3]
+        # a real OpenSees genericClient is served next (within the ±1 mm absolute limits)
+        result = run_opensees("static_1dof", port=bridge.ports["spec"], load=8.0, nsteps=4)
+        assert result["u"] == pytest.approx([0.2, 0.4, 0.6, 0.8])
+        assert state(bridge) is SiteState.IDLE
+
+
+@pytest.fixture
+def paused_link(run_root: Path) -> Iterator[tuple[BridgeThread, GenericClientLink]]:
+    with RunningBridge(config(LIMITS["absolute"], "reject"), run_root) as bridge:
+        link = GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1,
+                                 timeout=30.0).connect()
+        first_step(link)
+        yield bridge, link
+        link.close()
+
+
+def test_operator_pause_holds_the_next_trial_until_resume(
+    paused_link: tuple[BridgeThread, GenericClientLink], capsys: pytest.CaptureFixture[str]
+) -> None:
+    bridge, link = paused_link
+    sent = spy(bridge)
+    assert cli_main(["ctl", "pause", "--run-dir", str(bridge.run_dir)]) == 0
+    assert state(bridge) is SiteState.PAUSED
+    replies: list[float] = []
+    link.set_trial((0.5,), time=0.2)
+    waiter = threading.Thread(target=lambda: replies.append(link.force()[0]))
+    waiter.start()
+    wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["spec"].pending) is not None,
+             "the command to wait")
+    assert sent == [] and replies == []
+    _resume_via_cli(bridge, capsys)
+    waiter.join(10)
+    assert replies == [pytest.approx(5.0)] and sent == [(0.5,)]
+
+
+def test_abort_ends_the_session_refuses_new_ones_until_resume(
+    paused_link: tuple[BridgeThread, GenericClientLink], capsys: pytest.CaptureFixture[str]
+) -> None:
+    bridge, link = paused_link
+    assert cli_main(["ctl", "abort", "--site", "spec", "--run-dir", str(bridge.run_dir)]) == 0
+    assert state(bridge) is SiteState.FAULT
+    link.set_trial((0.5,), time=0.2)
+    with pytest.raises(ConnectionError):  # LinkError (EOF) or a reset, whichever comes first
+        link.force()
+    assert link.sock is not None
+    link.sock.close()  # the protocol session is mid-request: no DIE to send
+    link.sock = None
+    wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["spec"].peer) == "",
+             "the aborted session to end")
+    with pytest.raises(ConnectionError):  # refused while in FAULT
+        good_session(bridge.ports["spec"])
+    assert cli_main(["ctl", "resume", "--run-dir", str(bridge.run_dir)]) == 0
+    assert "FAULT → IDLE" in capsys.readouterr().out
+    good_session(bridge.ports["spec"])
+    kinds = [r.get("event") for r in read_record(bridge.run_dir) if r["kind"] == "event"]
+    assert kinds[:5] == ["session-open", "abort", "session-close", "resume", "session-open"]
