@@ -351,8 +351,40 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
 
 
 def _argv(command: Sequence[str]) -> list[str]:
+    """The service command behind the guard; our console scripts run with this interpreter."""
     module = CONSOLE_SCRIPTS.get(command[0])
-    return [sys.executable, "-m", module, *command[1:]] if module else list(command)
+    argv = [sys.executable, "-m", module, *command[1:]] if module else list(command)
+    return [sys.executable, "-m", "fresco_bridge.lab", "--guard", str(os.getpid()), "--", *argv]
+
+
+def guard_main(argv: Sequence[str]) -> int:
+    """``python -m fresco_bridge.lab --guard PARENT -- CMD...``: run CMD, die with ``lab up``.
+
+    The parent-death signal is lost when a program changes its credentials (mosquitto started
+    as root drops to its own user), so each service runs under this guard: it keeps the signal,
+    forwards SIGTERM/SIGINT to the service, escalates to SIGKILL after 10 s, and exits as the
+    service did (same status, or the same signal).
+    """
+    parent, cmd = int(argv[0]), list(argv[2:])
+    _die_with_parent()
+    child = subprocess.Popen(cmd)
+
+    def terminate(*_: object) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            child.send_signal(signal.SIGTERM)
+        timer = threading.Timer(10.0, lambda: child.poll() is None and child.kill())
+        timer.daemon = True
+        timer.start()
+
+    signal.signal(signal.SIGTERM, terminate)
+    signal.signal(signal.SIGINT, terminate)
+    if os.getppid() != parent:  # lab up died before the parent-death signal was armed
+        terminate()
+    rc = child.wait()
+    if rc < 0:
+        signal.signal(-rc, signal.SIG_DFL)
+        os.kill(os.getpid(), -rc)
+    return rc
 
 
 def _port_open(address: tuple[str, int], timeout: float = 0.5) -> bool:
@@ -453,6 +485,11 @@ def run_lab(opts: LabOptions, out: TextIO = sys.stdout,
                     _say(out, f"{svc.name}: already served on {svc.ready[0]}:{svc.ready[1]}, "
                          "reusing it")
                     continue
+                if svc.ready is not None and _port_open(svc.ready):
+                    raise LabError(
+                        f"service {svc.name}: {svc.ready[0]}:{svc.ready[1]} is already in use "
+                        f"by another process; stop it or choose other ports (the variables at "
+                        f"the top of {topo.path})")
                 argv = _argv([_placeholders(a, topo, svc, Path(tmp), opts) for a in
                               svc.command])
                 child = _Running(svc, argv, {**env, **svc.env}, out, width)
@@ -653,3 +690,7 @@ def lab_command(args: Any) -> int:
     stop = threading.Event()
     with signals_set(stop):
         return run_lab(opts, stop=stop)
+
+
+if __name__ == "__main__" and sys.argv[1:2] == ["--guard"]:
+    raise SystemExit(guard_main(sys.argv[2:]))
