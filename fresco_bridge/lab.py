@@ -372,7 +372,11 @@ def guard_main(argv: Sequence[str]) -> int:
     def terminate(*_: object) -> None:
         with contextlib.suppress(ProcessLookupError):
             child.send_signal(signal.SIGTERM)
-        timer = threading.Timer(10.0, lambda: child.poll() is None and child.kill())
+        def escalate() -> None:
+            if child.poll() is None:
+                child.kill()
+
+        timer = threading.Timer(10.0, escalate)
         timer.daemon = True
         timer.start()
 
