@@ -91,7 +91,6 @@ class ExperimentalSite:
         self._daq_limiter = limiter if limiter is not None and limiter.has_daq else None
         self.limit_counts: dict[str, int] = {}
         self._reference: tuple[float, ...] | None = None  # last command the controller got
-        self._interlocked = False  # controller.hold() engaged an interlock to release later
         self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
         self.pending: tuple[float, ...] | None = None  # a command waiting for an operator
@@ -209,8 +208,9 @@ class ExperimentalSite:
         self._enter(Trigger.HOLD, reason)
 
     def _controller_hold(self) -> None:
+        """Stop the actuator where it is; the adapter itself releases the interlock it engaged
+        at the next command the site forwards (a new session or an operator's resume)."""
         hold = self.controller.hold()
-        self._interlocked = hasattr(self.controller, "release")
         if self.controller.inline:
             _run_inline(hold)
         else:
@@ -361,8 +361,6 @@ class ExperimentalSite:
         while True:
             if self.state is PAUSED:
                 await self._wait_for_operator(target)
-            if self._interlocked:
-                await self._release_interlock()
             if self._ctrl_limiter is None:
                 commands: tuple[tuple[float, ...], ...] | None = (target,)
             else:
@@ -422,16 +420,6 @@ class ExperimentalSite:
                             "velocity limit", substeps=len(verdict.commands),
                             target=list(verdict.commands[-1]), step=self.step)
             return verdict.commands
-
-    async def _release_interlock(self) -> None:
-        """A HOLD engaged the controller's interlock; a new RUNNING session releases it."""
-        release = getattr(self.controller, "release", None)
-        self._interlocked = False
-        if release is None:
-            return
-        self._event("release", "controller interlock released for the new command",
-                    step=self.step)
-        await self._guard(release(), "release (interlock)")
 
     async def acquire(self) -> Daq:
         """The measurement for the current command, acquired once per trial."""
