@@ -312,8 +312,8 @@ class ModbusController(Controller):
 
     async def hold(self) -> None:
         """Engage the program interlock (stops a running move where it is)."""
+        self._interlock_ours = True  # set first: a write whose reply is lost may have engaged it
         await self._write_control(CONTROL_HOLD, "engage the interlock")
-        self._interlock_ours = True
 
     async def release(self, *, reset_fault: bool = False) -> None:
         """Release the program interlock (and optionally reset a latched fault)."""

@@ -263,8 +263,8 @@ class MtsController(Controller):
 
     async def hold(self) -> None:
         """Engage the program interlock (stops a running ramp where it is)."""
+        self._interlock_ours = True  # set first: a request whose reply is lost may have engaged it
         await self._control(["INTERLOCK ON"])
-        self._interlock_ours = True
 
     async def release(self, *, reset_fault: bool = False) -> None:
         """Release the program interlock (and optionally reset a latched fault)."""

@@ -1,0 +1,342 @@
+"""Fault injection between the bridge and a real ``sim-actuator serve`` process.
+
+The controller process is killed (SIGKILL) or hung (SIGSTOP) mid-run, or its replies are
+corrupted on the wire by a proxy (wrong register count, Modbus exception codes, garbage bytes,
+garbage MTS lines), or its heartbeat stops. Every case must end in HOLD with a reason that names
+the controller and the fault, with an answer to the integrator within the deadline, no command
+forwarded while holding, and a bridge that serves the next session once the fault is gone.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from pymodbus.client import ModbusTcpClient
+
+from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.record.export import committed_steps, read_record
+from sim_actuator.servers.modbus import Reg, decode_float32
+
+from .bridge_harness import RunningBridge
+from .lab_harness import free_ports
+
+K = 68.0  # preset ideal-elastic, kN/mm
+TIMEOUT = 3.0  # controller_timeout of the bridge, s
+
+
+@contextlib.contextmanager
+def sim_actuator(protocol: str, port: int, *extra: str) -> Iterator[subprocess.Popen[str]]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sim_actuator.cli", "serve", "--protocol", protocol,
+         "--port", str(port), "--preset", "ideal-elastic", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith("sim-actuator ready"), line + (proc.stderr.read()
+                                                               if proc.stderr else "")
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+            proc.terminate()
+        proc.wait(10)
+
+
+def bridge_toml(protocol: str, port: int, **controller: float) -> str:
+    extra = "".join(f"{k} = {v!r}\n" for k, v in controller.items())
+    return f"""
+[bridge]
+controller_timeout = {TIMEOUT}
+[[sites]]
+name = "act"
+port = 0
+[sites.controller]
+kind = "{protocol}"
+port = {port}
+stiffness = {K}
+heartbeat_timeout = 1.0
+request_timeout = 1.0
+connect_timeout = 1.0
+{extra}"""
+
+
+def site_state(b: BridgeThread) -> tuple[str, str]:
+    return b.call(lambda: (str(b.bridge.sites["act"].state), b.bridge.sites["act"].hold_reason))
+
+
+def drive(link: GenericClientLink, steps: range, amp: float = 0.05) -> list[float]:
+    forces = []
+    for i in steps:
+        link.set_trial((amp * i * (-1) ** i,), time=0.01 * i)
+        forces.append(link.force()[0])
+        link.commit()
+    return forces
+
+
+def modbus_registers(port: int) -> dict[str, float]:
+    client = ModbusTcpClient("127.0.0.1", port=port, timeout=2, retries=0)
+    assert client.connect()
+    try:
+        r = client.read_holding_registers(Reg.STATE, count=Reg.MAP_VERSION - Reg.STATE + 1,
+                                          device_id=1)
+        assert not r.isError(), r
+        w = r.registers
+        return {"sequence": w[Reg.SEQUENCE - Reg.STATE],
+                "target": decode_float32(w[Reg.TARGET - Reg.STATE:Reg.TARGET - Reg.STATE + 2]),
+                "state": w[0]}
+    finally:
+        client.close()
+
+
+def hold_events(run_dir: Path) -> list[dict[str, object]]:
+    return [r for r in read_record(run_dir)
+            if r.get("kind") == "event" and r.get("event") == "hold"]
+
+
+# -- the controller process killed / hung ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "mts"])
+def test_controller_killed_mid_run_holds_then_a_new_session_resumes(tmp_path: Path,
+                                                                    protocol: str) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator(protocol, port) as proc, \
+            RunningBridge(bridge_toml(protocol, port), tmp_path) as b:
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0)
+        with link:
+            good = drive(link, range(1, 11))
+            assert good[-1] == pytest.approx(K * 0.5, rel=1e-6)
+            proc.kill()
+            proc.wait(5)
+            t0 = time.monotonic()
+            link.set_trial((0.55,), time=0.11)
+            stale = link.force()[0]  # answered, from the last good measurement
+            assert time.monotonic() - t0 < TIMEOUT + 1.0
+            assert stale == good[-1]
+            state, reason = site_state(b)
+            assert state == "HOLD"
+            assert f"{protocol} controller 127.0.0.1:{port}" in reason
+            assert any(w in reason for w in ("link lost", "cannot connect", "link is down"))
+            link.commit()
+            # the controller comes back; the holding session forwards nothing to it
+            with sim_actuator(protocol, port):
+                for i in range(12, 20):
+                    link.set_trial((0.05 * i,), time=0.01 * i)
+                    assert link.force()[0] == stale
+                    link.commit()
+                if protocol == "modbus":
+                    regs = modbus_registers(port)
+                    assert regs["sequence"] == 0 and regs["target"] == 0.0  # no move, ever
+                assert site_state(b)[0] == "HOLD"
+                link.close()  # the integrator ends the session cleanly (DIE)
+                # the run resumes: a new session, the adapter reconnects and moves again
+                with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                                       timeout=10.0) as link2:
+                    again = drive(link2, range(1, 6))
+                    assert again == pytest.approx([K * 0.05 * i * (-1) ** i
+                                                   for i in range(1, 6)], rel=1e-6)
+                    assert site_state(b) == ("RUNNING", "")
+                if protocol == "modbus":
+                    assert modbus_registers(port)["sequence"] == 5
+        run_dir = b.run_dir
+    holds = hold_events(run_dir)
+    assert len(holds) == 1 and "controller" in str(holds[0].get("reason"))
+    sessions = {s.session for s in committed_steps(run_dir)}
+    assert sessions == {1, 2}
+
+
+def test_hung_controller_holds_within_the_deadline_and_the_session_ends_cleanly(
+        tmp_path: Path) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port), tmp_path) as b:
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            good = drive(link, range(1, 6))
+            os.kill(proc.pid, signal.SIGSTOP)  # accepts TCP, never answers
+            t0 = time.monotonic()
+            link.set_trial((0.3,), time=0.06)
+            assert link.force()[0] == good[-1]
+            elapsed = time.monotonic() - t0
+            assert elapsed < TIMEOUT + 1.0, elapsed
+            state, reason = site_state(b)
+            assert state == "HOLD"
+            assert "modbus controller" in reason
+            assert any(w in reason for w in ("No response", "did not answer", "link lost"))
+            link.commit()
+        # DIE sent: the session closed, the site is idle again, the bridge still serves
+        deadline = time.monotonic() + 5
+        while site_state(b)[0] != "IDLE" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert site_state(b)[0] == "IDLE"
+        os.kill(proc.pid, signal.SIGCONT)
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            assert drive(link, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1], rel=1e-6)
+        run_dir = b.run_dir
+    # steps 1-5 of session 1 (the held step is not committed), then 2 in session 2
+    assert [s.session for s in committed_steps(run_dir)] == [1] * 5 + [2] * 2
+
+
+def test_stale_heartbeat_holds_with_its_reason(tmp_path: Path) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port, "--heartbeat-hz", "0.001"), \
+            RunningBridge(bridge_toml("modbus", port), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
+        drive(link, range(1, 3))
+        time.sleep(1.3)  # > heartbeat_timeout with a counter that does not move
+        link.set_trial((0.3,), time=0.03)
+        link.force()
+        state, reason = site_state(b)
+        assert state == "HOLD"
+        assert "stale heartbeat" in reason and "heartbeat_timeout 1 s" in reason
+
+
+# -- corrupted replies on the wire ---------------------------------------------------------
+
+
+class ReplyCorruptor:
+    """A TCP proxy bridge -> controller whose controller->bridge direction a test can corrupt.
+
+    ``mode`` for Modbus: ``pass``, ``short`` (FC03/FC23 replies lose their last two registers,
+    with MBAP length and byte count kept consistent), ``exception:N`` (every reply becomes
+    exception N of its function), ``garbage`` (random bytes instead of the frame). For the MTS
+    stub (line protocol): ``pass``, ``garbage-line`` (every reply line is replaced).
+    """
+
+    def __init__(self, upstream: int, modbus: bool) -> None:
+        self.upstream = upstream
+        self.modbus = modbus
+        self.mode = "pass"
+        self.port = 0
+        self._loop = asyncio.new_event_loop()
+        self._ready = threading.Event()
+        self._thread = threading.Thread(target=self._main, daemon=True)
+
+    def __enter__(self) -> ReplyCorruptor:
+        self._thread.start()
+        assert self._ready.wait(10)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(10)
+
+    def _main(self) -> None:
+        asyncio.set_event_loop(self._loop)
+
+        async def start() -> None:
+            server = await asyncio.start_server(self._client, "127.0.0.1", 0)
+            self.port = server.sockets[0].getsockname()[1]
+
+        self._loop.run_until_complete(start())
+        self._ready.set()
+        self._loop.run_forever()
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        up_r, up_w = await asyncio.open_connection("127.0.0.1", self.upstream)
+
+        async def forward() -> None:
+            with contextlib.suppress(OSError):
+                while data := await reader.read(65536):
+                    up_w.write(data)
+                    await up_w.drain()
+            up_w.close()
+
+        task = asyncio.get_running_loop().create_task(forward())
+        with contextlib.suppress(OSError, asyncio.IncompleteReadError):
+            while True:
+                if self.modbus:
+                    head = await up_r.readexactly(7)
+                    pdu = await up_r.readexactly(struct.unpack(">H", head[4:6])[0] - 1)
+                    out = self._modbus(head, pdu)
+                else:
+                    out = self._line(await up_r.readline())
+                    if not out:
+                        break
+                writer.write(out)
+                await writer.drain()
+        task.cancel()
+        writer.close()
+
+    def _modbus(self, head: bytes, pdu: bytes) -> bytes:
+        fc = pdu[0]
+        if self.mode == "short" and fc in (3, 4, 23) and len(pdu) > 6:
+            pdu = bytes([fc, pdu[1] - 4]) + pdu[2:-4]
+        elif self.mode.startswith("exception:"):
+            pdu = bytes([fc | 0x80, int(self.mode.split(":")[1])])
+        elif self.mode == "garbage":
+            return os.urandom(len(head) + len(pdu))
+        return head[:4] + struct.pack(">H", len(pdu) + 1) + head[6:7] + pdu
+
+    def _line(self, line: bytes) -> bytes:
+        if self.mode == "garbage-line" and line:
+            return b"\x00\xff%%% not a reply at all\n"
+        return line
+
+
+@pytest.mark.parametrize(("mode", "expected"), [
+    ("short", "registers, expected 12"),
+    ("exception:4", "Modbus exception 04 SERVER_DEVICE_FAILURE"),
+    ("exception:6", "Modbus exception 06 SERVER_DEVICE_BUSY"),
+    ("exception:11", "Modbus exception 11 GATEWAY_TARGET_NO_RESPONSE"),
+    ("garbage", "link lost"),
+])
+def test_bad_modbus_replies_hold_with_a_clear_reason(tmp_path: Path, mode: str,
+                                                     expected: str) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port), ReplyCorruptor(port, modbus=True) as proxy, \
+            RunningBridge(bridge_toml("modbus", proxy.port), tmp_path) as b:
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            good = drive(link, range(1, 4))
+            proxy.mode = mode
+            t0 = time.monotonic()
+            link.set_trial((0.2,), time=0.04)
+            assert link.force()[0] == good[-1]
+            assert time.monotonic() - t0 < TIMEOUT + 1.0
+            state, reason = site_state(b)
+            assert state == "HOLD", reason
+            assert f"modbus controller 127.0.0.1:{proxy.port}" in reason
+            assert expected in reason, reason
+            link.commit()
+        proxy.mode = "pass"
+        # never a crash: the bridge serves the next session through the healed link
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            assert drive(link, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1], rel=1e-6)
+            assert site_state(b) == ("RUNNING", "")
+
+
+def test_garbage_mts_lines_hold_with_a_clear_reason(tmp_path: Path) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator("mts", port), ReplyCorruptor(port, modbus=False) as proxy, \
+            RunningBridge(bridge_toml("mts", proxy.port), tmp_path) as b:
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            good = drive(link, range(1, 4))
+            proxy.mode = "garbage-line"
+            link.set_trial((0.2,), time=0.04)
+            assert link.force()[0] == good[-1]
+            state, reason = site_state(b)
+            assert state == "HOLD"
+            assert "malformed reply to 'STATUS'" in reason and "not a reply at all" in reason
+            link.commit()
+        proxy.mode = "pass"
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link:
+            assert drive(link, range(1, 3)) == [-K * 0.05, K * 0.1]
