@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -232,3 +233,19 @@ def test_mqtt_commands_are_refused_at_config_time_without_credentials_and_token(
 ) -> None:
     with pytest.raises(ConfigError, match=message):
         parse_config("[telemetry]\n" + telemetry + SITE)
+
+
+def test_the_commented_limits_example_in_examples_lab_toml_is_valid() -> None:
+    """Uncommenting the documented ``[[sites.limits]]`` block gives a valid configuration."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "lab.toml"
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = lines.index("# [[sites.limits]]")
+    block = []
+    for line in lines[start:]:
+        if not line.startswith("#"):
+            break
+        block.append(line[2:] if not line.startswith("#  ") else "")
+    text = "\n".join(lines[:start] + block + lines[start + len(block):])
+    lab = parse_config(text, str(path))
+    (lim,) = lab.sites[0].limits
+    assert (lim.disp_max, lim.velocity, lim.max_substeps, lim.force_max) == (40.0, 20.0, 10, 150.0)
