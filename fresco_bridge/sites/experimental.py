@@ -358,6 +358,38 @@ class ExperimentalSite:
         if self.state is HOLD:
             return
         self._daq_valid = False
+        if self.state is RUNNING and self._ctrl_limiter is None:  # the hot path: no limits
+            ctrl = target
+            self.ctrl = ctrl
+            if self.record is not None:
+                self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
+            if ctrl != self._sent_ctrl:
+                await self._send(ctrl)
+            return
+        commands = await self._commands_for(target)
+        if commands is None:
+            return
+        ctrl = self.ctrl = commands[-1]
+        if self.record is not None:
+            self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
+        for command in commands:
+            if command != self._sent_ctrl and not await self._send(command):
+                return
+
+    async def _send(self, command: tuple[float, ...]) -> bool:
+        """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
+        self._uncommitted = True
+        await self._guard(self.controller.set_ctrl(command), "set_ctrl")
+        if self.state is HOLD or self.state is FAULT:
+            self._reference = None  # where the actuator stopped is not known
+            return False
+        self._sent_ctrl = self._reference = command
+        return True
+
+    async def _commands_for(
+        self, target: tuple[float, ...]
+    ) -> tuple[tuple[float, ...], ...] | None:
+        """Wait out a pause, apply the limits: the commands to send in order, or None."""
         while True:
             if self.state is PAUSED:
                 await self._wait_for_operator(target)
@@ -366,24 +398,12 @@ class ExperimentalSite:
             else:
                 commands = await self._limited(target)
             if commands is None or self.state is HOLD:
-                return
+                return None
             if self.state is RUNNING:
-                break
+                return commands
             if self.state is FAULT:
                 raise self._fault_error()
             # paused by the operator while the limits were being checked: wait, check again
-        ctrl = commands[-1]
-        self.ctrl = ctrl
-        if self.record is not None:
-            self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
-        for command in commands:
-            if command != self._sent_ctrl:
-                self._uncommitted = True
-                await self._guard(self.controller.set_ctrl(command), "set_ctrl")
-                if self.state is HOLD or self.state is FAULT:
-                    self._reference = None  # where the actuator stopped is not known
-                    return
-                self._sent_ctrl = self._reference = command
 
     async def _limited(self, target: tuple[float, ...]) -> tuple[tuple[float, ...], ...] | None:
         """The commands to send for ``target`` under the limits, or None (HOLD)."""
