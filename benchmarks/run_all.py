@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from benchmarks import bench_opensees_bridge, bench_safety
+from benchmarks import bench_modbus_adapter, bench_opensees_bridge, bench_safety
 
 BENCHMARKS: dict[str, Callable[[list[str] | None], None]] = {
     "opensees_bridge": bench_opensees_bridge.main,
+    "modbus_adapter": bench_modbus_adapter.main,
     "safety": bench_safety.main,
 }
 
