@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import socket
 import subprocess
@@ -75,7 +76,10 @@ def test_mqtt_commands_drive_the_same_handler_as_the_control_socket(tmp_path: Pa
         tel = bridge.bridge.telemetry
         assert tel is not None and tel.accept_commands
         _wait_for(lambda: tel.stats.connected, "the bridge to connect to the broker")
-        time.sleep(0.3)  # the command subscription follows the connection
+        events = subprocess.Popen(  # an independent subscriber sees every transition event
+            ["stdbuf", "-oL", "mosquitto_sub", "-h", "127.0.0.1", "-p", "1883",
+             "-t", f"{prefix}/spec/event", "-W", "30"], stdout=subprocess.PIPE, text=True)
+        time.sleep(0.5)  # both subscriptions are in place
 
         def state() -> SiteState:
             return bridge.call(lambda: bridge.bridge.sites["spec"].state)
@@ -96,6 +100,22 @@ def test_mqtt_commands_drive_the_same_handler_as_the_control_socket(tmp_path: Pa
         _wait_for(lambda: tel.stats.commands_rejected == rejected + 1, "the refusal to count")
         assert ctl.request(sock, "resume", "spec")["ok"]  # the operator resumes locally
         assert state() is SiteState.IDLE
+        seen: list[dict[str, object]] = []
+        assert events.stdout is not None
+        while not any(e["kind"] == "resume" for e in seen):
+            line = events.stdout.readline()
+            assert line, f"the subscriber ended before the resume event: {seen}"
+            seen.append(json.loads(line))
+        events.terminate()
+        events.wait(10)
+        status = subprocess.run(["mosquitto_sub", "-h", "127.0.0.1", "-p", "1883", "-C", "1",
+                                 "-W", "5", "-t", f"{prefix}/spec/status"],
+                                capture_output=True, text=True, timeout=10)
+        assert json.loads(status.stdout)["state"] == "IDLE"  # retained, latest
+    transitions = [(e["kind"], e["extra"]["from"], e["extra"]["to"]) for e in seen  # type: ignore[index]
+                   if e["kind"] in ("pause", "abort", "resume")]
+    assert transitions == [("pause", "IDLE", "PAUSED"), ("abort", "PAUSED", "FAULT"),
+                           ("resume", "FAULT", "IDLE")]
     reasons = [(r["event"], r["reason"]) for r in read_record(bridge.run_dir)
                if r.get("event") in ("pause", "abort", "resume")]
     assert reasons == [("pause", "operator pause (mqtt id op-7)"),
