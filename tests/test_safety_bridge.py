@@ -5,6 +5,7 @@ the real in-process specimen's ``set_ctrl``; ``pause`` is resumed through the re
 
 from __future__ import annotations
 
+import itertools
 import socket
 import subprocess
 import sys
@@ -332,3 +333,32 @@ def test_abort_ends_the_session_refuses_new_ones_until_resume(
     good_session(bridge.ports["spec"])
     kinds = [r.get("event") for r in read_record(bridge.run_dir) if r["kind"] == "event"]
     assert kinds[:5] == ["session-open", "abort", "session-close", "resume", "session-open"]
+
+
+@pytest.mark.opensees
+def test_limits_that_are_not_hit_leave_a_real_opensees_run_unchanged(tmp_path: Path) -> None:
+    """Two-story frame in real OpenSeesPy: with limits at 1.5× what the run needs (absolute,
+    increment and velocity on both actuators), the bridge is still invisible (1e-9)."""
+    from .test_conformance_opensees import _frame_config, _frame_params, _rel_diff
+
+    ref = run_opensees("frame2", **_frame_params(ports=None))["runs"][0]
+    strokes = {"story1": ref["u2"],
+               "story2": [b - a for a, b in zip(ref["u2"], ref["u3"], strict=True)]}
+    toml = _frame_config()
+    for name, stroke in strokes.items():
+        peak = max(abs(x) for x in stroke)
+        step = max(abs(b - a) for a, b in itertools.pairwise([0.0, *stroke]))
+        block = (f"[[sites.limits]]\ndisp_min = {-1.5 * peak}\ndisp_max = {1.5 * peak}\n"
+                 f"disp_increment = {1.5 * step}\nvelocity = {1.5 * step / 0.01}\n")
+        head = f'name = "{name}"\n'
+        at = toml.index(head)
+        nxt = toml.find("[[sites]]", at)
+        toml = toml[:nxt] + block + toml[nxt:] if nxt != -1 else toml + block
+    with RunningBridge(toml, tmp_path) as bridge:
+        got = run_opensees("frame2", **_frame_params(
+            ports=[bridge.ports["story1"], bridge.ports["story2"]]))["runs"][0]
+        assert all(len(s.cfg.limits) == 1 for s in bridge.bridge.sites.values())
+        run_dir = bridge.run_dir
+    assert _rel_diff(got["u2"], ref["u2"]) <= 1e-9
+    assert _rel_diff(got["u3"], ref["u3"]) <= 1e-9
+    assert not [r for r in read_record(run_dir) if r.get("event") in ("limit", "hold")]
