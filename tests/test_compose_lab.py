@@ -183,3 +183,25 @@ def test_dump_toml_escapes_and_special_floats() -> None:
     data = {"a": 'quote " back \\ tab\t ünï 🙂', "b": [1.5, float("inf"), -0.0, True],
             "weird key": {"x": [[1, 2], []]}, "t": [{"n": 1}, {"n": 2, "s": {"k": "v"}}]}
     assert tomllib.loads(dump_toml(data)) == data
+
+
+def test_the_image_gets_everything_the_package_build_needs() -> None:
+    """No engine here, so check the build context: every COPY source exists and is let through
+    by docker/Dockerfile.dockerignore, and together they are what pyproject.toml builds from."""
+    dockerfile = (DOCKER / "Dockerfile").read_text()
+    copied: set[str] = set()
+    for line in dockerfile.splitlines():
+        if line.startswith("COPY "):
+            *sources, _dest = line.split()[1:]
+            copied.update(sources)
+    assert all((ROOT / src).exists() for src in copied), copied
+    allowed = {ln[1:].strip().rstrip("/") for ln in
+               (DOCKER / "Dockerfile.dockerignore").read_text().splitlines()
+               if ln.startswith("!")}
+    assert copied <= allowed, copied - allowed
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    packages = project["tool"]["setuptools"]["packages"]["find"]["include"]
+    top_level = {p.rstrip("*") for p in packages}
+    assert top_level | {"pyproject.toml", project["project"]["readme"]} == copied
+    assert set(project["project"]["scripts"]) == {"fresco-bridge", "sim-actuator"}
+    assert "FROM python:3.11-slim" in dockerfile and "pip install --no-cache-dir ." in dockerfile
