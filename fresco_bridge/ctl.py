@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import socket
+import stat
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -97,8 +98,21 @@ def socket_path_for(run_dir: Path) -> Path:
     if len(os.fsencode(path.absolute())) <= _SUN_PATH_MAX:
         return path
     digest = hashlib.sha256(os.fsencode(run_dir.absolute())).hexdigest()[:16]
-    short = Path(tempfile.gettempdir()) / f"fresco-bridge-{os.getuid()}" / f"{digest}.sock"
-    return short
+    return Path(tempfile.gettempdir()) / _private_dir_name() / f"{digest}.sock"
+
+
+def _private_dir_name() -> str:
+    return f"fresco-bridge-{os.getuid()}"
+
+
+def _check_private(directory: Path) -> None:
+    """The shared-temp fallback directory must be ours and closed to others (no swapped
+    sockets from another user)."""
+    st = directory.lstat()
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
+        raise ControlError(f"{directory} must be a directory owned by uid {os.getuid()} with "
+                           f"mode 0700 (found uid {st.st_uid}, mode {stat.S_IMODE(st.st_mode):o}); "
+                           "remove it or set [bridge] control_socket")
 
 
 class ControlServer:
@@ -118,6 +132,8 @@ class ControlServer:
             raise ControlError(f"control socket path {path} is longer than the {_SUN_PATH_MAX} "
                                "bytes AF_UNIX allows; set [bridge] control_socket to a shorter one")
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        if path.parent.name == _private_dir_name():
+            _check_private(path.parent)
         if path.exists() or path.is_symlink():
             if _answers(path):
                 raise ControlError(f"control socket {path} is served by another running bridge")
@@ -213,12 +229,16 @@ def find_socket(socket_path: Path | None, run_dir: Path | None, runs_root: Path)
     ``runs_root``."""
     if socket_path is not None:
         return socket_path
-    candidates = [run_dir] if run_dir is not None else \
-        sorted((d for d in runs_root.glob("*") if d.is_dir()), key=_mtime, reverse=True)
-    for d in candidates:
-        for path in (d / SOCKET_NAME, _pointed(d / POINTER_NAME)):
+    if run_dir is not None:
+        for path in (run_dir / SOCKET_NAME, _pointed(run_dir / POINTER_NAME)):
             if path is not None and path.exists():
                 return path
+    else:  # the newest run directory whose bridge answers (skips stale sockets)
+        for d in sorted((d for d in runs_root.glob("*") if d.is_dir()), key=_mtime,
+                        reverse=True):
+            for path in (d / SOCKET_NAME, _pointed(d / POINTER_NAME)):
+                if path is not None and path.exists() and _answers(path):
+                    return path
     where = f"run directory {run_dir}" if run_dir is not None else f"{runs_root}/*"
     raise ControlError(f"no control socket in {where} (is the bridge running? pass --socket "
                        "PATH or --run-dir DIR)")
@@ -310,5 +330,6 @@ def ctl_command(args: Any) -> int:
     """0: done; 1: refused by a site (or an error answer). Raises ControlError (no bridge)."""
     path = find_socket(args.socket, args.run_dir, args.runs)
     answer = request(path, args.action, args.site, timeout=args.timeout)
-    print(json.dumps(answer, indent=2) if args.json else format_answer(answer))
+    print(json.dumps(answer, indent=2, ensure_ascii=False) if args.json
+          else format_answer(answer))
     return 0 if answer.get("ok") else 1

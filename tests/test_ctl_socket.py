@@ -147,3 +147,31 @@ def test_long_run_directories_get_a_short_socket_and_a_pointer(tmp_path: Path) -
         assert ctl.find_socket(None, None, deep) == found  # newest run under the root
         assert ctl.request(found, "status")["ok"]
     assert not (run_dir / ctl.POINTER_NAME).exists() and not found.exists()
+
+
+def test_discovery_skips_a_stale_socket_of_a_newer_run(tmp_path: Path, short_dir: Path) -> None:
+    runs = tmp_path / "runs"
+    with RunningBridge(_toml(), runs) as b:
+        live = ctl.find_socket(None, b.run_dir, runs)
+        newer = runs / "99991231T000000-killed"
+        newer.mkdir()
+        stale = short_dir / "stale.sock"
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s.bind(str(stale))
+        s.close()  # what a bridge killed with -9 leaves behind
+        (newer / ctl.POINTER_NAME).write_text(f"{stale}\n")
+        os.utime(newer, (time.time() + 60, time.time() + 60))
+        assert ctl.find_socket(None, None, runs) == live
+        # named explicitly, the stale one is used and the error says what happened
+        with pytest.raises(ctl.ControlError, match=r"stale\.sock"):
+            ctl.request(ctl.find_socket(None, newer, runs), "status")
+
+
+def test_the_shared_temp_fallback_directory_must_be_private(tmp_path: Path) -> None:
+    d = tmp_path / "open"
+    d.mkdir()
+    d.chmod(0o777)
+    with pytest.raises(ctl.ControlError, match="mode 0700"):
+        ctl._check_private(d)
+    d.chmod(0o700)
+    ctl._check_private(d)
