@@ -78,6 +78,14 @@ def site_state(b: BridgeThread) -> tuple[str, str]:
     return b.call(lambda: (str(b.bridge.sites["act"].state), b.bridge.sites["act"].hold_reason))
 
 
+def wait_idle(b: BridgeThread, timeout: float = 10.0) -> None:
+    """Until the site closed the last session (its DIE and commits processed)."""
+    deadline = time.monotonic() + timeout
+    while site_state(b)[0] != "IDLE":
+        assert time.monotonic() < deadline, site_state(b)
+        time.sleep(0.01)
+
+
 def drive(link: GenericClientLink, steps: range, amp: float = 0.05) -> list[float]:
     forces = []
     for i in steps:
@@ -150,6 +158,7 @@ def test_controller_killed_mid_run_holds_then_a_new_session_resumes(tmp_path: Pa
                     assert again == pytest.approx([K * 0.05 * i * (-1) ** i
                                                    for i in range(1, 6)], rel=1e-6)
                     assert site_state(b) == ("RUNNING", "")
+                wait_idle(b)
                 if protocol == "modbus":
                     assert modbus_registers(port)["sequence"] == 5
         run_dir = b.run_dir
@@ -178,15 +187,12 @@ def test_hung_controller_holds_within_the_deadline_and_the_session_ends_cleanly(
             assert "modbus controller" in reason
             assert any(w in reason for w in ("No response", "did not answer", "link lost"))
             link.commit()
-        # DIE sent: the session closed, the site is idle again, the bridge still serves
-        deadline = time.monotonic() + 5
-        while site_state(b)[0] != "IDLE" and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert site_state(b)[0] == "IDLE"
+        wait_idle(b)  # DIE sent: the session closed, the site is idle, the bridge still serves
         os.kill(proc.pid, signal.SIGCONT)
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             assert drive(link, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1], rel=1e-6)
+        wait_idle(b)
         run_dir = b.run_dir
     # steps 1-5 of session 1 (the held step is not committed), then 2 in session 2
     assert [s.session for s in committed_steps(run_dir)] == [1] * 5 + [2] * 2
