@@ -367,7 +367,12 @@ def guard_main(argv: Sequence[str]) -> int:
     """
     parent, cmd = int(argv[0]), list(argv[2:])
     _die_with_parent()
-    child = subprocess.Popen(cmd)
+    try:
+        child = subprocess.Popen(cmd)
+    except OSError as exc:
+        print(f"lab: cannot start {cmd[0]!r}: {exc.strerror} (is it installed and on PATH?)",
+              file=sys.stderr, flush=True)
+        return 127
 
     def terminate(*_: object) -> None:
         with contextlib.suppress(ProcessLookupError):

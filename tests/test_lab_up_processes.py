@@ -138,3 +138,20 @@ def test_a_service_dying_before_it_is_ready_is_named(tmp_path: Path,
     err = capsys.readouterr().err
     assert "service broken exited with status 2" in err and "(before it was ready)" in err
     assert "nope" in err  # the service's own last words are shown
+
+
+def test_a_missing_program_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    compose = tmp_path / "compose.yaml"
+    compose.write_text(
+        "services:\n"
+        "  broker:\n"
+        "    image: x\n"
+        "    x-local:\n"
+        "      command: [no-such-broker-binary, -p, '1']\n"
+        "      ready: 127.0.0.1:9\n")
+    from fresco_bridge.cli import main
+
+    assert main(["lab", "up", "--compose", str(compose), "--runs", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "service broker exited with status 127" in err
+    assert "cannot start 'no-such-broker-binary'" in err
