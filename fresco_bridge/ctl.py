@@ -296,13 +296,32 @@ def format_answer(answer: dict[str, Any]) -> str:
         lines.append(f"    ctrl {_vec(st['ctrl'])} mm (target {_vec(st['target'])})  daq disp "
                      f"{_vec(st['daq_disp'])} mm force {_vec(st['daq_force'])} kN")
         counts = ", ".join(f"{k} {v}" for k, v in sorted(st["limit_events"].items())) or "none"
-        lines.append(f"    holds {st['holds']}  limit events: {counts}"
-                     + (f"  limits {len(st['limits'])} control point(s)" if st["limits"] else
-                        "  no limits configured"))
+        lines.append(f"    holds {st['holds']}  limit events: {counts}")
+        for lim in st["limits"]:
+            lines.append("    limits " + _limits_line(lim))
+        if not st["limits"]:
+            lines.append("    no limits configured")
         if st["pending"] is not None:
             lines.append(f"    command {_vec(st['pending'])} waiting for an operator for "
                          f"{st['paused_for'] or 0.0:.1f} s")
     return "\n".join(lines)
+
+
+def _limits_line(lim: dict[str, Any]) -> str:
+    """``actuator 1: disp [-40, 40] mm, increment 2 mm, velocity 20 mm/s, ... policy reject``."""
+    parts = [f"actuator {lim.get('actuator', 1)}:"]
+    if "disp_min" in lim or "disp_max" in lim:
+        parts.append(f"disp [{lim.get('disp_min', '-inf')}, {lim.get('disp_max', 'inf')}] mm,")
+    for key, label, unit in (("disp_increment", "increment", "mm"),
+                             ("velocity", "velocity", "mm/s"), ("step_time", "step_time", "s"),
+                             ("max_substeps", "max_substeps", "")):
+        if lim.get(key):
+            parts.append(f"{label} {lim[key]}{' ' + unit if unit else ''},")
+    if "force_min" in lim or "force_max" in lim:
+        parts.append(f"force [{lim.get('force_min', '-inf')}, {lim.get('force_max', 'inf')}] "
+                     "kN,")
+    parts.append(f"policy {lim.get('policy', 'reject')}")
+    return " ".join(parts)
 
 
 def _vec(values: list[float]) -> str:

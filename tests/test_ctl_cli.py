@@ -78,7 +78,8 @@ def test_ctl_against_a_running_fresco_bridge_serve(tmp_path: Path) -> None:
         r = ctl("status")
         assert r.returncode == 0, r.stderr
         assert "spec: IDLE" in r.stdout and "other: IDLE" in r.stdout
-        assert "limits 1 control point(s)" in r.stdout
+        assert "limits actuator 1: disp [-2.0, 2.0] mm, policy reject" in r.stdout
+        assert "no limits configured" in r.stdout  # site other
 
         r = ctl("pause", "--site", "spec")
         assert r.returncode == 0 and "spec: ok: site spec PAUSED" in r.stdout
