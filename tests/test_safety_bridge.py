@@ -341,7 +341,8 @@ def test_limits_that_are_not_hit_leave_a_real_opensees_run_unchanged(tmp_path: P
     increment and velocity on both actuators), the bridge is still invisible (1e-9)."""
     from .test_conformance_opensees import _frame_config, _frame_params, _rel_diff
 
-    ref = run_opensees("frame2", **_frame_params(ports=None))["runs"][0]
+    ref_params: dict[str, Any] = _frame_params(ports=None)
+    ref = run_opensees("frame2", **ref_params)["runs"][0]
     strokes = {"story1": ref["u2"],
                "story2": [b - a for a, b in zip(ref["u2"], ref["u3"], strict=True)]}
     toml = _frame_config()
@@ -355,8 +356,9 @@ def test_limits_that_are_not_hit_leave_a_real_opensees_run_unchanged(tmp_path: P
         nxt = toml.find("[[sites]]", at)
         toml = toml[:nxt] + block + toml[nxt:] if nxt != -1 else toml + block
     with RunningBridge(toml, tmp_path) as bridge:
-        got = run_opensees("frame2", **_frame_params(
-            ports=[bridge.ports["story1"], bridge.ports["story2"]]))["runs"][0]
+        params: dict[str, Any] = _frame_params(
+            ports=[bridge.ports["story1"], bridge.ports["story2"]])
+        got = run_opensees("frame2", **params)["runs"][0]
         assert all(len(s.cfg.limits) == 1 for s in bridge.bridge.sites.values())
         run_dir = bridge.run_dir
     assert _rel_diff(got["u2"], ref["u2"]) <= 1e-9
