@@ -249,3 +249,23 @@ def test_config_is_strict() -> None:
         ModbusControllerConfig.model_validate({"kind": "modbus", "prot": 5020})
     with pytest.raises(ValueError, match="port"):
         ModbusControllerConfig.model_validate({"kind": "modbus", "port": 0})
+
+
+def test_status_parse_follows_the_register_map() -> None:
+    from fresco_bridge.controls.modbus import _Status
+    from sim_actuator.servers.modbus import Reg, encode_float32
+
+    words = [0] * (Reg.SIM_TIME + 2 - Reg.STATE)
+
+    def put(addr: int, regs: list[int]) -> None:
+        words[addr - Reg.STATE: addr - Reg.STATE + len(regs)] = regs
+
+    put(Reg.STATE, [2])
+    put(Reg.FAULT_CODE, [1])
+    put(Reg.MEAS_DISP, encode_float32(-1.25))
+    put(Reg.MEAS_FORCE, encode_float32(3.5e-3))
+    put(Reg.HEARTBEAT, [65535])
+    put(Reg.SEQUENCE, [7])
+    put(Reg.TARGET, encode_float32(12.75))
+    put(Reg.SIM_TIME, encode_float32(0.5))
+    assert _Status.parse(words) == _Status(2, 1, -1.25, f32(3.5e-3), 65535, 7, 12.75, 0.5)

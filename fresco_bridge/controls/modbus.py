@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import struct
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -47,6 +48,9 @@ _MOVING, _DONE, _FAULT, _INTERLOCK = 1, 2, 3, 4
 
 
 _STATUS_COUNT = Reg.SIM_TIME + 2 - Reg.STATE  # STATE .. SIM_TIME, 12 registers
+_STATUS_WORDS = struct.Struct(f">{_STATUS_COUNT}H")
+_STATUS_LAYOUT = struct.Struct(">HHffHHff")
+"""STATE, FAULT_CODE, MEAS_DISP, MEAS_FORCE, HEARTBEAT, SEQUENCE, TARGET, SIM_TIME."""
 
 MODBUS_EXCEPTIONS: dict[int, str] = {
     1: "ILLEGAL_FUNCTION",
@@ -85,15 +89,8 @@ class _Status:
 
     @classmethod
     def parse(cls, words: list[int]) -> _Status:
-        def f(addr: int) -> float:
-            i = addr - Reg.STATE
-            return decode_float32(words[i : i + 2])
-
-        return cls(
-            state=words[0], fault=words[1], disp=f(Reg.MEAS_DISP), force=f(Reg.MEAS_FORCE),
-            heartbeat=words[Reg.HEARTBEAT - Reg.STATE], sequence=words[Reg.SEQUENCE - Reg.STATE],
-            target=f(Reg.TARGET), time=f(Reg.SIM_TIME),
-        )
+        """One unpack of the 12 registers (float32 high word first is big-endian bytes)."""
+        return cls(*_STATUS_LAYOUT.unpack(_STATUS_WORDS.pack(*words)))
 
     def describe(self) -> str:
         return f"state {state_name(self.state)}, fault {self.fault} {fault_name(self.fault)}"
