@@ -247,18 +247,18 @@ def bench_full_lab(steps: int) -> dict[str, Any]:
                 raise BenchmarkError("lab up exited before it was ready")
             ports = [int(env["LAB_BRIDGE_PORT"]), int(env["LAB_STORY2_PORT"])]
             modbus = _run_client(ports, steps)
+            in_process = _in_process_lab(env, Path(tmp), steps)  # same broker, same run
         finally:
             lab.send_signal(signal.SIGINT)
             lab.communicate(timeout=60)
         modbus["lab_up_exit"] = lab.returncode
-        in_process = _in_process_lab(env, Path(tmp), steps)
     return {"modbus_lab": modbus, "in_process": in_process,
             "ratio": modbus["ms_per_step"] / in_process["ms_per_step"]}
 
 
 def _in_process_lab(env: dict[str, str], tmp: Path, steps: int) -> dict[str, Any]:
-    """The lab's bridge config with the damper in-process (rig.toml's model), same record and
-    telemetry switched off: the bridge-only baseline of the same run."""
+    """The lab's bridge config (record on, MQTT telemetry to the lab's broker) with the damper
+    in-process (rig.toml's model), on free ports: the no-controller baseline of the same run."""
     topo = Topology.load(COMPOSE, env=env)
     text = localize_bridge_config((COMPOSE.parent / "lab.toml").read_text(), "lab.toml", topo,
                                   "bridge", tmp / "ref-runs")
@@ -266,7 +266,8 @@ def _in_process_lab(env: dict[str, str], tmp: Path, steps: int) -> dict[str, Any
     rig = tomllib.loads((COMPOSE.parent / "rig.toml").read_text())["specimen"]
     cfg["sites"][0]["controller"] = {"kind": "sim", "model": rig["kind"],
                                      "params": rig["params"]}
-    cfg["telemetry"] = {}
+    for site in cfg["sites"]:
+        site["port"] = 0
     path = tmp / "in-process.toml"
     path.write_text(dump_toml(cfg))
     bridge = subprocess.Popen(
@@ -277,8 +278,8 @@ def _in_process_lab(env: dict[str, str], tmp: Path, steps: int) -> dict[str, Any
         line = bridge.stdout.readline()
         if not line.startswith("fresco-bridge ready"):
             raise BenchmarkError(f"bridge did not start: {line} {bridge.stderr}")
-        ports = [int(env["LAB_BRIDGE_PORT"]), int(env["LAB_STORY2_PORT"])]
-        return _run_client(ports, steps)
+        bound = dict(kv.split("=") for kv in line.split(":", 1)[1].replace(",", " ").split())
+        return _run_client([int(bound["damper"]), int(bound["story2"])], steps)
     finally:
         bridge.send_signal(signal.SIGTERM)
         bridge.communicate(timeout=30)
