@@ -30,7 +30,9 @@ from dataclasses import dataclass
 from typing import Any, Literal, Protocol, cast, get_args
 
 import aiomqtt
+from paho.mqtt.client import MQTTMessageInfo
 
+from fresco_bridge.telemetry.mqtt_batch import Qos0Batch, hand_to_paho
 from fresco_bridge.telemetry.schema import (
     SCHEMA_VERSION,
     SiteEvent,
@@ -49,6 +51,7 @@ MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
 BRIDGE_TOPIC = "_bridge/status"
 _YIELD_EVERY = 32  # publishes between forced yields, so a long backlog cannot starve the loop
+_LINGER = 0.005  # s the drain waits after waking, so fast steps go out in batches
 
 
 def _reraise_lost_cancel() -> None:
@@ -214,6 +217,8 @@ class MqttTelemetry:
         self._capacity = queue_size
         self._event_capacity = min(queue_size, 1024)
         self._steps: deque[StepSample] = deque()
+        self._in_flight: deque[tuple[MQTTMessageInfo, int]] = deque()  # QoS-0 batches unsent
+        self._in_flight_messages = 0
         self._events: deque[SiteEvent] = deque()
         self._pending_status: dict[str, SiteStatus] = {}
         self._last_status: dict[str, SiteStatus] = {}
@@ -326,7 +331,8 @@ class MqttTelemetry:
         return TelemetryStats(
             published=self._published, dropped=self._dropped, reconnects=self._reconnects,
             connected=self._connected,
-            queued=len(self._steps) + len(self._events) + len(self._pending_status),
+            queued=len(self._steps) + len(self._events) + len(self._pending_status)
+            + self._in_flight_messages,
             failures=self._failures,
             commands_accepted=self._accepted, commands_rejected=self._rejected,
         )
@@ -367,6 +373,7 @@ class MqttTelemetry:
                 reason = f"{type(exc).__name__}: {exc}"
             finally:
                 self._connected = False
+                self._settle(lost=True)
             self._failures += 1
             attempt += 1
             delay = self._backoff_delay(attempt)
@@ -458,27 +465,77 @@ class MqttTelemetry:
 
     async def _drain(self, client: aiomqtt.Client) -> None:
         since_yield = 0
-        while True:
-            item = self._next_message()
-            if item is None:
-                if self._stopping:
-                    return
-                self._report_drops()
-                self._wake.clear()
-                await self._wake.wait()  # idle: nothing to publish, no peer involved
-                continue
-            topic, payload, retain = item
-            try:
-                await client.publish(topic, payload, qos=self.qos, retain=retain,
-                                     timeout=self._timeout)
-            except BaseException:
-                self._dropped += 1  # taken off the queue but not confirmed sent
-                raise
-            self._published += 1
-            since_yield += 1
-            if since_yield >= _YIELD_EVERY:
-                since_yield = 0
-                await asyncio.sleep(0)
+        batch = Qos0Batch()
+        try:
+            while True:
+                self._settle()
+                item = self._next_message()
+                if item is None:
+                    self._send_batch(client, batch)
+                    if self._stopping:
+                        await self._flush_in_flight()
+                        return
+                    if self._in_flight:  # paho writes them within a loop turn: settle then
+                        await asyncio.sleep(_LINGER)
+                        continue
+                    self._report_drops()
+                    self._wake.clear()
+                    await self._wake.wait()  # idle: nothing to publish, no peer involved
+                    await asyncio.sleep(_LINGER)  # let a burst of steps gather into one write
+                    continue
+                topic, payload, retain = item
+                if self.qos == 0 and not retain:
+                    batch.add(topic, payload)
+                else:
+                    self._send_batch(client, batch)  # keep the order across topics
+                    try:
+                        await client.publish(topic, payload, qos=self.qos, retain=retain,
+                                             timeout=self._timeout)
+                    except BaseException:
+                        self._dropped += 1  # taken off the queue but not confirmed sent
+                        raise
+                    self._published += 1
+                since_yield += 1
+                if since_yield >= _YIELD_EVERY:
+                    since_yield = 0
+                    self._send_batch(client, batch)
+                    await asyncio.sleep(0)
+        finally:
+            self._dropped += batch.count  # encoded but never handed to paho
+
+    def _send_batch(self, client: aiomqtt.Client, batch: Qos0Batch) -> None:
+        """Hand the gathered QoS-0 steps/events to paho as one write (see ``mqtt_batch``)."""
+        if not batch.count:
+            return
+        data, n = batch.take()
+        try:
+            info = hand_to_paho(client._client, data)
+        except aiomqtt.MqttCodeError:
+            self._dropped += n
+            raise
+        self._in_flight.append((info, n))
+        self._in_flight_messages += n
+
+    def _settle(self, *, lost: bool = False) -> None:
+        """Count QoS-0 batches paho has written as published; with ``lost``, the rest as
+        dropped (the connection ended with them still in paho's buffer)."""
+        flight = self._in_flight
+        while flight and flight[0][0].is_published():
+            _, n = flight.popleft()
+            self._published += n
+            self._in_flight_messages -= n
+        if lost and flight:
+            self._dropped += self._in_flight_messages
+            self._in_flight_messages = 0
+            flight.clear()
+
+    async def _flush_in_flight(self) -> None:
+        """At stop: wait (bounded) until paho has written every queued QoS-0 message."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(self._timeout):
+                while self._in_flight:
+                    await asyncio.sleep(0.001)
+                    self._settle()
 
     def _next_message(self) -> tuple[str, bytes, bool] | None:
         """The next (topic, payload, retain) in priority order; bad records are logged, dropped."""
