@@ -4,12 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from benchmarks import bench_modbus_adapter, bench_opensees_bridge, bench_safety
+from benchmarks import (
+    bench_modbus_adapter,
+    bench_opensees_bridge,
+    bench_safety,
+    bench_telemetry,
+)
 
 BENCHMARKS: dict[str, Callable[[list[str] | None], None]] = {
     "opensees_bridge": bench_opensees_bridge.main,
     "modbus_adapter": bench_modbus_adapter.main,
     "safety": bench_safety.main,
+    "telemetry": bench_telemetry.main,
 }
 
 

@@ -1,0 +1,186 @@
+"""Demo steps/s with live telemetry (real Mosquitto) on vs off, alternating in one process run.
+
+Why: telemetry must never slow the test (issue 4: at most 10 % slower with telemetry on).
+Each run is the demo's own loop: the explicit-Newmark two-story frame drives the bridge's
+``damper`` site (``BridgeThread``, in-process bilinear damper, run record on) over loopback
+TCP with ``GenericClientLink``, exactly as ``fresco-bridge demo`` does, minus the plotting.
+
+Variants (each run gets a fresh bridge and a fresh run directory):
+
+- ``off``: the demo's default config: no MQTT, no metrics; online monitors on and recorded.
+- ``mqtt``: ``telemetry.mqtt_host = 127.0.0.1`` (real Mosquitto on 1883), every step published.
+- ``mqtt+metrics``: plus the Prometheus endpoint (``metrics_port = 0``).
+- ``bare``: ``monitors = false`` (no step taps at all), to price the monitors themselves.
+
+Variants take turns within each round (rotating the order each round); the table gives the
+median and [min - max] steps/s over the rounds; ratio = median(variant) / median(off).
+
+    python -m benchmarks.bench_telemetry [--rounds 5] [--duration 40]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import socket
+import statistics
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fresco_bridge.config import parse_config
+from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.demo import demo_config_text
+from fresco_bridge.integrator import DEMO_DT, demo_integrator, kanai_tajimi
+from fresco_bridge.integrator.link import GenericClientLink
+
+BROKER = ("127.0.0.1", 1883)
+TARGET_SLOWDOWN = 0.10
+PRIMARY = "mqtt"
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    telemetry_toml: str
+    needs_broker: bool = False
+
+
+VARIANTS = (
+    Variant("off", ""),
+    Variant("mqtt", 'mqtt_host = "127.0.0.1"\nprefix = "{prefix}"', needs_broker=True),
+    Variant("mqtt+metrics", 'mqtt_host = "127.0.0.1"\nprefix = "{prefix}"\nmetrics_port = 0',
+            needs_broker=True),
+    Variant("bare", "monitors = false"),
+)
+
+
+def broker_up() -> bool:
+    """Mosquitto on 127.0.0.1:1883, started (daemonised) if it is installed but not running."""
+    def reachable() -> bool:
+        try:
+            socket.create_connection(BROKER, timeout=1).close()
+            return True
+        except OSError:
+            return False
+
+    if reachable():
+        return True
+    if shutil.which("mosquitto") is None:
+        return False
+    subprocess.run(["mosquitto", "-d", "-c", "/etc/mosquitto/mosquitto.conf"], check=False)
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        if reachable():
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def run_variant(v: Variant, duration: float, root: Path) -> dict[str, Any]:
+    """One demo run; returns steps/s (timed around the integrator loop) and telemetry stats."""
+    text = demo_config_text("tcp", run_name=f"bench-{v.name.replace('+', '-')}")
+    if v.telemetry_toml:
+        prefix = f"fb-bench-{os.getpid()}"
+        text += "\n[telemetry]\n" + v.telemetry_toml.format(prefix=prefix) + "\n"
+    cfg = parse_config(text, f"<bench {v.name}>")
+    motion = kanai_tajimi(3.0, duration=duration, dt=DEMO_DT, seed=1)
+    with BridgeThread(cfg, text, run_dir=root) as bridge:
+        tel = bridge.bridge.telemetry
+        if tel is not None:  # time the steady state, not the first connection
+            deadline = time.monotonic() + 10
+            while not bridge.call(lambda: tel.stats.connected):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("telemetry never connected to the broker")
+                time.sleep(0.02)
+        link = GenericClientLink("127.0.0.1", bridge.ports["damper"], 2, timeout=10.0)
+
+        def damper_force(step: int, t: float, drift: np.ndarray) -> list[float]:
+            link.set_trial((0.0, float(drift[0])), time=t)
+            return [link.force()[1]]
+
+        integ = demo_integrator(damper_force, motion)
+        with link:
+            t0, c0 = time.perf_counter(), time.process_time()
+            while not integ.done:
+                integ.step()
+                link.commit()
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        stats = bridge.call(lambda: tel.stats) if tel is not None else None
+    return {"steps": integ.n_steps, "steps_per_s": integ.n_steps / wall,
+            "cpu_us_per_step": 1e6 * cpu / integ.n_steps, "stats": stats}
+
+
+def machine_info() -> dict[str, str]:
+    cpu = "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg()
+    return {"cpus": str(os.cpu_count()), "cpu": cpu, "python": platform.python_version(),
+            "load": f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}"}
+
+
+def run_benchmark(rounds: int, duration: float) -> dict[str, list[float]]:
+    variants = list(VARIANTS)
+    have_broker = broker_up()
+    if not have_broker:
+        print("no Mosquitto on 127.0.0.1:1883 and none could be started: MQTT variants skipped",
+              flush=True)
+        variants = [v for v in variants if not v.needs_broker]
+    samples: dict[str, list[float]] = {v.name: [] for v in variants}
+    with tempfile.TemporaryDirectory(prefix="fb-bench-telemetry-") as tmp:
+        for r in range(rounds):
+            order = variants[r % len(variants):] + variants[: r % len(variants)]
+            for v in order:
+                res = run_variant(v, duration, Path(tmp) / f"{r}-{v.name}")
+                samples[v.name].append(res["steps_per_s"])
+                st = res["stats"]
+                extra = "" if st is None else (
+                    f"  published {st.published}, dropped {st.dropped}, queued {st.queued}")
+                print(f"round {r + 1} {v.name:<13} {res['steps']} steps  "
+                      f"{res['steps_per_s']:8.0f} steps/s{extra}", flush=True)
+    return samples
+
+
+def summarize(samples: dict[str, list[float]]) -> str:
+    base = statistics.median(samples["off"])
+    lines = ["", "| variant | steps/s median | [min - max] | ratio to off |", "|---|---|---|---|"]
+    for name, xs in samples.items():
+        med = statistics.median(xs)
+        lines.append(f"| {name} | {med:.0f} | [{min(xs):.0f} - {max(xs):.0f}] | "
+                     f"{med / base:.3f} |")
+    if PRIMARY in samples:
+        slowdown = 1.0 - statistics.median(samples[PRIMARY]) / base
+        verdict = "MET" if slowdown <= TARGET_SLOWDOWN else "NOT met"
+        lines.append(f"\ntelemetry on ({PRIMARY}) is {100 * slowdown:.1f} % slower than off "
+                     f"(target <= {100 * TARGET_SLOWDOWN:.0f} %): {verdict}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="benchmarks.bench_telemetry", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--duration", type=float, default=40.0,
+                        help="seconds of synthetic ground motion per run (dt 0.01 s)")
+    args = parser.parse_args(argv)
+    info = machine_info()
+    print(f"demo loop, {args.duration:g} s record ({round(args.duration / DEMO_DT) + 1} steps), "
+          f"{args.rounds} rounds; " + "; ".join(f"{k}: {v}" for k, v in info.items()), flush=True)
+    print(summarize(run_benchmark(args.rounds, args.duration)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
