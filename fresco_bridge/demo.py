@@ -119,6 +119,9 @@ def run_demo(
     summary = _summary(response, motion, wall, integ.n_steps, run_dir, n_rows)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
     _plot(response, run_dir / "hysteresis.png")
+    from .report.html import write_report  # matplotlib is loaded by _plot anyway
+
+    write_report(run_dir)
     _print_summary(summary)
     return summary
 
@@ -149,7 +152,7 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
         "damper_ductility": round(float(np.max(np.abs(drift[:, 0]))) / dy, 2),
         "committed_steps_in_record": n_rows,
         "files": ["config.toml", "run.json", "record.jsonl", "steps.csv", "summary.json",
-                  "hysteresis.png"],
+                  "hysteresis.png", "report.html"],
     }
 
 
@@ -187,6 +190,6 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"{s['peak_damper_force_kN'][1]} kN, ductility {s['damper_ductility']} "
         f"(yield at {s['damper_yield_disp_mm']:.2f} mm)\n"
         f"record            {s['committed_steps_in_record']} committed steps -> steps.csv, "
-        f"hysteresis.png, summary.json",
+        f"hysteresis.png, summary.json, report.html",
         file=sys.stderr,
     )
