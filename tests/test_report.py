@@ -7,6 +7,7 @@ import io
 import json
 import math
 import shutil
+import time
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -17,11 +18,13 @@ from matplotlib.image import imread
 
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.demo import run_demo
+from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import RunRecord
 from fresco_bridge.report.html import write_report
 from fresco_bridge.runs import RunDirError, load_run
 
-from .recorded_run import raw_lines, record_run
+from .bridge_harness import RunningBridge
+from .recorded_run import LAB_TOML, drive, raw_lines, record_run
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -198,3 +201,33 @@ def test_bad_run_directories_get_clear_errors(recorded: Path, tmp_path: Path,
     assert cli_main(["report", str(corrupt)]) == 2
     err = capsys.readouterr().err
     assert "error:" in err and "record.jsonl:11" in err and not (corrupt / "report.html").exists()
+
+
+def test_two_sessions_and_two_sites_each_get_their_rows(tmp_path: Path) -> None:
+    toml = LAB_TOML.format(name="two", telemetry="") + """
+[[sites]]
+name = "story2"
+port = 0
+[sites.controller]
+model = "elastic"
+params = { k = 4.0 }
+"""
+    with RunningBridge(toml, tmp_path) as bridge:
+        for i, steps in enumerate((40, 25), 1):  # two integrator sessions on the same site
+            with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as link:
+                drive(link, steps)
+            deadline = time.monotonic() + 10  # the site takes the next client once this closed
+            while sum(r.get("event") == "session-close" for r in raw_lines(bridge.run_dir)) < i:
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+        with GenericClientLink("127.0.0.1", bridge.ports["story2"], 1, data_size=1) as link:
+            drive(link, 30)
+        run_dir = bridge.run_dir
+    rep = parse(write_report(run_dir))
+    assert rep.sections == ["run", "summary", "site-spring", "site-story2", "events", "config"]
+    assert len(rep.images) == 8
+    spring, story2 = rep.summary["sites"]["spring"], rep.summary["sites"]["story2"]
+    assert (spring["steps"], spring["sessions"]) == (65, 2)
+    assert [(d["session"], d["steps"]) for d in spring["detail"]] == [(1, 40), (2, 25)]
+    assert story2["steps"] == 30 and story2["detail"][0]["force_max"] == pytest.approx(
+        4.0 * story2["detail"][0]["peak_cmd"], rel=1e-9)

@@ -51,6 +51,14 @@ def _no_data(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
+def _min_span(ax: Axes, values: np.ndarray, span: float) -> None:
+    """Keep at least ``span`` visible around the data, so round-off does not fill the axis."""
+    finite = values[np.isfinite(values)]
+    if finite.size and float(finite.max() - finite.min()) < span:
+        mid = 0.5 * float(finite.max() + finite.min())
+        ax.set_ylim(mid - span / 2, mid + span / 2)
+
+
 def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
     """Measured force against measured displacement, per actuator and session."""
     fig = Figure(figsize=(6.4, 4.8))
@@ -140,6 +148,8 @@ def error_monitors(
         ax_delay.plot(t[::k], 1000.0 * delay[::k], color="tab:orange", lw=0.9,
                       label="FEI delay")
         ax_delay.set_ylabel("FEI delay (ms)", color="tab:orange")
+        _min_span(ax_fei, amp, 0.02)
+        _min_span(ax_delay, 1000.0 * delay, 0.2)  # round-off is not a delay worth a scale
         if not np.isfinite(amp).any():
             _no_data(ax_fei, "FEI window not yet full (fewer steps than telemetry.monitor_window)")
     else:
