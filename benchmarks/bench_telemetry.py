@@ -113,7 +113,7 @@ def run_variant(v: Variant, duration: float, root: Path) -> dict[str, Any]:
                 integ.step()
                 link.commit()
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        stats = bridge.call(lambda: tel.stats) if tel is not None else None
+    stats = tel.stats if tel is not None else None  # final: the bridge has drained and stopped
     return {"steps": integ.n_steps, "steps_per_s": integ.n_steps / wall,
             "cpu_us_per_step": 1e6 * cpu / integ.n_steps, "stats": stats}
 
@@ -132,37 +132,46 @@ def machine_info() -> dict[str, str]:
             "load": f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}"}
 
 
-def run_benchmark(rounds: int, duration: float) -> dict[str, list[float]]:
+Samples = dict[str, list[tuple[float, float]]]  # variant -> [(steps/s, CPU µs/step)]
+
+
+def run_benchmark(rounds: int, duration: float) -> Samples:
     variants = list(VARIANTS)
     have_broker = broker_up()
     if not have_broker:
         print("no Mosquitto on 127.0.0.1:1883 and none could be started: MQTT variants skipped",
               flush=True)
         variants = [v for v in variants if not v.needs_broker]
-    samples: dict[str, list[float]] = {v.name: [] for v in variants}
+    samples: Samples = {v.name: [] for v in variants}
     with tempfile.TemporaryDirectory(prefix="fb-bench-telemetry-") as tmp:
         for r in range(rounds):
             order = variants[r % len(variants):] + variants[: r % len(variants)]
             for v in order:
                 res = run_variant(v, duration, Path(tmp) / f"{r}-{v.name}")
-                samples[v.name].append(res["steps_per_s"])
+                samples[v.name].append((res["steps_per_s"], res["cpu_us_per_step"]))
                 st = res["stats"]
                 extra = "" if st is None else (
                     f"  published {st.published}, dropped {st.dropped}, queued {st.queued}")
                 print(f"round {r + 1} {v.name:<13} {res['steps']} steps  "
-                      f"{res['steps_per_s']:8.0f} steps/s{extra}", flush=True)
+                      f"{res['steps_per_s']:8.0f} steps/s  "
+                      f"{res['cpu_us_per_step']:6.1f} CPU µs/step{extra}", flush=True)
     return samples
 
 
-def summarize(samples: dict[str, list[float]]) -> str:
-    base = statistics.median(samples["off"])
-    lines = ["", "| variant | steps/s median | [min - max] | ratio to off |", "|---|---|---|---|"]
+def summarize(samples: Samples) -> str:
+    def med(name: str, i: int) -> float:
+        return statistics.median(x[i] for x in samples[name])
+
+    base, base_cpu = med("off", 0), med("off", 1)
+    lines = ["", "| variant | steps/s median | [min - max] | ratio to off | process CPU µs/step "
+             "(median) | CPU − off |", "|---|---|---|---|---|---|"]
     for name, xs in samples.items():
-        med = statistics.median(xs)
-        lines.append(f"| {name} | {med:.0f} | [{min(xs):.0f} - {max(xs):.0f}] | "
-                     f"{med / base:.3f} |")
+        rates = [x[0] for x in xs]
+        lines.append(f"| {name} | {med(name, 0):.0f} | [{min(rates):.0f} - {max(rates):.0f}] | "
+                     f"{med(name, 0) / base:.3f} | {med(name, 1):.1f} | "
+                     f"{med(name, 1) - base_cpu:+.1f} |")
     if PRIMARY in samples:
-        slowdown = 1.0 - statistics.median(samples[PRIMARY]) / base
+        slowdown = 1.0 - med(PRIMARY, 0) / base
         verdict = "MET" if slowdown <= TARGET_SLOWDOWN else "NOT met"
         lines.append(f"\ntelemetry on ({PRIMARY}) is {100 * slowdown:.1f} % slower than off "
                      f"(target <= {100 * TARGET_SLOWDOWN:.0f} %): {verdict}")
