@@ -218,7 +218,8 @@ def test_stale_heartbeat_holds_with_its_reason(tmp_path: Path) -> None:
 class ReplyCorruptor:
     """A TCP proxy bridge -> controller whose controller->bridge direction a test can corrupt.
 
-    ``mode`` for Modbus: ``pass``, ``short`` (FC03/FC23 replies lose their last two registers,
+    ``mode`` for Modbus: ``pass``, ``cut`` (the connection is closed instead of replying),
+    ``short`` (FC03/FC23 replies lose their last two registers,
     with MBAP length and byte count kept consistent), ``exception:N`` (every reply becomes
     exception N of its function), ``garbage`` (random bytes instead of the frame). For the MTS
     stub (line protocol): ``pass``, ``garbage-line`` (every reply line is replaced).
@@ -269,6 +270,8 @@ class ReplyCorruptor:
                 if self.modbus:
                     head = await up_r.readexactly(7)
                     pdu = await up_r.readexactly(struct.unpack(">H", head[4:6])[0] - 1)
+                    if self.mode == "cut":  # the link breaks: the reply never arrives
+                        break
                     out = self._modbus(head, pdu)
                 else:
                     out = self._line(await up_r.readline())
@@ -346,3 +349,55 @@ def test_garbage_mts_lines_hold_with_a_clear_reason(tmp_path: Path) -> None:
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             assert drive(link, range(1, 3)) == [-K * 0.05, K * 0.1]
+
+
+def test_controller_killed_mid_move_the_move_is_not_resent(tmp_path: Path) -> None:
+    """A 0.4 s ramp in real time; the controller dies 0.15 s into it."""
+    (port,) = free_ports(1)
+    toml = bridge_toml("modbus", port, ramp_time=0.4)
+    with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \
+            RunningBridge(toml, tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
+        good = drive(link, range(1, 3))
+        link.set_trial((0.5,), time=0.03)
+        time.sleep(0.15)
+        proc.kill()
+        proc.wait(5)
+        assert link.force()[0] == good[-1]
+        state, reason = site_state(b)
+        assert state == "HOLD"
+        assert "move to 0.5 mm" in reason and "it is not retried" in reason, reason
+        link.commit()
+        with sim_actuator("modbus", port):
+            for i in range(4, 8):
+                link.set_trial((0.1 * i,), time=0.01 * i)
+                link.force()
+                link.commit()
+            assert modbus_registers(port)["sequence"] == 0  # nothing re-sent, nothing new
+
+
+def test_link_cut_while_the_controller_lives_leaves_its_command_unchanged(
+        tmp_path: Path) -> None:
+    """The controller keeps running; only the bridge's link breaks. During HOLD it must keep
+    the last good command: same target, no further move (the bridge may engage its interlock,
+    which is not motion)."""
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port), ReplyCorruptor(port, modbus=True) as proxy, \
+            RunningBridge(bridge_toml("modbus", proxy.port), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
+        drive(link, range(1, 6))
+        last = modbus_registers(port)
+        assert last["sequence"] == 5 and last["target"] == pytest.approx(-0.25)
+        proxy.mode = "cut"
+        link.set_trial((0.3,), time=0.06)
+        link.force()
+        state, reason = site_state(b)
+        assert state == "HOLD" and "link lost" in reason, reason
+        proxy.mode = "pass"  # the link could be re-established now; the site still holds
+        for i in range(7, 12):
+            link.set_trial((0.05 * i,), time=0.01 * i)
+            link.force()
+            link.commit()
+        now = modbus_registers(port)
+        assert now["target"] == last["target"] and now["sequence"] == last["sequence"]
+        assert now["state"] in (2, 4)  # DONE, or INTERLOCK engaged by the bridge's hold
