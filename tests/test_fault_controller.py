@@ -25,7 +25,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from fresco_bridge.daemon import BridgeThread
-from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.integrator.link import GenericClientLink, LinkError
 from fresco_bridge.record.export import committed_steps, read_record
 from sim_actuator.servers.modbus import Reg, decode_float32
 
@@ -401,3 +401,57 @@ def test_link_cut_while_the_controller_lives_leaves_its_command_unchanged(
         now = modbus_registers(port)
         assert now["target"] == last["target"] and now["sequence"] == last["sequence"]
         assert now["state"] in (2, 4)  # DONE, or INTERLOCK engaged by the bridge's hold
+
+
+def _ctl(action: str, run_dir: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "fresco_bridge.cli", "ctl", action, "--site", "act",
+         "--run-dir", str(run_dir)], capture_output=True, text=True, timeout=30)
+
+
+def _drop(link: GenericClientLink) -> None:
+    """Close a link the bridge already closed (no DIE: the session is gone)."""
+    if link.sock is not None:
+        link.sock.close()
+        link.sock = None
+
+
+def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
+        tmp_path: Path) -> None:
+    """The other way out of a controller loss: it does not come back, the operator aborts
+    (``fresco-bridge ctl abort``); the held session is closed at its next request, the record
+    says why, no new session is accepted until the operator resumes."""
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port), tmp_path) as b:
+        run_dir = b.run_dir
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0)
+        link.connect()
+        drive(link, range(1, 4))
+        proc.kill()
+        proc.wait(5)
+        link.set_trial((0.2,), time=0.04)
+        link.force()
+        assert site_state(b)[0] == "HOLD"
+        r = _ctl("abort", run_dir)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert site_state(b)[0] == "FAULT"
+        with pytest.raises(LinkError, match="closed the connection"):
+            link.set_trial((0.25,), time=0.05)
+            link.force()  # the bridge ends the aborted session instead of answering
+        _drop(link)
+        refused = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=5.0)
+        with pytest.raises(ConnectionError):  # closed (LinkError) or reset by the bridge
+            refused.connect()
+            refused.force()  # FAULT: new sessions are refused until an operator resumes
+        _drop(refused)
+        with sim_actuator("modbus", port):
+            r = _ctl("resume", run_dir)
+            assert r.returncode == 0, r.stdout + r.stderr
+            with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                                   timeout=10.0) as link2:
+                assert drive(link2, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1],
+                                                                  rel=1e-6)
+            wait_idle(b)
+    events = [r.get("event") for r in read_record(run_dir) if r.get("kind") == "event"]
+    assert events.index("hold") < events.index("abort") < events.index("resume")
