@@ -269,3 +269,17 @@ def test_status_parse_follows_the_register_map() -> None:
     put(Reg.TARGET, encode_float32(12.75))
     put(Reg.SIM_TIME, encode_float32(0.5))
     assert _Status.parse(words) == _Status(2, 1, -1.25, f32(3.5e-3), 65535, 7, 12.75, 0.5)
+
+
+def test_a_move_still_running_after_move_timeout_is_an_error_and_not_resent() -> None:
+    async def scenario() -> None:
+        async with serving(preset("ideal-bilinear"), time_scale=1.0, ramp_time=0.5,
+                           move_timeout=0.1) as (s, ctl):
+            with pytest.raises(ControllerError, match=r"still MOVING after move_timeout 0\.1 s"
+                               r".*it is not retried"):
+                await ctl.set_ctrl((1.0,))
+            assert s.controller.move_id == 1
+            await s.controller.wait(5.0)
+            assert s.controller.move_id == 1 and s.controller.sequence == 1
+
+    run(scenario)

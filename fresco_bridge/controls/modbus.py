@@ -74,6 +74,8 @@ class ModbusControllerConfig(NetworkControllerConfig):
     device_id: int = Field(1, ge=0, le=255)
     poll_interval: float = Field(0.002, gt=0.0, allow_inf_nan=False)
     """Pause between STATE polls while a move runs, s."""
+    move_timeout: float = Field(10.0, gt=0.0, le=3600.0, allow_inf_nan=False)
+    """A move still MOVING after this long (wall s) is an error (like the MTS WAIT bound)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -265,7 +267,11 @@ class ModbusController(Controller):
                 raise ControllerError(f"{problem}; controller {after.describe()}")
             try:
                 status = self._status(list(response.registers))
+                deadline = asyncio.get_running_loop().time() + cfg.move_timeout
                 while status.state == _MOVING:
+                    if asyncio.get_running_loop().time() > deadline:
+                        raise ControllerError(f"{self.where}: still MOVING after move_timeout "
+                                              f"{cfg.move_timeout:g} s")
                     await asyncio.sleep(cfg.poll_interval)
                     status = await self._read_status()
             except ControllerError as exc:
