@@ -295,6 +295,8 @@ class ReplyCorruptor:
     def _line(self, line: bytes) -> bytes:
         if self.mode == "garbage-line" and line:
             return b"\x00\xff%%% not a reply at all\n"
+        if self.mode == "truncated" and line.startswith(b"OK "):
+            return b" ".join(line.split()[:2]) + b"\n"  # OK and its first key=value only
         return line
 
 
@@ -331,19 +333,24 @@ def test_bad_modbus_replies_hold_with_a_clear_reason(tmp_path: Path, mode: str,
             assert site_state(b) == ("RUNNING", "")
 
 
-def test_garbage_mts_lines_hold_with_a_clear_reason(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("mode", "expected"), [
+    ("garbage-line", "malformed reply to 'STATUS'"),
+    ("truncated", "reply lacks a numeric 'heartbeat'"),
+])
+def test_bad_mts_lines_hold_with_a_clear_reason(tmp_path: Path, mode: str,
+                                                expected: str) -> None:
     (port,) = free_ports(1)
     with sim_actuator("mts", port), ReplyCorruptor(port, modbus=False) as proxy, \
             RunningBridge(bridge_toml("mts", proxy.port), tmp_path) as b:
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             good = drive(link, range(1, 4))
-            proxy.mode = "garbage-line"
+            proxy.mode = mode
             link.set_trial((0.2,), time=0.04)
             assert link.force()[0] == good[-1]
             state, reason = site_state(b)
             assert state == "HOLD"
-            assert "malformed reply to 'STATUS'" in reason and "not a reply at all" in reason
+            assert f"mts controller 127.0.0.1:{proxy.port}" in reason and expected in reason
             link.commit()
         proxy.mode = "pass"
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,

@@ -155,3 +155,16 @@ def test_a_missing_program_is_named(tmp_path: Path, capsys: pytest.CaptureFixtur
     err = capsys.readouterr().err
     assert "service broker exited with status 127" in err
     assert "cannot start 'no-such-broker-binary'" in err
+
+
+def test_integrator_names_an_unreachable_bridge(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]  # nobody listens once the block ends
+    from fresco_bridge.cli import main
+
+    t0 = time.monotonic()
+    rc = main(["lab", "integrate", "--port", str(port), "--connect-timeout", "0.5",
+               "--duration", "1"])
+    assert rc == 2 and time.monotonic() - t0 < 5
+    assert f"bridge 127.0.0.1:{port} not reachable within 0.5 s" in capsys.readouterr().err
