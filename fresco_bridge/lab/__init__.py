@@ -55,7 +55,7 @@ def add_lab_parser(sub: Any) -> None:
     p_up = lab_sub.add_parser("up", help="start mosquitto, sim-actuator and the bridge (and the "
                               "integrator) from docker/compose.yaml; Ctrl-C stops them")
     p_up.add_argument("--compose", type=Path, default=DEFAULT_COMPOSE,
-                      help="compose file (default %(default)s)")
+                      help="compose file (default %(default)s, else the one of this checkout)")
     p_up.add_argument("--with-integrator", action="store_true",
                       help="also run the demo integrator (profile `integrator`); the lab stops "
                       "when it finishes")
@@ -87,7 +87,11 @@ def lab_command(args: Any) -> int:
         env["LAB_CONTROLLER"] = args.controller
         env["LAB_BRIDGE_CONFIG"] = "lab.toml" if args.controller == "modbus" else "lab-mts.toml"
     profiles = tuple(args.profile) + (("integrator",) if args.with_integrator else ())
-    opts = LabOptions(compose=args.compose, profiles=profiles, env=env, runs=args.runs,
+    compose = args.compose
+    checkout = Path(__file__).resolve().parents[2] / DEFAULT_COMPOSE  # a source checkout
+    if compose == DEFAULT_COMPOSE and not compose.exists() and checkout.exists():
+        compose = checkout
+    opts = LabOptions(compose=compose, profiles=profiles, env=env, runs=args.runs,
                       ready_timeout=args.ready_timeout)
     stop = threading.Event()
     with signals_set(stop):
