@@ -397,12 +397,17 @@ class ExperimentalSite:
                 commands: tuple[tuple[float, ...], ...] | None = (target,)
             else:
                 commands = await self._limited(target)
-            if commands is None or self.state is HOLD:
+            state = self.state
+            if commands is None or state is HOLD:
                 return None
-            if self.state is RUNNING:
+            if state is RUNNING:
                 return commands
-            if self.state is FAULT:
+            if state is FAULT:
                 raise self._fault_error()
+            if state is not PAUSED:  # no session (IDLE): nothing is ever forwarded
+                log.error("site %s: command %s without a running session not forwarded",
+                          self.name, list(target))
+                return None
             # paused by the operator while the limits were being checked: wait, check again
 
     async def _limited(self, target: tuple[float, ...]) -> tuple[tuple[float, ...], ...] | None:
