@@ -97,6 +97,12 @@ class SiteConfig(_Strict):
     limits: list[ControlPointLimitsConfig] = Field(default_factory=list)
     """``[[sites.limits]]``, one per control point (actuator after the setup); default none."""
 
+    @field_validator("limits", mode="before")
+    @classmethod
+    def _single_limits_table(cls, v: Any) -> Any:
+        """``[sites.limits]`` (one table, not an array) is the one control point's limits."""
+        return [v] if isinstance(v, dict) else v
+
     @model_validator(mode="after")
     def _matrices_fit(self) -> SiteConfig:
         for key in ("damping", "mass"):

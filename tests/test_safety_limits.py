@@ -249,3 +249,9 @@ def test_the_commented_limits_example_in_examples_lab_toml_is_valid() -> None:
     lab = parse_config(text, str(path))
     (lim,) = lab.sites[0].limits
     assert (lim.disp_max, lim.velocity, lim.max_substeps, lim.force_max) == (40.0, 20.0, 10, 150.0)
+
+
+def test_a_single_limits_table_is_accepted_for_a_one_actuator_site() -> None:
+    lab = parse_config(SITE + "[sites.limits]\ndisp_max = 3.0\n")
+    (lim,) = lab.sites[0].limits
+    assert (lim.actuator, lim.disp_max) == (1, 3.0)
