@@ -364,3 +364,25 @@ def test_limits_that_are_not_hit_leave_a_real_opensees_run_unchanged(tmp_path: P
     assert _rel_diff(got["u2"], ref["u2"]) <= 1e-9
     assert _rel_diff(got["u3"], ref["u3"]) <= 1e-9
     assert not [r for r in read_record(run_dir) if r.get("event") in ("limit", "hold")]
+
+
+def test_pause_and_resume_over_udp(run_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    toml = config(LIMITS["increment"], "pause").replace("port = 0\n",
+                                                        'port = 0\ntransport = "udp"\n')
+    with RunningBridge(toml, run_root) as bridge:
+        sent = spy(bridge)
+        link = GenericClientLink("127.0.0.1", bridge.ports["spec"], 1, data_size=1,
+                                 transport="udp", timeout=30.0).connect()
+        first_step(link)
+        replies: list[float] = []
+        link.set_trial((1.3,), time=0.2)
+        waiter = threading.Thread(target=lambda: replies.append(link.force()[0]))
+        waiter.start()
+        wait_for(lambda: state(bridge) is SiteState.PAUSED, "PAUSED")
+        time.sleep(0.2)
+        assert replies == [] and sent == [(WITHIN,)]
+        _resume_via_cli(bridge, capsys)
+        waiter.join(10)
+        assert replies == [pytest.approx(K * 1.3)] and sent == [(WITHIN,), (1.3,)]
+        link.commit()
+        link.close()
