@@ -69,6 +69,9 @@ def test_velocity_without_any_dt_is_a_violation_naming_step_time() -> None:
     assert v is not None and v.action == "reject" and math.isnan(v.hits[0].value)
     assert "set step_time" in v.describe()
     assert one(velocity=10.0).check_ctrl((0.0,), (0.0,), 0.0) is None  # no motion: fine
+    clamp = one(velocity=10.0, policy="clamp").check_ctrl((0.5,), (0.0,), 0.0)
+    assert clamp is not None and clamp.action == "reject"  # nothing to clamp to without dt
+    assert one(velocity=10.0, policy="pause").check_ctrl((0.5,), (0.0,), 0.0).action == "pause"  # type: ignore[union-attr]
 
 
 def test_substeps_split_a_fast_command_into_equal_steps_ending_exactly_on_target() -> None:

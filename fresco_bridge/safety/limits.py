@@ -178,9 +178,10 @@ class Limiter:
                 continue
             step = lim.step_time if lim.step_time is not None else dt
             if not step > 0.0:
-                if d != 0.0 and not waived:
+                if d != 0.0 and not waived:  # unknown dt: nothing to clamp to, so no clamp
                     hits = hits if hits is not None else []
-                    hits.append(LimitHit(i, "velocity", math.nan, lim.velocity, policy))
+                    hits.append(LimitHit(i, "velocity", math.nan, lim.velocity,
+                                         "reject" if policy == "clamp" else policy))
                 continue
             reach = lim.velocity * step
             if abs(d) <= reach:
