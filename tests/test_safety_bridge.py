@@ -386,3 +386,21 @@ def test_pause_and_resume_over_udp(run_root: Path, capsys: pytest.CaptureFixture
         assert replies == [pytest.approx(K * 1.3)] and sent == [(WITHIN,), (1.3,)]
         link.commit()
         link.close()
+
+
+def test_a_finite_trial_whose_setup_transform_overflows_is_never_forwarded(
+    run_root: Path,
+) -> None:
+    toml = config(LIMITS["absolute"], "clamp").replace(
+        "port = 0\n", 'port = 0\ndofs = 2\nsetup = "OneActuator"\n')
+    with RunningBridge(toml, run_root) as bridge:
+        sent = spy(bridge)
+        with GenericClientLink("127.0.0.1", bridge.ports["spec"], 2, data_size=2) as link:
+            link.set_trial((0.0, 0.4), time=0.1)
+            assert link.force()[1] == pytest.approx(K * 0.4)
+            link.commit()
+            link.set_trial((-1e308, 1e308), time=0.2)  # stroke u_j - u_i = inf
+            assert link.force()[1] == pytest.approx(K * 0.4)
+            assert state(bridge) is SiteState.HOLD
+        assert sent == [(0.4,)]
+        assert "non-finite ctrl" in events(bridge, "hold")[0]["reason"]

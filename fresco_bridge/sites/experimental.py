@@ -354,7 +354,13 @@ class ExperimentalSite:
         self.trial = trial
         if trial.time:
             self.time = trial.time[0]
-        target = self.target = self.setup.ctrl_disp(trial.disp)
+        target = self.setup.ctrl_disp(trial.disp)
+        if not math.isfinite(sum(target)):  # finite trials whose transform overflows
+            if self.state is not HOLD:
+                self.enter_hold(f"setup {self.setup.kind} turned trial {list(trial.disp)} into "
+                                f"non-finite ctrl {list(target)}; not forwarded")
+            return
+        self.target = target
         if self.state is HOLD:
             return
         self._daq_valid = False
