@@ -179,8 +179,8 @@ class ControlServer:
                 if not line:
                     return
                 await _reply(writer, self.answer(line))
-        except (ConnectionError, asyncio.CancelledError):
-            pass
+        except (ConnectionError, TimeoutError, asyncio.CancelledError):
+            pass  # the client went away, stopped reading its answers, or the bridge stops
         finally:
             self._clients.discard(task)
             writer.close()
