@@ -51,7 +51,8 @@ MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
 BRIDGE_TOPIC = "_bridge/status"
 _YIELD_EVERY = 32  # publishes between forced yields, so a long backlog cannot starve the loop
-_LINGER = 0.005  # s the drain waits after waking, so fast steps go out in batches
+_LINGER = 0.02  # s the drain waits after waking, so fast steps go out in batches
+_BATCH_BYTES = 65536  # a batch is handed to paho at this size, or when the queue is empty
 
 
 def _reraise_lost_cancel() -> None:
@@ -498,7 +499,8 @@ class MqttTelemetry:
                 since_yield += 1
                 if since_yield >= _YIELD_EVERY:
                     since_yield = 0
-                    self._send_batch(client, batch)
+                    if len(batch.buf) >= _BATCH_BYTES:
+                        self._send_batch(client, batch)
                     await asyncio.sleep(0)
         finally:
             self._dropped += batch.count  # encoded but never handed to paho
