@@ -204,9 +204,12 @@ def render_report(run: Run) -> str:
 
 
 def write_report(run_dir: Path, out: Path | None = None) -> Path:
-    """Write the report of ``run_dir`` (default ``RUN_DIR/report.html``); returns its path."""
+    """Write the report of ``run_dir`` to ``out`` (a file, or a directory to put report.html
+    in; default ``RUN_DIR/report.html``); returns its path."""
     run = load_run(run_dir)
     path = out if out is not None else run_dir / REPORT_FILE
+    if path.is_dir():
+        path = path / REPORT_FILE
     text = render_report(run)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
