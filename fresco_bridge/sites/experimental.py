@@ -210,12 +210,21 @@ class ExperimentalSite:
     def _controller_hold(self) -> None:
         """Stop the actuator where it is; the adapter itself releases the interlock it engaged
         at the next command the site forwards (a new session or an operator's resume)."""
-        hold = self.controller.hold()
         if self.controller.inline:
-            _run_inline(hold)
+            _run_inline(self.controller.hold())
         else:
-            asyncio.get_running_loop().create_task(asyncio.wait_for(hold, self.timeout),
+            asyncio.get_running_loop().create_task(self._hold_in_background(),
                                                    name=f"{self.name}.hold")
+
+    async def _hold_in_background(self) -> None:
+        """The hold call with its deadline; a failure is logged and recorded, never lost."""
+        try:
+            await asyncio.wait_for(self.controller.hold(), self.timeout)
+        except (TimeoutError, ControllerError) as exc:
+            reason = f"controller hold failed: {exc or f'no answer within {self.timeout:g} s'}"
+            log.error("site %s: %s (the actuator keeps its last command only if the controller "
+                      "does)", self.name, reason)
+            self._event("controller-hold-failed", reason, step=self.step)
 
     def _wake_waiter(self) -> None:
         if self._wake is not None:
@@ -269,7 +278,7 @@ class ExperimentalSite:
                          "session ended")
 
     async def _wait_for_operator(self, command: tuple[float, ...]) -> None:
-        """Wait (logging every PAUSE_LOG_INTERVAL s) until resumed; abort raises SiteError."""
+        """Wait (logging every PAUSE_LOG_INTERVAL s) until resumed or aborted."""
         self.pending = command
         log.warning("site %s: command %s at step %d waits for an operator (%s): "
                     "'fresco-bridge ctl resume --site %s' or 'abort'", self.name, list(command),
@@ -290,8 +299,6 @@ class ExperimentalSite:
         finally:
             self.pending = None
             self._wake = None
-        if self.state is FAULT:
-            raise self._fault_error()
 
     # -- telemetry -----------------------------------------------------------------------------
     def attach_telemetry(self, telemetry: Telemetry, monitor: OnlineMonitor | None) -> None:
@@ -341,9 +348,13 @@ class ExperimentalSite:
 
     # -- the step ------------------------------------------------------------------------------
     async def set_trial(self, trial: Signals) -> None:
-        """Code 3: validate, transform, check limits, forward. Never forwards an unsafe command."""
+        """Code 3: validate, transform, check limits, forward. Never forwards an unsafe command.
+
+        In FAULT nothing happens here: the session ends at the next request that expects a
+        reply, once the client has nothing more in flight (a clean close, not a reset).
+        """
         if self.state is FAULT:
-            raise self._fault_error()
+            return
         values = trial.disp + trial.vel + trial.accel + trial.time
         if not all(math.isfinite(v) for v in values):
             if self.state is not HOLD:
@@ -409,7 +420,7 @@ class ExperimentalSite:
             if state is RUNNING:
                 return commands
             if state is FAULT:
-                raise self._fault_error()
+                return None  # aborted while waiting: the next reply request ends the session
             if state is not PAUSED:  # no session (IDLE): nothing is ever forwarded
                 log.error("site %s: command %s without a running session not forwarded",
                           self.name, list(target))
@@ -442,6 +453,8 @@ class ExperimentalSite:
                 self._transition(Trigger.PAUSE, f"limit exceeded, command {list(target)} "
                                  f"waits for an operator: {verdict.describe()}", step=self.step)
                 await self._wait_for_operator(target)
+                if self.state is not RUNNING:
+                    return None  # aborted
                 approved = True  # the operator saw it: increment/velocity waived, absolute not
                 continue
             if action == "substep":
@@ -479,10 +492,8 @@ class ExperimentalSite:
 
     async def commit(self) -> None:
         """Code 5 (also while PAUSED: it completes a step already forwarded)."""
-        if self.state is HOLD:
+        if self.state is HOLD or self.state is FAULT:
             return
-        if self.state is FAULT:
-            raise self._fault_error()
         await self.acquire()  # every committed step has its measurement in the record
         if self.state is HOLD:
             return
