@@ -7,6 +7,8 @@ import io
 import json
 import math
 import shutil
+import subprocess
+import sys
 import time
 from html.parser import HTMLParser
 from pathlib import Path
@@ -231,3 +233,11 @@ params = { k = 4.0 }
     assert [(d["session"], d["steps"]) for d in spring["detail"]] == [(1, 40), (2, 25)]
     assert story2["steps"] == 30 and story2["detail"][0]["force_max"] == pytest.approx(
         4.0 * story2["detail"][0]["peak_cmd"], rel=1e-9)
+
+
+def test_the_daemon_and_cli_never_import_matplotlib_or_h5py() -> None:
+    code = ("import sys, fresco_bridge.daemon, fresco_bridge.cli; "
+            "print(sorted(m for m in ('matplotlib', 'h5py') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
