@@ -168,3 +168,27 @@ def test_integrator_names_an_unreachable_bridge(capsys: pytest.CaptureFixture[st
                "--duration", "1"])
     assert rc == 2 and time.monotonic() - t0 < 5
     assert f"bridge 127.0.0.1:{port} not reachable within 0.5 s" in capsys.readouterr().err
+
+
+def test_an_optional_service_that_is_not_installed_is_skipped(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    compose = tmp_path / "compose.yaml"
+    compose.write_text(
+        "services:\n"
+        "  broker:\n"
+        "    image: x\n"
+        "    x-local:\n"
+        "      command: [no-such-broker-binary]\n"
+        "      optional: true\n"
+        "  job:\n"
+        "    image: x\n"
+        "    depends_on: [broker]\n"
+        "    x-local:\n"
+        "      command: [sim-actuator, presets]\n"
+        "      oneshot: true\n")
+    from fresco_bridge.cli import main
+
+    assert main(["lab", "up", "--compose", str(compose), "--runs", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "broker: 'no-such-broker-binary' is not installed; skipped" in out
+    assert "ideal-bilinear" in out  # the dependent one-shot ran

@@ -97,6 +97,8 @@ class LabService:
     ready_line: str | None = None
     oneshot: bool = False
     reuse: bool = False
+    optional: bool = False
+    """Skipped with a warning when its program is not installed (e.g. the telemetry broker)."""
     config: Path | None = None
     env: Mapping[str, str] = field(default_factory=dict)
     ports: Mapping[int, int] = field(default_factory=dict)
@@ -164,7 +166,7 @@ def _service(name: str, spec: dict[str, Any], path: Path, where: str,
     if not isinstance(local, dict):
         raise LabError(f"{where}: no `x-local` block: `lab up` does not know how to run it "
                        "locally")
-    known = {"command", "ready", "ready_line", "oneshot", "reuse", "config", "env"}
+    known = {"command", "ready", "ready_line", "oneshot", "reuse", "optional", "config", "env"}
     unknown = set(local) - known
     if unknown:
         raise LabError(f"{where}.x-local: unknown key(s) {sorted(unknown)} (known: "
@@ -189,6 +191,7 @@ def _service(name: str, spec: dict[str, Any], path: Path, where: str,
         ready_line=str(local["ready_line"]) if local.get("ready_line") else None,
         oneshot=bool(local.get("oneshot", False)),
         reuse=bool(local.get("reuse", False)),
+        optional=bool(local.get("optional", False)),
         config=(path.parent / str(config)) if config else None,
         env={str(k): str(v) for k, v in (local.get("env") or {}).items()},
         ports=ports,

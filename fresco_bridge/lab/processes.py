@@ -11,6 +11,7 @@ import collections
 import contextlib
 import ctypes
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -162,7 +163,7 @@ class LabOptions:
     bridge_service: str = "bridge"
 
 
-def run_lab(opts: LabOptions, out: TextIO = sys.stdout,
+def run_lab(opts: LabOptions, out: TextIO | None = None,
             stop: threading.Event | None = None,
             on_ready: Callable[[dict[str, int]], None] | None = None) -> int:
     """Start the topology, supervise it, stop it; returns the exit status for the CLI.
@@ -170,6 +171,7 @@ def run_lab(opts: LabOptions, out: TextIO = sys.stdout,
     0: stopped by ``stop`` (Ctrl-C, SIGTERM) or the one-shot services all succeeded; else the
     first failing one-shot's status, or 1 when a long-running service died.
     """
+    out = sys.stdout if out is None else out
     env = {**os.environ, **opts.env}
     topo = Topology.load(opts.compose, profiles=opts.profiles, env=env)
     stop = stop or threading.Event()
@@ -184,6 +186,11 @@ def run_lab(opts: LabOptions, out: TextIO = sys.stdout,
                 if svc.reuse and svc.ready is not None and _port_open(svc.ready):
                     _say(out, f"{svc.name}: already served on {svc.ready[0]}:{svc.ready[1]}, "
                          "reusing it")
+                    continue
+                if (svc.optional and svc.command[0] not in CONSOLE_SCRIPTS
+                        and shutil.which(svc.command[0], path=env.get("PATH")) is None):
+                    _say(out, f"{svc.name}: {svc.command[0]!r} is not installed; skipped (an "
+                         "optional service: its clients retry in the background)")
                     continue
                 if svc.ready is not None and _port_open(svc.ready):
                     raise LabError(
