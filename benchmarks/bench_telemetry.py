@@ -23,6 +23,8 @@ machine), the ratio of the best runs, and the process CPU per step (client + bri
 from __future__ import annotations
 
 import argparse
+import asyncio
+import math
 import os
 import platform
 import shutil
@@ -40,8 +42,10 @@ import numpy as np
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.demo import demo_config_text
+from fresco_bridge.indicators import OnlineMonitor
 from fresco_bridge.integrator import DEMO_DT, demo_integrator, kanai_tajimi
 from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.telemetry import MqttTelemetry, NullTelemetry, StepSample, Telemetry
 
 BROKER = ("127.0.0.1", 1883)
 TARGET_SLOWDOWN = 0.10
@@ -139,6 +143,48 @@ def broker_cpu() -> float:
     return total
 
 
+async def _tap_cost(tel: Telemetry, n: int) -> float:
+    """Process CPU µs per step of a loop feeding ``tel`` like a site does (monitor included)."""
+    task = asyncio.create_task(tel.run())
+    deadline = time.monotonic() + 10
+    while isinstance(tel, MqttTelemetry) and not tel.stats.connected:
+        if time.monotonic() > deadline:
+            raise RuntimeError("telemetry never connected to the broker")
+        await asyncio.sleep(0.01)
+    monitor = OnlineMonitor(DEMO_DT)
+    c0 = time.process_time()
+    for i in range(n):
+        x = math.sin(0.01 * i)
+        tel.publish_step(StepSample("damper", 1, i, DEMO_DT * i, (0.0, x), (x,), (x,), (8.0 * x,),
+                                    "RUNNING", None, monitor.update(x, x)))
+        if i % 4 == 0:
+            await asyncio.sleep(0)  # the loop turns between steps, as between client requests
+    tel.stop()
+    await task
+    cpu = time.process_time() - c0
+    if isinstance(tel, MqttTelemetry) and tel.stats.published != n:
+        raise RuntimeError(f"not every step was published: {tel.stats}")
+    return 1e6 * cpu / n
+
+
+def isolated_cost(rounds: int, n: int = 20000) -> str:
+    """The telemetry's own CPU per step: MQTT vs NullTelemetry, same loop, alternating."""
+    async def all_rounds() -> tuple[list[float], list[float]]:
+        null, mqtt = [], []
+        for _ in range(rounds):
+            null.append(await _tap_cost(NullTelemetry(), n))
+            mqtt.append(await _tap_cost(MqttTelemetry(
+                host=BROKER[0], port=BROKER[1], prefix=f"fb-bench-{os.getpid()}"), n))
+        return null, mqtt
+
+    null, mqtt = asyncio.run(all_rounds())
+    a, b = statistics.median(null), statistics.median(mqtt)
+    rounds_txt = ", ".join(f"{y - x:.1f}" for x, y in zip(null, mqtt, strict=True))
+    return (f"\nisolated, {n} steps x {rounds} rounds (one event loop, no bridge): NullTelemetry "
+            f"{a:.2f} CPU µs/step, MqttTelemetry {b:.2f} -> telemetry costs {b - a:.2f} CPU µs "
+            f"per step [per round: {rounds_txt}]")
+
+
 def machine_info() -> dict[str, str]:
     cpu = "?"
     try:
@@ -224,6 +270,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"demo loop, {args.duration:g} s record ({round(args.duration / DEMO_DT) + 1} steps), "
           f"{args.rounds} rounds; " + "; ".join(f"{k}: {v}" for k, v in info.items()), flush=True)
     print(summarize(run_benchmark(args.rounds, args.duration)), flush=True)
+    if broker_up():
+        print(isolated_cost(7), flush=True)
 
 
 if __name__ == "__main__":
