@@ -12,8 +12,10 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import Bridge, BridgeThread
+from fresco_bridge.integrator.link import GenericClientLink
 
-from .recorded_run import LAB_TOML, raw_lines, record_run
+from .bridge_harness import RunningBridge
+from .recorded_run import LAB_TOML, drive, raw_lines, record_run
 
 Samples = dict[tuple[str, tuple[tuple[str, str], ...]], float]
 
@@ -91,3 +93,19 @@ def test_a_metrics_port_in_use_fails_start_cleanly(tmp_path: Path) -> None:
             asyncio.run(bridge.start())
         assert bridge.record is not None and bridge.record.closed
         assert not bridge._servers  # listeners closed again
+
+
+def test_metrics_scraped_during_a_session_follow_the_record(tmp_path: Path) -> None:
+    toml = LAB_TOML.format(name="live", telemetry="metrics_port = 0")
+    with RunningBridge(toml, tmp_path) as bridge:
+        assert bridge.bridge.metrics_server is not None
+        port = bridge.bridge.metrics_server.port
+        with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as link:
+            for done in (30, 75):
+                drive(link, done - int(scrape(port).get(
+                    ("fresco_steps_total", (("site", "spring"),)), 0)))
+                link.force()  # answered in order: the last commit has been handled
+                values = scrape(port)  # the session is still open
+                commits = sum(r["kind"] == "commit" for r in raw_lines(bridge.run_dir))
+                assert values[("fresco_steps_total", (("site", "spring"),))] == commits == done
+                assert _latency_count(values, "commitState") == done
