@@ -80,8 +80,15 @@ def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
     return _png(fig)
 
 
-def command_vs_measured(site: str, signals: Sequence[SessionSignals]) -> bytes:
-    """Command and measured displacement over the integrator's time."""
+MARKER_COLORS = {"hold": "tab:red", "limit": "tab:orange", "monitor-warning": "tab:purple"}
+
+
+def command_vs_measured(
+    site: str, signals: Sequence[SessionSignals],
+    markers: Sequence[tuple[float, str]] = (),
+) -> bytes:
+    """Command and measured displacement over the integrator's time; ``markers`` are
+    (time, event kind) drawn as vertical lines (holds, limit hits, monitor warnings)."""
     fig = Figure(figsize=(9.6, 4.0))
     ax = fig.add_subplot()
     many = len(signals) > 1
@@ -95,6 +102,11 @@ def command_vs_measured(site: str, signals: Sequence[SessionSignals]) -> bytes:
                     label=f"measured{sep}{label}")
     if not signals:
         _no_data(ax, "no committed steps")
+    labelled: set[str] = set()
+    for t, kind in markers:
+        ax.axvline(t, color=MARKER_COLORS.get(kind, "0.3"), lw=0.8, ls=":",
+                   label=None if kind in labelled else kind)
+        labelled.add(kind)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("displacement (mm)")
     ax.set_title(f"{site}: command vs measured displacement")

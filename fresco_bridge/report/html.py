@@ -21,7 +21,16 @@ import numpy as np
 
 from .. import __version__
 from ..indicators import IndicatorError, tracking_indicator
-from ..runs import Run, SiteSummary, fmt, human_size, load_run, session_signals, summarise
+from ..runs import (
+    Run,
+    SessionSignals,
+    SiteSummary,
+    fmt,
+    human_size,
+    load_run,
+    session_signals,
+    summarise,
+)
 from . import figures
 
 REPORT_FILE = "report.html"
@@ -120,14 +129,16 @@ def _site_section(run: Run, site: str, warn: float | None) -> str:
             ti.append(np.full(sig.step.size, math.nan))
     monitors = [m for m in run.monitors if m.site == site]
     n = sum(s.step.size for s in signals)
+    markers = _event_times(run, site, signals)
     thin = "" if n <= figures.MAX_POINTS else (
         f" Lines are drawn from every {math.ceil(n / figures.MAX_POINTS)}th step.")
     return "".join([
         f'<section id="site-{_e(site)}"><h2>Site {_e(site)}</h2>',
         _img(figures.hysteresis(site, signals), f"{site} hysteresis",
              "Measured force against measured displacement (actuator space)." + thin),
-        _img(figures.command_vs_measured(site, signals), f"{site} command vs measured",
-             "Command (ctrl) and measured (daq) displacement of each committed step." + thin),
+        _img(figures.command_vs_measured(site, signals, markers), f"{site} command vs measured",
+             "Command (ctrl) and measured (daq) displacement of each committed step; dotted "
+             "lines mark holds, limit hits and monitor warnings." + thin),
         _img(figures.error_monitors(site, signals, ti, monitors, warn),
              f"{site} error monitors",
              "Top: tracking error. Middle: tracking indicator computed from the committed steps "
@@ -138,6 +149,23 @@ def _site_section(run: Run, site: str, warn: float | None) -> str:
              "Measured against command displacement; the dashed line is perfect tracking."),
         "</section>",
     ])
+
+
+def _event_times(run: Run, site: str, signals: list[SessionSignals]) -> list[tuple[float, str]]:
+    """(time, kind) of the site's holds, limit hits and monitor warnings: the time of the
+    last step committed before the event (its ``step``) in the same session."""
+    times = {(sig.session, int(s)): float(t)
+             for sig in signals for s, t in zip(sig.step, sig.time, strict=True)}
+    out = []
+    for ev in run.events:
+        kind = str(ev.get("event", ""))
+        if ev.get("site") != site or kind not in figures.MARKER_COLORS:
+            continue
+        step = ev.get("step")
+        t = times.get((int(ev.get("session", 0)), int(step))) if isinstance(step, int) else None
+        if t is not None:
+            out.append((t, kind))
+    return out
 
 
 def _events_section(run: Run) -> str:
