@@ -194,9 +194,11 @@ def scan_run(path: Path) -> RunListing:
         steps = sessions = holds = 0
         with (path / RECORD_FILE).open("rb") as fh:
             for line in fh:
+                if not line.endswith(b"\n"):
+                    continue  # a torn last line, as load_run skips it
                 if b'"kind":"commit"' in line:
                     steps += 1
-                elif b'"kind":"event"' in line and line.endswith(b"\n"):
+                elif b'"kind":"event"' in line:
                     ev = json.loads(line).get("event")
                     sessions += ev == "session-open"
                     holds += ev == "hold"
