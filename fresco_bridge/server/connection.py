@@ -1,8 +1,12 @@
 """The per-connection pump shared by TCP and UDP: feed bytes, step handlers, close on errors.
 
 Events are processed inside ``data_received``. A handler that completes without suspending
-(in-process controller) costs no scheduler round trip; one that waits on a network controller
-is finished in a task while reading is paused, so messages are still handled strictly in order.
+(in-process controller) costs no scheduler round trip; one that waits (a network controller, an
+operator pause) is finished in a task, and what arrives meanwhile is only buffered, so messages
+are still handled strictly in order. Reading goes on while a request waits, so a client that
+vanishes is noticed: an operator wait is then cancelled (its command is never forwarded), while
+a controller call finishes under its own deadline. Only a client that keeps sending more than
+``HELD_BYTES_CAP`` during one wait is paused (backpressure).
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from ..sites import ExperimentalSite, SiteError
 from .handlers import ActorHandler, ElementHandler, SessionEnded
 
 log = logging.getLogger("fresco_bridge.server")
+HELD_BYTES_CAP = 1 << 20
+"""Bytes buffered while a request waits before the transport stops reading."""
 
 
 class _Handler(Protocol):
@@ -45,6 +51,8 @@ class SessionPump:
         self._close = close
         self._pause = pause
         self._pending: asyncio.Task[None] | None = None
+        self._held = 0  # bytes received while a request waits
+        self._reading_paused = False
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
         self.session: ElementServerSession | ActorSession
@@ -62,6 +70,11 @@ class SessionPump:
         self.session.receive_data(data)
         if self._pending is None:
             self._run()
+        elif not self._reading_paused:
+            self._held += len(data)
+            if self._held > HELD_BYTES_CAP:
+                self._reading_paused = True
+                self._pause(True)
 
     def _run(self) -> None:
         session, handle, metrics = self.session, self.handler.handle, self.site.metrics
@@ -87,7 +100,7 @@ class SessionPump:
                 self._end(f"internal error: {exc!r}", error=True)
                 return
             if isinstance(r, Suspended):
-                self._pause(True)
+                self._held = 0
                 self._pending = r.task(name=f"{self.site.name}.request")
                 self._pending.add_done_callback(self._resumed)
                 if metrics is not None:
@@ -111,7 +124,9 @@ class SessionPump:
         if self._timing is not None and self.site.metrics is not None:
             self.site.metrics.message(self._timing[0], perf_counter() - self._timing[1])
         self._timing = None
-        self._pause(False)
+        if self._reading_paused:
+            self._reading_paused = False
+            self._pause(False)
         self._run()
 
     def _end(self, reason: str, *, error: bool = False) -> None:
@@ -125,6 +140,13 @@ class SessionPump:
     def busy(self) -> bool:
         """A request is waiting on the controller; it finishes (with its deadline) first."""
         return self._pending is not None
+
+    def peer_lost(self, reason: str) -> None:
+        """The client is gone (EOF already fed). A wait for the operator is cancelled at once,
+        so a later resume cannot forward a dead client's command; a controller call finishes
+        under its deadline and the session then ends on the EOF."""
+        if self._pending is None or self.site.pending is not None:
+            self.abort(reason)
 
     def abort(self, reason: str) -> None:
         """The transport went away or the bridge stops."""

@@ -82,5 +82,5 @@ class TcpConnection(asyncio.Protocol):
         if pump is None or pump.closed:
             return
         pump.feed(b"")  # the session reports a clean EOF or a message cut short
-        if not pump.closed and not pump.busy:
-            pump.abort(f"connection lost: {exc or 'closed by peer'}")
+        if not pump.closed:
+            pump.peer_lost(f"connection lost: {exc or 'closed by peer'}")
