@@ -94,6 +94,7 @@ class ExperimentalSite:
         self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
         self.pending: tuple[float, ...] | None = None  # a command waiting for an operator
+        self._background: set[asyncio.Task[None]] = set()
         self._reset_signals()
 
     @property
@@ -213,15 +214,19 @@ class ExperimentalSite:
         if self.controller.inline:
             _run_inline(self.controller.hold())
         else:
-            asyncio.get_running_loop().create_task(self._hold_in_background(),
-                                                   name=f"{self.name}.hold")
+            task = asyncio.get_running_loop().create_task(self._hold_in_background(),
+                                                          name=f"{self.name}.hold")
+            self._background.add(task)  # the loop keeps only a weak reference
+            task.add_done_callback(self._background.discard)
 
     async def _hold_in_background(self) -> None:
         """The hold call with its deadline; a failure is logged and recorded, never lost."""
         try:
             await asyncio.wait_for(self.controller.hold(), self.timeout)
-        except (TimeoutError, ControllerError) as exc:
-            reason = f"controller hold failed: {exc or f'no answer within {self.timeout:g} s'}"
+        except Exception as exc:  # any failure: logged and recorded, never "never retrieved"
+            detail = (str(exc) if isinstance(exc, ControllerError | TimeoutError)
+                      else f"{type(exc).__name__}: {exc}")
+            reason = f"controller hold failed: {detail or f'no answer within {self.timeout:g} s'}"
             log.error("site %s: %s (the actuator keeps its last command only if the controller "
                       "does)", self.name, reason)
             self._event("controller-hold-failed", reason, step=self.step)
