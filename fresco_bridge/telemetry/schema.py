@@ -60,15 +60,19 @@ def _nums(values: Sequence[float]) -> list[float | str]:
 
 
 def _jnum(value: float | None) -> str:
-    """``json.dumps(_num(value))`` without the encoder."""
+    """``json.dumps(_num(value))`` without the encoder. A finite float's repr never contains
+    an "n"; "nan", "inf" and "-inf" all do and become JSON strings."""
     if value is None:
         return "null"
-    v = float(value)
-    return repr(v) if math.isfinite(v) else f'"{v}"'
+    r = repr(float(value))
+    return f'"{r}"' if "n" in r else r
 
 
 def _jnums(values: Sequence[float]) -> str:
-    return "[" + ",".join(map(_jnum, values)) + "]"
+    body = ",".join(map(repr, map(float, values)))
+    if "n" in body:  # a non-finite value somewhere: quote those
+        body = ",".join(map(_jnum, values))
+    return f"[{body}]"
 
 
 _JSON_STRINGS: dict[str, str] = {}
