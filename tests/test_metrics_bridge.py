@@ -66,8 +66,15 @@ def test_metrics_scraped_after_a_real_run_match_the_record(tmp_path: Path) -> No
     assert 0 < lat_sum < 5.0
     # the updater histogram exists before any updater runs
     assert values[("fresco_updater_step_seconds_count", ())] == 0
-    # monitors were on: one monitor line per committed step
-    assert sum(1 for r in lines if r["kind"] == "monitor") == len(commits)
+    # monitors were on: one monitor line per committed step, the last one also as gauges
+    monitors = [r for r in lines if r["kind"] == "monitor"]
+    assert len(monitors) == len(commits)
+    last, site = monitors[-1], (("site", "spring"),)
+    for gauge, key in (("tracking_error_mm", "err"), ("tracking_indicator", "ti"),
+                       ("nrms", "nrms"), ("fei_amplitude", "fei_amp"),
+                       ("fei_delay_seconds", "fei_delay")):
+        assert values[(f"fresco_monitor_{gauge}", site)] == pytest.approx(last[key]), gauge
+    assert last["fei_amp"] is not None  # 120 steps > the 64-step window of the test config
     # the endpoint is gone with the bridge
     with pytest.raises(OSError):
         urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=2)

@@ -8,15 +8,17 @@ a single source of truth for drops.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from wsgiref.simple_server import WSGIServer
 
-from prometheus_client import CollectorRegistry, Counter, Histogram, start_http_server
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, start_http_server
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from fresco_bridge.indicators import MonitorSample
 from fresco_bridge.telemetry.mqtt import TelemetryStats
 from protocol import (
     Action,
@@ -67,12 +69,21 @@ class SiteMetrics:
     _latency: Histogram
     _limits: Counter
     _events: Counter
+    _monitor: tuple[Gauge, ...] = ()
     _latency_children: dict[str, Histogram] = field(default_factory=dict)
     _limit_children: dict[str, Counter] = field(default_factory=dict)
     _event_children: dict[str, Counter] = field(default_factory=dict)
 
     def step(self) -> None:
         self.steps.inc()
+
+    def monitor(self, sample: MonitorSample) -> None:
+        """The online error monitors after the latest step (NaN where there is no value yet)."""
+        nan = math.nan
+        for gauge, value in zip(self._monitor, (
+                sample.tracking_error, sample.ti, sample.nrms, sample.fei_amplitude,
+                sample.fei_delay), strict=True):
+            gauge.set(nan if value is None else value)
 
     def hold(self) -> None:
         self.holds.inc()
@@ -160,7 +171,9 @@ class Metrics:
 
     ``steps_total{site}``, ``message_latency_seconds{site,action}``, ``holds_total{site}``,
     ``limit_events_total{site,signal}``, ``events_total{site,kind}``, ``updater_step_seconds``
-    (present, with zero counts, before any updater runs) and, once ``track_telemetry``
+    (present, with zero counts, before any updater runs), the online monitors as gauges
+    ``monitor_tracking_error_mm{site}``, ``monitor_tracking_indicator``, ``monitor_nrms``,
+    ``monitor_fei_amplitude``, ``monitor_fei_delay_seconds`` and, once ``track_telemetry``
     is called, ``telemetry_dropped_total`` and friends.
     """
 
@@ -176,6 +189,14 @@ class Metrics:
                                    namespace=NAMESPACE, registry=r)
         self.limit_events_total = Counter("limit_events", "Limit checks that tripped",
                                           ["site", "signal"], namespace=NAMESPACE, registry=r)
+        self.monitor_gauges = tuple(
+            Gauge(name, doc, ["site"], namespace=NAMESPACE, registry=r) for name, doc in (
+                ("monitor_tracking_error_mm", "Online monitor: measured - command, last step"),
+                ("monitor_tracking_indicator", "Online monitor: tracking indicator (mm^2)"),
+                ("monitor_nrms", "Online monitor: NRMS tracking error since the start"),
+                ("monitor_fei_amplitude", "Online monitor: FEI amplitude ratio (window)"),
+                ("monitor_fei_delay_seconds", "Online monitor: FEI equivalent delay (window)"),
+            ))
         self.events_total = Counter("events", "Site events (as in the run record) per kind",
                                     ["site", "kind"], namespace=NAMESPACE, registry=r)
         self.updater_step_seconds = Histogram(
@@ -191,7 +212,8 @@ class Metrics:
             bound = SiteMetrics(
                 site=site, steps=self.steps_total.labels(site), holds=self.holds_total.labels(site),
                 _latency=self.message_latency_seconds, _limits=self.limit_events_total,
-                _events=self.events_total)
+                _events=self.events_total,
+                _monitor=tuple(g.labels(site) for g in self.monitor_gauges))
             self._sites[site] = bound
         return bound
 

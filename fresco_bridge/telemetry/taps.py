@@ -35,9 +35,11 @@ class SiteTaps:
         self._record = record
 
     def publish_step(self, sample: StepSample) -> None:
+        m = sample.monitor
         if self._metrics is not None:
             self._metrics.step()
-        m = sample.monitor
+            if m is not None:
+                self._metrics.monitor(m)
         if m is not None and self._record is not None:
             self._record.monitor(sample.site, sample.session, sample.step, m.tracking_error,
                                  m.ti, m.nrms, m.fei_amplitude, m.fei_delay)
