@@ -189,7 +189,8 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"damper force      max {s['peak_damper_force_kN'][0]} / min "
         f"{s['peak_damper_force_kN'][1]} kN, ductility {s['damper_ductility']} "
         f"(yield at {s['damper_yield_disp_mm']:.2f} mm)\n"
-        f"record            {s['committed_steps_in_record']} committed steps -> steps.csv, "
+        f"record            {s['committed_steps_in_record']} committed steps (step 0, the "
+        f"initial state, included) -> steps.csv, "
         f"hysteresis.png, summary.json, report.html",
         file=sys.stderr,
     )
