@@ -29,8 +29,8 @@ from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
 
 if TYPE_CHECKING:
     from ..indicators import OnlineMonitor
+    from ..telemetry.base import Telemetry
     from ..telemetry.metrics import SiteMetrics
-    from ..telemetry.mqtt import Telemetry
 
 log = logging.getLogger("fresco_bridge.site")
 T = TypeVar("T")

@@ -4,15 +4,15 @@ Nothing here is on the critical path: the step loop only appends to bounded queu
 increments counters. ``NullTelemetry`` is the default; see README.md for topics and payloads.
 """
 
-from fresco_bridge.telemetry.mqtt import (
+from fresco_bridge.telemetry.base import (
     CommandHandler,
-    MqttTelemetry,
     NullTelemetry,
     OperatorCommand,
     Telemetry,
     TelemetryConfigError,
     TelemetryStats,
 )
+from fresco_bridge.telemetry.mqtt import MqttTelemetry
 from fresco_bridge.telemetry.schema import (
     SCHEMA_VERSION,
     SiteEvent,

@@ -19,7 +19,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from fresco_bridge.indicators import MonitorSample
-from fresco_bridge.telemetry.mqtt import TelemetryStats
+from fresco_bridge.telemetry.base import TelemetryStats
 from protocol import (
     Action,
     CommitReceived,

@@ -25,13 +25,22 @@ import random
 import ssl
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
-from typing import Any, Literal, Protocol, cast, get_args
+from collections.abc import AsyncIterator
+from typing import Any, cast
 
 import aiomqtt
 from paho.mqtt.client import MQTTMessageInfo
 
+from fresco_bridge.telemetry.base import (
+    COMMANDS,
+    CommandHandler,
+    CommandName,
+    NullTelemetry,
+    OperatorCommand,
+    Telemetry,
+    TelemetryConfigError,
+    TelemetryStats,
+)
 from fresco_bridge.telemetry.mqtt_batch import Qos0Batch, hand_to_paho
 from fresco_bridge.telemetry.schema import (
     SCHEMA_VERSION,
@@ -42,11 +51,21 @@ from fresco_bridge.telemetry.schema import (
     check_site_name,
 )
 
+__all__ = [  # the shared types are re-exported: importers of this module keep working
+    "COMMANDS",
+    "CommandHandler",
+    "CommandName",
+    "MqttTelemetry",
+    "NullTelemetry",
+    "OperatorCommand",
+    "Telemetry",
+    "TelemetryConfigError",
+    "TelemetryStats",
+]
+
 log = logging.getLogger("fresco_bridge.telemetry")
 _paho_log = logging.getLogger("fresco_bridge.telemetry.paho")  # per-packet chatter at DEBUG
 
-CommandName = Literal["pause", "resume", "abort"]
-COMMANDS: frozenset[str] = frozenset(get_args(CommandName))
 MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
 BRIDGE_TOPIC = "_bridge/status"
@@ -78,74 +97,6 @@ def _force_close(client: aiomqtt.Client) -> None:
     with contextlib.suppress(Exception):
         if client._lock.locked():
             client._lock.release()
-
-
-class TelemetryConfigError(ValueError):
-    """The telemetry configuration is unusable or unsafe (checked at construction)."""
-
-
-@dataclass(frozen=True, slots=True)
-class TelemetryStats:
-    """Counters since construction; ``dropped`` counts every message that was not sent.
-
-    ``failures`` counts failed connection attempts and sessions ended by an error.
-    """
-
-    published: int
-    dropped: int
-    reconnects: int
-    connected: bool
-    queued: int = 0
-    failures: int = 0
-    commands_accepted: int = 0
-    commands_rejected: int = 0
-
-
-@dataclass(frozen=True, slots=True)
-class OperatorCommand:
-    """An authenticated operator command for one site, handed to the daemon's handler."""
-
-    site: str
-    command: CommandName
-    request_id: str | None = None
-
-
-CommandHandler = Callable[[OperatorCommand], None]
-
-
-class Telemetry(Protocol):
-    """What the daemon calls; ``NullTelemetry`` and ``MqttTelemetry`` both provide it."""
-
-    def publish_step(self, sample: StepSample) -> None: ...
-    def publish_status(self, status: SiteStatus) -> None: ...
-    def publish_event(self, event: SiteEvent) -> None: ...
-    async def run(self) -> None: ...
-    def stop(self) -> None: ...
-    @property
-    def stats(self) -> TelemetryStats: ...
-
-
-class NullTelemetry:
-    """Telemetry off (the default): every call is a no-op and ``run`` returns at once."""
-
-    def publish_step(self, sample: StepSample) -> None:
-        """Discard the sample."""
-
-    def publish_status(self, status: SiteStatus) -> None:
-        """Discard the status."""
-
-    def publish_event(self, event: SiteEvent) -> None:
-        """Discard the event."""
-
-    async def run(self) -> None:
-        """Nothing to run."""
-
-    def stop(self) -> None:
-        """Nothing to stop."""
-
-    @property
-    def stats(self) -> TelemetryStats:
-        return TelemetryStats(published=0, dropped=0, reconnects=0, connected=False)
 
 
 class _RateLimitedLog:

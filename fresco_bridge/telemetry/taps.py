@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from fresco_bridge.telemetry.mqtt import NullTelemetry, Telemetry, TelemetryStats
+from fresco_bridge.telemetry.base import NullTelemetry, Telemetry, TelemetryStats
 from fresco_bridge.telemetry.schema import SiteEvent, SiteStatus, StepSample
 
 if TYPE_CHECKING:
