@@ -20,12 +20,14 @@ $(VENV)/.test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.runtime
 	$(BIN)/fresco-bridge demo
 
-# Debian packages the tests drive as independent peers (mbpoll: a libmodbus Modbus master;
-# mosquitto: the broker `fresco-bridge lab up` starts).
+# Debian packages the tests drive as independent peers, as program:package (mbpoll: a
+# libmodbus Modbus master; mosquitto: the broker the telemetry tests and `lab up` start;
+# mosquitto_sub/_pub: the independent subscriber and publisher).
 # Idempotent and quiet; `apt-get update` only when the package lists do not know the package.
-APT_TEST_PACKAGES := mbpoll mosquitto
+APT_TEST_PACKAGES := mbpoll:mbpoll mosquitto:mosquitto mosquitto_sub:mosquitto-clients
 apt-test-deps:
-	@for p in $(APT_TEST_PACKAGES); do command -v $$p >/dev/null 2>&1 && continue; \
+	@for pair in $(APT_TEST_PACKAGES); do prog=$${pair%%:*}; p=$${pair##*:}; \
+	  command -v $$prog >/dev/null 2>&1 && continue; \
 	  export DEBIAN_FRONTEND=noninteractive; \
 	  apt-get install -y -qq $$p >/dev/null 2>&1 \
 	  || { apt-get update -qq >/dev/null && apt-get install -y -qq $$p >/dev/null; } \
