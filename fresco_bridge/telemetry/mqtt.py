@@ -171,6 +171,7 @@ class MqttTelemetry:
         self._steps: deque[StepSample] = deque()
         self._in_flight: deque[tuple[MQTTMessageInfo, int]] = deque()  # QoS-0 batches unsent
         self._in_flight_messages = 0
+        self._batch = Qos0Batch()  # encoded by the drain, not yet handed to paho
         self._events: deque[SiteEvent] = deque()
         self._pending_status: dict[str, SiteStatus] = {}
         self._last_status: dict[str, SiteStatus] = {}
@@ -284,7 +285,7 @@ class MqttTelemetry:
             published=self._published, dropped=self._dropped, reconnects=self._reconnects,
             connected=self._connected,
             queued=len(self._steps) + len(self._events) + len(self._pending_status)
-            + self._in_flight_messages,
+            + self._in_flight_messages + self._batch.count,
             failures=self._failures,
             commands_accepted=self._accepted, commands_rejected=self._rejected,
         )
@@ -417,7 +418,7 @@ class MqttTelemetry:
 
     async def _drain(self, client: aiomqtt.Client) -> None:
         since_yield = 0
-        batch = Qos0Batch()
+        batch = self._batch = Qos0Batch()
         try:
             while True:
                 self._settle()
@@ -455,6 +456,7 @@ class MqttTelemetry:
                     await asyncio.sleep(0)
         finally:
             self._dropped += batch.count  # encoded but never handed to paho
+            batch.take()
 
     def _send_batch(self, client: aiomqtt.Client, batch: Qos0Batch) -> None:
         """Hand the gathered QoS-0 steps/events to paho as one write (see ``mqtt_batch``)."""
