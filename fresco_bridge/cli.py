@@ -90,6 +90,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:  # a port in use, a run directory that cannot be written, …
+        logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
     except Exception as exc:  # the CLI boundary: a clear line, no traceback
         logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
         print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import shutil
 import threading
 from collections.abc import Callable
 from functools import partial
@@ -89,25 +90,30 @@ class Bridge:
                 self.sites[scfg.name] = site
                 allowed = frozenset(scfg.allowed_clients or cfg.bridge.allowed_clients)
                 mds = cfg.bridge.max_data_size
-                if scfg.transport == "tcp":
-                    server = await loop.create_server(
-                        partial(TcpConnection, site, allowed, mds),
-                        cfg.bridge.host, scfg.port, reuse_address=True,
-                    )
-                    port = server.sockets[0].getsockname()[1]
-                else:
-                    server, _ = await loop.create_datagram_endpoint(
-                        partial(UdpSiteEndpoint, site, allowed, mds),
-                        local_addr=(cfg.bridge.host, scfg.port),
-                    )
-                    port = server.get_extra_info("sockname")[1]
+                try:
+                    if scfg.transport == "tcp":
+                        server = await loop.create_server(
+                            partial(TcpConnection, site, allowed, mds),
+                            cfg.bridge.host, scfg.port, reuse_address=True,
+                        )
+                        port = server.sockets[0].getsockname()[1]
+                    else:
+                        server, _ = await loop.create_datagram_endpoint(
+                            partial(UdpSiteEndpoint, site, allowed, mds),
+                            local_addr=(cfg.bridge.host, scfg.port),
+                        )
+                        port = server.get_extra_info("sockname")[1]
+                except OSError as exc:
+                    raise OSError(exc.errno, f"site {scfg.name}: cannot listen on "
+                                  f"{scfg.transport.upper()} {cfg.bridge.host}:{scfg.port}: "
+                                  f"{exc.strerror or exc}") from exc
                 self._servers.append(server)
                 self.ports[scfg.name] = port
                 log.info("site %s: listening on %s %s:%d (%s protocol, %d DOF, setup %s)",
                          scfg.name, scfg.transport.upper(), cfg.bridge.host, port,
                          scfg.protocol, scfg.dofs, scfg.setup)
         except OSError:
-            await self.close()
+            await self._abandon_start()
             raise
         await self._start_control()
         tcfg = cfg.telemetry
@@ -126,9 +132,18 @@ class Bridge:
             try:
                 self._start_metrics(tcfg.metrics_host, tcfg.metrics_port)
             except OSError:
-                await self.close()
+                await self._abandon_start()
                 raise
         self._attach_taps()
+
+    async def _abandon_start(self) -> None:
+        """A start that failed closes what it opened; a run directory that recorded nothing
+        is removed, so a failed start does not show up as an empty run."""
+        await self.close()
+        record = self.record
+        if record is not None and record.lines == 0:
+            shutil.rmtree(record.directory, ignore_errors=True)
+            log.info("run record %s removed: the bridge never started", record.directory)
 
     def _start_metrics(self, host: str, port: int) -> None:
         """The /metrics endpoint (its own thread); a port in use fails start() cleanly."""

@@ -230,3 +230,21 @@ params = {{ k = 100.0 }}
         run_dir = b.run_dir
     steps = committed_steps(run_dir)
     assert [s.time for s in steps] == pytest.approx([0.1, 0.2, 0.3])  # time from code 3
+
+
+def test_serve_on_a_port_in_use_names_the_site_and_leaves_no_empty_run(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        runs = tmp_path / "runs"
+        cfg = tmp_path / "lab.toml"
+        cfg.write_text(f'[bridge]\nrun_dir = "{runs}"\n[[sites]]\nname = "free"\nport = 0\n'
+                       f'[[sites]]\nname = "damper"\nport = {port}\n')
+        proc = subprocess.run([sys.executable, "-m", "fresco_bridge.cli", "serve", "--config",
+                               str(cfg)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: site damper: cannot listen on TCP 127.0.0.1:{port}: ")
+    assert "Traceback" not in proc.stderr
+    assert not runs.exists() or not any(runs.iterdir())  # a failed start is not a run

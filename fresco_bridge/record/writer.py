@@ -206,6 +206,11 @@ class RunRecord:
             os.fdatasync(self._fd)
 
     @property
+    def lines(self) -> int:
+        """Lines appended so far (0: nothing was ever recorded)."""
+        return self._seq
+
+    @property
     def syncs(self) -> int:
         return self._syncer.syncs if self._syncer is not None else 0
 
