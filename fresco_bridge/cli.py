@@ -60,6 +60,11 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--seed", type=int, default=1, help="synthetic record seed")
     p_demo.add_argument("--runs", type=Path, default=Path("runs"), help="run directory root")
     p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
+    p_demo.add_argument("--mqtt", metavar="HOST[:PORT]", default=None,
+                        help="publish live telemetry to this MQTT broker (default: off)")
+    p_demo.add_argument("--mqtt-prefix", default="fresco", help="MQTT topic prefix")
+    p_demo.add_argument("--metrics-port", type=int, default=None,
+                        help="serve Prometheus /metrics on 127.0.0.1:PORT (0 = any free port)")
     add_report_parsers(sub)  # report, runs list|show|export, export (alias)
     add_lab_parser(sub)
     add_ctl_parser(sub)
@@ -77,7 +82,8 @@ def main(argv: list[str] | None = None) -> int:
             from .demo import run_demo
 
             run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
-                     runs=args.runs, transport=args.transport)
+                     runs=args.runs, transport=args.transport, mqtt=args.mqtt,
+                     mqtt_prefix=args.mqtt_prefix, metrics_port=args.metrics_port)
             return 0
         if args.command == "lab":
             return lab_command(args)

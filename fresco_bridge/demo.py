@@ -32,8 +32,26 @@ from .integrator.link import GenericClientLink
 from .record import export_csv
 
 
-def demo_config_text(transport: str = "tcp", run_name: str = "demo") -> str:
-    """The demo's lab config as TOML (it is also the run's config snapshot)."""
+def demo_config_text(transport: str = "tcp", run_name: str = "demo", *,
+                     mqtt: str | None = None, mqtt_prefix: str = "fresco",
+                     metrics_port: int | None = None) -> str:
+    """The demo's lab config as TOML (it is also the run's config snapshot).
+
+    Telemetry is off unless ``mqtt`` (``HOST`` or ``HOST:PORT``) or ``metrics_port`` is given:
+    the embedded default needs no broker.
+    """
+    telemetry = ""
+    if mqtt is not None:
+        host, _, port = mqtt.partition(":")
+        telemetry += f'mqtt_host = {json.dumps(host)}\nprefix = {json.dumps(mqtt_prefix)}\n'
+        if port:
+            if not port.isdigit():
+                raise ValueError(f"--mqtt {mqtt!r}: the port after ':' must be a number")
+            telemetry += f"mqtt_port = {int(port)}\n"
+    if metrics_port is not None:
+        telemetry += f"metrics_port = {int(metrics_port)}\n"
+    if telemetry:
+        telemetry = "\n[telemetry]\n" + telemetry
     return f"""# fresco-bridge demo: source paper's two-story frame, damper in story 1 (mm, kN, s)
 [bridge]
 run_name = "{run_name}"
@@ -50,7 +68,7 @@ kind = "sim"
 model = "{DEMO_DAMPER['model']}"
 params = {{ k0 = {DEMO_DAMPER['k0']!r}, fy = {DEMO_DAMPER['fy']!r}, \
 alpha = {DEMO_DAMPER['alpha']!r} }}
-"""
+{telemetry}"""
 
 
 class _Progress:
@@ -82,13 +100,17 @@ def run_demo(
     seed: int = 1,
     runs: Path = Path("runs"),
     transport: str = "tcp",
+    mqtt: str | None = None,
+    mqtt_prefix: str = "fresco",
+    metrics_port: int | None = None,
 ) -> dict[str, Any]:
     """Run the demo; returns the summary (also written to the run directory)."""
     if record is not None:
         motion: GroundMotion = read_ground_motion(record).scaled_to_pga(pga)
     else:
         motion = kanai_tajimi(pga, duration=duration, dt=DEMO_DT, seed=seed)
-    text = demo_config_text(transport)
+    text = demo_config_text(transport, mqtt=mqtt, mqtt_prefix=mqtt_prefix,
+                            metrics_port=metrics_port)
     cfg = parse_config(text, "<demo config>")
     print(f"fresco-bridge demo: two-story frame, damper in story 1 served by the bridge "
           f"({transport.upper()}), record {motion.name} scaled to PGA {pga:g} m/s²",

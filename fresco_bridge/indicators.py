@@ -309,4 +309,4 @@ class OnlineMonitor:
         self._last_seen[condition] = self._steps
         if last is not None and self._steps - last <= self.window:
             return []
-        return [f"step {self._steps - 1}: {message}"]
+        return [message]  # the caller knows which step this is (the site adds its own number)

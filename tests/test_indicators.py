@@ -179,7 +179,7 @@ def test_tracking_error_warning_is_edge_triggered_and_rearms_after_a_clean_windo
     # first crossing, no repeat inside the window, re-armed after `window` clean steps
     assert [k for k, _ in fired] == [10, len(errors) - 1]
     assert "0.6 > 0.5" in fired[0][1]
-    assert fired[0][1].startswith("step 10:")
+    assert fired[0][1].startswith("|tracking error| 0.6")
 
 
 def test_ti_rate_warning_fires_for_lag_and_not_for_lead() -> None:
