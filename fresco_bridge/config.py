@@ -160,6 +160,14 @@ class TelemetryConfig(_Strict):
     queue_size: int = Field(default=10000, ge=10)
     username: str | None = None
     password: str | None = None
+    tls: bool = False
+    """Connect to the broker over TLS, verifying its certificate (system CAs unless
+    ``tls_ca_file``) and host name."""
+    tls_ca_file: Path | None = None
+    """PEM file of the CA(s) that signed the broker's certificate."""
+    tls_cert_file: Path | None = None
+    """PEM client certificate (with ``tls_key_file``), for brokers that authenticate clients."""
+    tls_key_file: Path | None = None
     accept_commands: bool = False
     """Accept operator commands (pause/resume/abort) on ``<prefix>/<site>/cmd``; needs
     ``username``/``password`` and ``command_token`` (see README, threat model)."""
@@ -180,14 +188,31 @@ class TelemetryConfig(_Strict):
 
 
     @model_validator(mode="after")
+    def _tls_files_fit(self) -> TelemetryConfig:
+        files = {"tls_ca_file": self.tls_ca_file, "tls_cert_file": self.tls_cert_file,
+                 "tls_key_file": self.tls_key_file}
+        given = [k for k, v in files.items() if v is not None]
+        if given and not self.tls:
+            raise ValueError(f"{', '.join(given)} set but tls = false (set tls = true)")
+        if (self.tls_cert_file is None) != (self.tls_key_file is None):
+            raise ValueError("tls_cert_file and tls_key_file go together")
+        for key in given:
+            path = files[key]
+            assert path is not None
+            if not path.is_file():
+                raise ValueError(f"{key}: no such file {str(path)!r}")
+        return self
+
+    @model_validator(mode="after")
     def _commands_need_credentials(self) -> TelemetryConfig:
         if not self.accept_commands:
             return self
         problems = []
         if self.mqtt_host is None:
             problems.append("mqtt_host is not set")
-        if not (self.username and self.password):
-            problems.append("broker credentials (username and password) are required")
+        if not ((self.username and self.password) or self.tls_cert_file is not None):
+            problems.append("broker credentials (username and password, or a TLS client "
+                            "certificate) are required")
         if self.command_token is None or len(self.command_token) < 16:
             problems.append("command_token of at least 16 characters is required")
         if problems:

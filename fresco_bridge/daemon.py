@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import shutil
+import ssl
 import threading
 from collections.abc import Callable
 from functools import partial
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from . import __version__
-from .config import LabConfig, SiteConfig
+from .config import ConfigError, LabConfig, SiteConfig, TelemetryConfig
 from .controls.base import Controller, ControllerError
 from .controls.modbus import ModbusController
 from .controls.mts import MtsController
@@ -45,6 +46,20 @@ def make_controller(cfg: SiteConfig) -> Controller:
         return MtsController(c)
     n_act = make_setup(cfg.setup, cfg.dofs).n_actuators
     return SimController.from_params(n_act, c.model, dict(c.params))
+
+
+def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:
+    """The broker connection's TLS context: certificate and host name verified, always."""
+    if not tcfg.tls:
+        return None
+    try:
+        context = ssl.create_default_context(
+            cafile=str(tcfg.tls_ca_file) if tcfg.tls_ca_file else None)
+        if tcfg.tls_cert_file is not None and tcfg.tls_key_file is not None:
+            context.load_cert_chain(str(tcfg.tls_cert_file), str(tcfg.tls_key_file))
+    except (OSError, ssl.SSLError) as exc:
+        raise ConfigError(f"telemetry TLS: cannot load the certificates: {exc}") from exc
+    return context
 
 
 class Bridge:
@@ -121,7 +136,8 @@ class Bridge:
             self.telemetry = MqttTelemetry(
                 host=tcfg.mqtt_host, port=tcfg.mqtt_port, prefix=tcfg.prefix, qos=tcfg.qos,
                 queue_size=tcfg.queue_size, compact=tcfg.compact, username=tcfg.username,
-                password=tcfg.password, accept_commands=tcfg.accept_commands,
+                password=tcfg.password, tls=_tls_context(tcfg),
+                accept_commands=tcfg.accept_commands,
                 command_handler=self.desk.handle_mqtt if tcfg.accept_commands else None,
                 command_token=tcfg.command_token,
             )
