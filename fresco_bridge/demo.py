@@ -157,7 +157,7 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
     return {
         "run_dir": str(run_dir),
         "record": motion.name,
-        "pga_m_s2": motion.pga_m_s2,
+        "pga_m_s2": round(motion.pga_m_s2, 9),
         "steps": n_steps,
         "dt_s": DEMO_DT,
         "wall_s": round(wall, 3),
@@ -211,8 +211,8 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"damper force      max {s['peak_damper_force_kN'][0]} / min "
         f"{s['peak_damper_force_kN'][1]} kN, ductility {s['damper_ductility']} "
         f"(yield at {s['damper_yield_disp_mm']:.2f} mm)\n"
-        f"record            {s['committed_steps_in_record']} committed steps (step 0, the "
-        f"initial state, included) -> steps.csv, "
+        f"record            {s['committed_steps_in_record']} committed steps (the first is "
+        f"the initial state at t = 0) -> steps.csv, "
         f"hysteresis.png, summary.json, report.html",
         file=sys.stderr,
     )
