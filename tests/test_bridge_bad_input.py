@@ -205,3 +205,22 @@ def test_second_concurrent_client_is_refused(bridge, caplog) -> None:  # type: i
         time.sleep(0.01)
     steps = committed_steps(bridge.run_dir)
     assert [s.cmd_disp for s in steps if s.site == "spring"] == [(0.02,)]
+
+
+def test_other_sites_are_served_while_a_bad_client_is_still_connected(bridge, caplog) -> None:  # type: ignore[no-untyped-def]
+    """A client stuck mid-message (half a vector sent, socket open) blocks nothing else: the
+    other site runs a whole session meanwhile, and the record holds it intact."""
+    caplog.set_level(logging.INFO, logger="fresco_bridge")
+    stuck = _raw(bridge.ports["spring"])
+    stuck.sendall(SizeID.for_generic_client(1, 1).encode() + _vector(3.0, 0.01)[:17])
+    try:
+        _good_session(bridge.ports["other"], 50.0, steps=20)  # while `stuck` is open
+        intruder = _raw(bridge.ports["spring"])  # its own site stays one-client-at-a-time
+        assert _closed_by_bridge(intruder)
+        intruder.close()
+    finally:
+        stuck.close()
+    _after_bad_client(bridge, caplog, "middle of a message")
+    other = [s for s in committed_steps(bridge.run_dir) if s.site == "other"]
+    assert [s.cmd_disp for s in other[:20]] == [(0.01 * i,) for i in range(1, 21)]
+    assert all(s.meas_force == pytest.approx((50.0 * s.cmd_disp[0],)) for s in other)
