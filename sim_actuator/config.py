@@ -320,6 +320,19 @@ PRESETS: dict[str, RigConfig] = {
                 "load_cell": {"noise_std": 0.02},
             },
         }),
+        parse_rig_config({
+            "name": "damper-bwbn",
+            "description": "bending damper sized like the demo's (k0 8 kN/mm, fy 12 kN, "
+                           "alpha 0.05) as BWBN with energy-driven stiffness/strength "
+                           "degradation and pinching (illustrative values, not calibrated), "
+                           "on the servo-hydraulic actuator",
+            "specimen": {"kind": "bwbn", "params": {
+                "k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 1.0, "beta": 0.5, "gamma": 0.5,
+                "A0": 1.0, "delta_a": 0.0, "delta_nu": 0.002, "delta_eta": 0.002,
+                "zeta_s": 0.3, "p": 0.05, "q": 0.1, "psi0": 0.2, "delta_psi": 0.005,
+                "lam": 0.5}},
+            "actuator": {"delay": 0.02, "servo": {"kind": "first_order", "tau": 0.015}},
+        }),
     )
 }
 """Named rig descriptions for ``sim-actuator serve --preset NAME``."""

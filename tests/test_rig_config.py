@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import pytest
@@ -60,6 +61,20 @@ def test_every_preset_builds_and_moves(name: str) -> None:
     rig = build_rig(preset(name))
     m = rig.execute(0.5, ramp_time=0.05)
     assert m.displacement == pytest.approx(0.5, abs=0.05)
+
+
+def test_the_bwbn_damper_preset_degrades_and_pinches() -> None:
+    """Cycles at ±6 mm (4 × yield): the peak force falls cycle after cycle (strength
+    degradation) and the force near zero displacement shrinks (pinching)."""
+    rig = build_rig(preset("damper-bwbn"))
+    peaks, near_zero = [], []
+    for _ in range(4):
+        peaks.append(rig.execute(6.0, ramp_time=0.5).force)
+        rig.execute(-6.0, ramp_time=0.5)
+        near_zero.append(abs(rig.execute(0.0, ramp_time=0.25).force))
+    assert all(b < a for a, b in itertools.pairwise(peaks)), peaks
+    assert peaks[-1] < 0.97 * peaks[0]
+    assert near_zero[-1] < near_zero[0], near_zero
 
 
 @pytest.mark.parametrize(
