@@ -301,7 +301,10 @@ def format_answer(answer: dict[str, Any]) -> str:
             lines.append("    limits " + _limits_line(lim))
         if not st["limits"]:
             lines.append("    no limits configured")
-        if st["pending"] is not None:
+        if st.get("recovering_for") is not None:
+            lines.append(f"    command {_vec(st['pending'])} waits for the lost controller to "
+                         f"answer again ({st['recovering_for']:.1f} s so far)")
+        elif st["pending"] is not None:
             lines.append(f"    command {_vec(st['pending'])} waiting for an operator for "
                          f"{st['paused_for'] or 0.0:.1f} s")
     return "\n".join(lines)

@@ -94,6 +94,7 @@ class Bridge:
                 site = ExperimentalSite(
                     scfg, make_controller(scfg), self.record,
                     controller_timeout=cfg.bridge.controller_timeout,
+                    controller_recovery=cfg.bridge.controller_recovery,
                 )
                 try:
                     await asyncio.wait_for(site.controller.connect(), site.timeout)

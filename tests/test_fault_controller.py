@@ -3,8 +3,13 @@
 The controller process is killed (SIGKILL) or hung (SIGSTOP) mid-run, or its replies are
 corrupted on the wire by a proxy (wrong register count, Modbus exception codes, garbage bytes,
 garbage MTS lines), or its heartbeat stops. Every case must end in HOLD with a reason that names
-the controller and the fault, with an answer to the integrator within the deadline, no command
-forwarded while holding, and a bridge that serves the next session once the fault is gone.
+the controller and the fault, no command forwarded while holding, and a bridge that serves the
+next session once the fault is gone.
+
+With ``bridge.controller_recovery`` > 0 a lost or silent controller is waited for inside the
+integrator's request: back in time, the same session goes on with fresh measurements; not back,
+the session is ended (the client sees the connection close). A controller *fault* is never
+recovered. The tests of the plain HOLD (stale answers until the session ends) set it to 0.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from .lab_harness import free_ports
 
 K = 68.0  # preset ideal-elastic, kN/mm
 TIMEOUT = 3.0  # controller_timeout of the bridge, s
+NO_RECOVERY = 0.0  # controller_recovery that keeps the plain HOLD (stale answers)
 
 
 @contextlib.contextmanager
@@ -56,11 +62,14 @@ def sim_actuator(protocol: str, port: int, *extra: str) -> Iterator[subprocess.P
         proc.wait(10)
 
 
-def bridge_toml(protocol: str, port: int, **controller: float) -> str:
+def bridge_toml(protocol: str, port: int, *, recovery: float = 30.0,
+                **controller: float) -> str:
+    """A bridge on one ``sim-actuator`` site; ``recovery`` defaults to the product's default."""
     extra = "".join(f"{k} = {v!r}\n" for k, v in controller.items())
     return f"""
 [bridge]
 controller_timeout = {TIMEOUT}
+controller_recovery = {recovery}
 [[sites]]
 name = "act"
 port = 0
@@ -119,11 +128,11 @@ def hold_events(run_dir: Path) -> list[dict[str, object]]:
 
 
 @pytest.mark.parametrize("protocol", ["modbus", "mts"])
-def test_controller_killed_mid_run_holds_then_a_new_session_resumes(tmp_path: Path,
+def test_without_recovery_a_killed_controller_holds_then_a_new_session_resumes(tmp_path: Path,
                                                                     protocol: str) -> None:
     (port,) = free_ports(1)
     with sim_actuator(protocol, port) as proc, \
-            RunningBridge(bridge_toml(protocol, port), tmp_path) as b:
+            RunningBridge(bridge_toml(protocol, port, recovery=NO_RECOVERY), tmp_path) as b:
         link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0)
         with link:
             good = drive(link, range(1, 11))
@@ -172,7 +181,7 @@ def test_hung_controller_holds_within_the_deadline_and_the_session_ends_cleanly(
         tmp_path: Path) -> None:
     (port,) = free_ports(1)
     with sim_actuator("modbus", port) as proc, \
-            RunningBridge(bridge_toml("modbus", port), tmp_path) as b:
+            RunningBridge(bridge_toml("modbus", port, recovery=NO_RECOVERY), tmp_path) as b:
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             good = drive(link, range(1, 6))
@@ -201,7 +210,7 @@ def test_hung_controller_holds_within_the_deadline_and_the_session_ends_cleanly(
 def test_stale_heartbeat_holds_with_its_reason(tmp_path: Path) -> None:
     (port,) = free_ports(1)
     with sim_actuator("modbus", port, "--heartbeat-hz", "0.001"), \
-            RunningBridge(bridge_toml("modbus", port), tmp_path) as b, \
+            RunningBridge(bridge_toml("modbus", port, recovery=NO_RECOVERY), tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
         drive(link, range(1, 3))
         time.sleep(1.3)  # > heartbeat_timeout with a counter that does not move
@@ -311,7 +320,7 @@ def test_bad_modbus_replies_hold_with_a_clear_reason(tmp_path: Path, mode: str,
                                                      expected: str) -> None:
     (port,) = free_ports(1)
     with sim_actuator("modbus", port), ReplyCorruptor(port, modbus=True) as proxy, \
-            RunningBridge(bridge_toml("modbus", proxy.port), tmp_path) as b:
+            RunningBridge(bridge_toml("modbus", proxy.port, recovery=NO_RECOVERY), tmp_path) as b:
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             good = drive(link, range(1, 4))
@@ -341,7 +350,7 @@ def test_bad_mts_lines_hold_with_a_clear_reason(tmp_path: Path, mode: str,
                                                 expected: str) -> None:
     (port,) = free_ports(1)
     with sim_actuator("mts", port), ReplyCorruptor(port, modbus=False) as proxy, \
-            RunningBridge(bridge_toml("mts", proxy.port), tmp_path) as b:
+            RunningBridge(bridge_toml("mts", proxy.port, recovery=NO_RECOVERY), tmp_path) as b:
         with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                timeout=10.0) as link:
             good = drive(link, range(1, 4))
@@ -361,7 +370,7 @@ def test_bad_mts_lines_hold_with_a_clear_reason(tmp_path: Path, mode: str,
 def test_controller_killed_mid_move_the_move_is_not_resent(tmp_path: Path) -> None:
     """A 0.4 s ramp in real time; the controller dies 0.15 s into it."""
     (port,) = free_ports(1)
-    toml = bridge_toml("modbus", port, ramp_time=0.4)
+    toml = bridge_toml("modbus", port, recovery=NO_RECOVERY, ramp_time=0.4)
     with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \
             RunningBridge(toml, tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
@@ -390,7 +399,7 @@ def test_link_cut_while_the_controller_lives_leaves_its_command_unchanged(
     which is not motion)."""
     (port,) = free_ports(1)
     with sim_actuator("modbus", port), ReplyCorruptor(port, modbus=True) as proxy, \
-            RunningBridge(bridge_toml("modbus", proxy.port), tmp_path) as b, \
+            RunningBridge(bridge_toml("modbus", proxy.port, recovery=NO_RECOVERY), tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0) as link:
         drive(link, range(1, 6))
         last = modbus_registers(port)
@@ -430,7 +439,7 @@ def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
     says why, no new session is accepted until the operator resumes."""
     (port,) = free_ports(1)
     with sim_actuator("modbus", port) as proc, \
-            RunningBridge(bridge_toml("modbus", port), tmp_path) as b:
+            RunningBridge(bridge_toml("modbus", port, recovery=NO_RECOVERY), tmp_path) as b:
         run_dir = b.run_dir
         link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=10.0)
         link.connect()
@@ -462,3 +471,201 @@ def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
             wait_idle(b)
     events = [r.get("event") for r in read_record(run_dir) if r.get("kind") == "event"]
     assert events.index("hold") < events.index("abort") < events.index("resume")
+
+
+# -- controller recovery (bridge.controller_recovery > 0) ------------------------------------
+
+
+def wait_recovering(b: BridgeThread, timeout: float = 10.0) -> None:
+    """Until the site waits for its lost controller inside the integrator's request."""
+    deadline = time.monotonic() + timeout
+    while b.call(lambda: b.bridge.sites["act"].recovering_since) is None:
+        assert time.monotonic() < deadline, site_state(b)
+        time.sleep(0.01)
+
+
+def site_events(run_dir: Path) -> list[dict[str, object]]:
+    return [r for r in read_record(run_dir) if r.get("kind") == "event"]
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "mts"])
+def test_controller_killed_and_back_within_the_window_the_same_session_goes_on(
+        tmp_path: Path, protocol: str) -> None:
+    """The controller process dies between steps and is restarted (a fresh rig at 0 mm) while
+    the integrator's step waits: the step is answered with the force of the restarted rig at
+    the commanded position, sent once after the link was verified, and the run goes on."""
+    (port,) = free_ports(1)
+    with sim_actuator(protocol, port) as proc, \
+            RunningBridge(bridge_toml(protocol, port, recovery=20.0), tmp_path) as b:
+        run_dir = b.run_dir
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=30.0) as link:
+            drive(link, range(1, 11))
+            proc.kill()
+            proc.wait(5)
+            link.set_trial((0.55,), time=0.11)  # no reply: the bridge holds and waits
+            wait_recovering(b)
+            assert site_state(b)[0] == "HOLD"
+            status = _ctl("status", run_dir)
+            assert "waits for the lost controller to answer again" in status.stdout, status
+            time.sleep(0.5)  # a few probes fail meanwhile
+            with sim_actuator(protocol, port):
+                force = link.force()[0]  # the same request, answered with fresh data
+                assert force == pytest.approx(K * 0.55, rel=1e-6)
+                assert site_state(b) == ("RUNNING", "")
+                if protocol == "modbus":
+                    regs = modbus_registers(port)  # the restarted controller got one move
+                    assert regs["sequence"] == 1 and regs["target"] == pytest.approx(0.55)
+                link.commit()
+                later = drive(link, range(12, 20))
+                assert later == pytest.approx([K * 0.05 * i * (-1) ** i for i in range(12, 20)],
+                                              rel=1e-6)
+                if protocol == "modbus":
+                    assert modbus_registers(port)["sequence"] == 9
+        wait_idle(b)
+    steps = committed_steps(run_dir)
+    assert [(s.session, s.step) for s in steps] == [(1, i) for i in range(1, 20)]
+    kinds = [str(e.get("event")) for e in site_events(run_dir)]
+    assert "recovery-failed" not in kinds
+    hold = kinds.index("hold")
+    assert kinds[hold:hold + 2] == ["hold", "recovering"]
+    assert kinds.index("recovered") > hold and kinds.count("hold") == 1
+    recovered = next(e for e in site_events(run_dir) if e.get("event") == "recovered")
+    assert recovered["from"] == "HOLD" and recovered["to"] == "RUNNING"
+    assert "the same setpoint [0.55] mm is sent once" in str(recovered["reason"])
+    assert float(str(recovered["elapsed"])) >= 0.5
+
+
+@pytest.mark.parametrize("fault", ["killed", "link-cut"])
+def test_controller_not_back_within_the_window_the_session_ends_cleanly(
+        tmp_path: Path, fault: str) -> None:
+    """Killed for good, or alive behind a link that stays cut: after controller_recovery the
+    session is ended (the integrator sees the connection close instead of stale forces), the
+    actuator's command is the last good one, and the next session is served once it is back."""
+    window = 1.5
+    (port,) = free_ports(1)
+    with contextlib.ExitStack() as stack:
+        proc = stack.enter_context(sim_actuator("modbus", port))
+        proxy = stack.enter_context(ReplyCorruptor(port, modbus=True))
+        b = stack.enter_context(RunningBridge(
+            bridge_toml("modbus", proxy.port, recovery=window), tmp_path))
+        run_dir = b.run_dir
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0)
+        link.connect()
+        drive(link, range(1, 6))
+        last = modbus_registers(port)
+        assert last["sequence"] == 5 and last["target"] == pytest.approx(-0.25)
+        if fault == "killed":
+            proc.kill()
+            proc.wait(5)
+        else:
+            proxy.mode = "cut"
+        t0 = time.monotonic()
+        link.set_trial((0.3,), time=0.06)
+        with pytest.raises(LinkError, match="closed the connection"):
+            link.force()
+        elapsed = time.monotonic() - t0
+        assert window <= elapsed < window + TIMEOUT + 2.0, elapsed
+        _drop(link)
+        wait_idle(b)
+        if fault == "link-cut":  # the live controller kept its last good command
+            now = modbus_registers(port)
+            assert now["target"] == last["target"] and now["sequence"] == last["sequence"]
+            assert now["state"] in (2, 4)  # DONE, or INTERLOCK engaged by the bridge's hold
+            proxy.mode = "pass"
+        else:
+            stack.enter_context(sim_actuator("modbus", port))
+        with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                               timeout=10.0) as link2:
+            assert drive(link2, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1], rel=1e-6)
+        wait_idle(b)
+    events = site_events(run_dir)
+    kinds = [str(e.get("event")) for e in events]
+    assert kinds.index("hold") < kinds.index("recovering") < kinds.index("recovery-failed")
+    assert "recovered" not in kinds
+    failed = next(e for e in events if e.get("event") == "recovery-failed")
+    assert f"within controller_recovery {window:g} s" in str(failed["reason"])
+    assert "modbus controller" in str(failed["reason"])
+    close = next(e for e in events if e.get("event") == "session-close" and e.get("from") == "HOLD")
+    assert close["to"] == "IDLE" and "controller_recovery" in str(close["reason"])
+    assert [s.session for s in committed_steps(run_dir)] == [1] * 5 + [2] * 2
+
+
+def test_a_controller_fault_is_not_recovered(tmp_path: Path) -> None:
+    """A command beyond the stroke latches STROKE_LIMIT in the controller: it answers, so this
+    is no link loss; the site holds at once (stale answers, as without recovery)."""
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port), \
+            RunningBridge(bridge_toml("modbus", port, recovery=20.0), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0) as link:
+        good = drive(link, range(1, 4))
+        t0 = time.monotonic()
+        link.set_trial((150.0,), time=0.04)  # the rig's half stroke is 100 mm
+        assert link.force()[0] == good[-1]
+        assert time.monotonic() - t0 < TIMEOUT
+        state, reason = site_state(b)
+        assert state == "HOLD" and "STROKE_LIMIT" in reason, reason
+        assert b.call(lambda: b.bridge.sites["act"].recovering_since) is None
+        link.commit()
+        run_dir = b.run_dir
+    kinds = [str(e.get("event")) for e in site_events(run_dir)]
+    assert "hold" in kinds and "recovering" not in kinds and "recovered" not in kinds
+
+
+def test_operator_abort_ends_a_recovery_at_once(tmp_path: Path) -> None:
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=60.0), tmp_path) as b:
+        run_dir = b.run_dir
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0)
+        link.connect()
+        drive(link, range(1, 4))
+        proc.kill()
+        proc.wait(5)
+        link.set_trial((0.2,), time=0.04)
+        wait_recovering(b)
+        t0 = time.monotonic()
+        r = _ctl("abort", run_dir)
+        assert r.returncode == 0, r.stdout + r.stderr
+        with pytest.raises(LinkError, match="closed the connection"):
+            link.force()
+        assert time.monotonic() - t0 < 10.0  # not the 60 s window
+        _drop(link)
+        assert site_state(b)[0] == "FAULT"
+        assert b.call(lambda: b.bridge.sites["act"].recovering_since) is None
+        with sim_actuator("modbus", port) as back:
+            r = _ctl("resume", run_dir)
+            assert r.returncode == 0, r.stdout + r.stderr
+            assert modbus_registers(port)["sequence"] == 0  # nothing was sent to it
+            with GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                                   timeout=10.0) as link2:
+                assert drive(link2, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1],
+                                                                  rel=1e-6)
+            wait_idle(b)
+            assert back.poll() is None
+    kinds = [str(e.get("event")) for e in site_events(run_dir)]
+    assert kinds.index("hold") < kinds.index("recovering") < kinds.index("abort")
+    assert "recovered" not in kinds and "recovery-failed" not in kinds
+
+
+def test_client_gone_during_recovery_ends_it_and_sends_nothing(tmp_path: Path) -> None:
+    """The integrator vanishes while its step waits for the controller: the wait is cancelled
+    at once (its command must never reach a controller that comes back later)."""
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=60.0), tmp_path) as b:
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0)
+        link.connect()
+        drive(link, range(1, 4))
+        proc.kill()
+        proc.wait(5)
+        link.set_trial((0.2,), time=0.04)
+        wait_recovering(b)
+        _drop(link)  # no DIE: the process is gone
+        wait_idle(b, timeout=5.0)
+        with sim_actuator("modbus", port):
+            time.sleep(0.5)
+            assert modbus_registers(port)["sequence"] == 0
+        run_dir = b.run_dir
+    kinds = [str(e.get("event")) for e in site_events(run_dir)]
+    assert "recovering" in kinds and "recovered" not in kinds

@@ -28,6 +28,7 @@ S, T = SiteState, Trigger
         (S.HOLD, T.ABORT, True, S.FAULT),
         (S.FAULT, T.SESSION_CLOSE, True, S.FAULT),
         (S.FAULT, T.RESUME, False, S.IDLE),
+        (S.HOLD, T.RECOVERED, True, S.RUNNING),  # a lost controller answered again in time
     ],
 )
 def test_transitions(state: SiteState, trigger: Trigger, in_session: bool,
@@ -40,7 +41,10 @@ def test_transitions(state: SiteState, trigger: Trigger, in_session: bool,
     [
         (S.FAULT, T.SESSION_OPEN, False, "an operator must resume it first"),
         (S.FAULT, T.RESUME, True, "still connected"),
-        (S.HOLD, T.RESUME, True, "HOLD ends when the integrator session ends"),
+        (S.HOLD, T.RESUME, True, "HOLD ends by itself when a lost controller answers again"),
+        (S.HOLD, T.RECOVERED, False, "not a transition"),  # no session: nothing to recover
+        (S.RUNNING, T.RECOVERED, True, "only a HOLD with an open session can recover"),
+        (S.FAULT, T.RECOVERED, True, "aborted by the operator"),
         (S.HOLD, T.PAUSE, True, "nothing is forwarded already"),
         (S.RUNNING, T.RESUME, True, "not paused"),
         (S.IDLE, T.RESUME, False, "not paused"),
@@ -64,7 +68,8 @@ def test_the_table_only_names_states_and_triggers_it_knows_and_fault_needs_an_op
     for (state, trigger), row in TRANSITIONS.items():
         assert isinstance(state, SiteState) and isinstance(trigger, Trigger)
         assert all(to is None or isinstance(to, SiteState) for to in row)
-    # only an operator's resume leaves FAULT; no fault trigger leaves HOLD except a session end
+    # only an operator's resume leaves FAULT; HOLD is left only by a session end (→ IDLE) or
+    # by a recovered controller within the session (→ RUNNING)
     for state, trigger, in_session in itertools.product(S, T, (True, False)):
         try:
             to = next_state(state, trigger, in_session)
@@ -73,4 +78,5 @@ def test_the_table_only_names_states_and_triggers_it_knows_and_fault_needs_an_op
         if state is S.FAULT and to is not S.FAULT:
             assert trigger is T.RESUME
         if state is S.HOLD and to not in (S.HOLD, S.FAULT):
-            assert trigger is T.SESSION_CLOSE and to is S.IDLE
+            assert (trigger, to, in_session) in ((T.SESSION_CLOSE, S.IDLE, True),
+                                                 (T.RECOVERED, S.RUNNING, True))

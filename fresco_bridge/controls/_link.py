@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from .base import ControllerError
+from .base import ControllerLinkError
 
 STATE_NAMES = {0: "IDLE", 1: "MOVING", 2: "DONE", 3: "FAULT", 4: "INTERLOCK"}
 FAULT_NAMES = {0: "NONE", 1: "STROKE_LIMIT", 2: "FORCE_LIMIT"}
@@ -67,13 +67,13 @@ class HeartbeatWatch:
         self._value = None
 
     def observe(self, value: int) -> None:
-        """Record a heartbeat reading; raise ControllerError if it is stale."""
+        """Record a heartbeat reading; raise ControllerLinkError if it is stale."""
         now = self._clock()
         if value != self._value:
             self._value, self._since = value, now
             return
         if self.timeout is not None and now - self._since > self.timeout:
-            raise ControllerError(
+            raise ControllerLinkError(
                 f"{self.what}: stale heartbeat: the counter stayed at {value} for "
                 f"{now - self._since:.3g} s (> heartbeat_timeout {self.timeout:g} s); "
                 "the controller is not running"

@@ -17,6 +17,13 @@ class ControllerError(Exception):
     """A controller failed: lost connection, fault word, bad reply. The site goes to HOLD."""
 
 
+class ControllerLinkError(ControllerError):
+    """The controller could not be reached or did not answer (connection refused, closed or
+    silent, stale heartbeat): its own state is unknown, not faulted. The site may wait for it
+    to answer again (``bridge.controller_recovery``); every other ``ControllerError`` (a latched
+    fault, an interlock, a refused command, a malformed reply) needs a human."""
+
+
 @dataclass(frozen=True, slots=True)
 class Daq:
     """Measured signals at the control points, one entry per actuator (mm, kN)."""

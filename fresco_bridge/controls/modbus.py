@@ -3,9 +3,12 @@
 One actuator. A move is one FC23 transaction: write COMMAND, RAMP_TIME and EXECUTE=1 and read
 the status block back; then poll STATE until it leaves MOVING. A motion command whose outcome
 is unknown (timeout, lost link, cancelled by the site's deadline) raises ``ControllerError`` and
-is never re-sent: the site goes to HOLD. Every call reconnects after a loss, with jittered
-backoff; a *new* command is sent on a fresh link only after the status read shows the controller
-healthy and idle (so the lost command is never replayed, and setpoints are absolute).
+is never re-sent by the adapter: the site goes to HOLD. Link loss and silence raise
+``ControllerLinkError`` (the site may wait for the controller to answer again); a refusal,
+fault or malformed reply raises a plain ``ControllerError``. Every call reconnects after a
+loss, with jittered backoff; a *new* command is sent on a fresh link only after the status
+read shows the controller healthy and idle (so the lost command is never replayed, and
+setpoints are absolute).
 
 ``hold`` engages the program interlock. The next motion command the site forwards (the site
 forwards nothing while it holds, so this is a new session or an operator's resume) releases it
@@ -37,7 +40,7 @@ from sim_actuator.servers.modbus import (  # the one documented register map and
 )
 
 from ._link import Backoff, HeartbeatWatch, NetworkControllerConfig, fault_name, state_name
-from .base import Controller, ControllerError, Daq
+from .base import Controller, ControllerError, ControllerLinkError, Daq
 
 __all__ = ["MODBUS_EXCEPTIONS", "ModbusController", "ModbusControllerConfig", "Reg"]
 
@@ -154,14 +157,14 @@ class ModbusController(Controller):
         except (TimeoutError, OSError, ModbusException) as exc:
             client.close()
             self._backoff.failed()
-            raise ControllerError(f"{self.where}: cannot connect: {exc}") from None
+            raise ControllerLinkError(f"{self.where}: cannot connect: {exc}") from None
         except asyncio.CancelledError:
             client.close()
             raise
         if not ok:
             client.close()
             self._backoff.failed()
-            raise ControllerError(f"{self.where}: cannot connect (connection refused or "
+            raise ControllerLinkError(f"{self.where}: cannot connect (connection refused or "
                                   f"no answer within {cfg.connect_timeout:g} s)")
         self._client = client
         version = await self._read(Reg.MAP_VERSION, 1, "read MAP_VERSION")
@@ -180,7 +183,7 @@ class ModbusController(Controller):
             lost = client is not None
             self._drop()
             reason = "link lost (connection closed by the controller)" if lost else "link is down"
-            raise ControllerError(f"{self.where}: {reason}; {what} not sent"
+            raise ControllerLinkError(f"{self.where}: {reason}; {what} not sent"
                                   + (" (a motion command is never sent on a link that was "
                                      "lost; the next read reconnects)" if motion else ""))
         try:
@@ -192,7 +195,7 @@ class ModbusController(Controller):
             self._drop()
             unknown = (": the outcome of the motion command is unknown and it is not retried"
                        if motion else "")
-            raise ControllerError(f"{self.where}: {what} failed, link lost ({exc}){unknown}"
+            raise ControllerLinkError(f"{self.where}: {what} failed, link lost ({exc}){unknown}"
                                   ) from None
 
     def _exception(self, response: Any, what: str) -> str | None:
@@ -274,9 +277,9 @@ class ModbusController(Controller):
                                               f"{cfg.move_timeout:g} s")
                     await asyncio.sleep(cfg.poll_interval)
                     status = await self._read_status()
-            except ControllerError as exc:
-                raise ControllerError(f"{exc}; the {what} was accepted but its completion is "
-                                      "unknown; it is not retried") from None
+            except ControllerError as exc:  # keeps its kind: a lost link stays a lost link
+                raise type(exc)(f"{exc}; the {what} was accepted but its completion is "
+                                "unknown; it is not retried") from None
             self._check_done(status, target, before.sequence)
 
     def _check_done(self, status: _Status, target: float, sequence_before: int) -> None:

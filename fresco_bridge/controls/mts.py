@@ -4,7 +4,9 @@ One actuator. The adapter owns the test (``OPEN``) and sends each move as one ``
 <wait_timeout>`` request (command + execute + wait + acquire in a round trip), after a
 ``STATUS`` that checks the state and the heartbeat. A request whose reply does not come (lost
 link, timeout, cancelled by the site's deadline) drops the link and raises ``ControllerError``;
-a motion command is never re-sent. Every call reconnects after a loss, with jittered backoff;
+a motion command is never re-sent by the adapter. Link loss and silence raise
+``ControllerLinkError``; a refusal (``ERR``), fault or malformed reply a plain
+``ControllerError``. Every call reconnects after a loss, with jittered backoff;
 a *new* command goes out on a fresh link only after ``STATUS`` shows the controller healthy
 and idle. ``hold`` engages the program interlock; the next motion command the site forwards
 releases it only if this adapter engaged it (never an operator's interlock or a fault).
@@ -22,7 +24,7 @@ from typing import Literal
 from pydantic import Field
 
 from ._link import Backoff, HeartbeatWatch, NetworkControllerConfig
-from .base import Controller, ControllerError, Daq
+from .base import Controller, ControllerError, ControllerLinkError, Daq
 
 __all__ = ["MtsController", "MtsControllerConfig"]
 
@@ -114,7 +116,7 @@ class MtsController(Controller):
                 asyncio.open_connection(cfg.host, cfg.port), cfg.connect_timeout)
         except (TimeoutError, OSError) as exc:
             self._backoff.failed()
-            raise ControllerError(f"{self.where}: cannot connect: {exc or 'timed out'}"
+            raise ControllerLinkError(f"{self.where}: cannot connect: {exc or 'timed out'}"
                                   ) from None
         try:
             info = await self._ask(["INFO"])
@@ -125,6 +127,7 @@ class MtsController(Controller):
             if info.get("dofs") != "1":
                 raise ControllerError(f"{self.where}: has {info.get('dofs')} dofs, expected 1")
             await self._ask(["OPEN", f"SET_RAMP_TIME {cfg.ramp_time!r}"])
+            self._ramp = None  # a restarted controller forgot the old link's ramp ids
             self._heartbeat.observe(int(_float(await self._ask(["STATUS"]), "heartbeat",
                                                self.where)))
         except _Refused as exc:
@@ -147,7 +150,7 @@ class MtsController(Controller):
         what = " / ".join(lines)
         if reader is None or writer is None or writer.is_closing():
             self._drop()
-            raise ControllerError(f"{self.where}: link is down; {what!r} not sent")
+            raise ControllerLinkError(f"{self.where}: link is down; {what!r} not sent")
         bound = self.config.request_timeout if timeout is None else timeout
         replies: list[str] = []
         try:
@@ -166,7 +169,7 @@ class MtsController(Controller):
             reason = f"no reply within {bound:g} s" if isinstance(exc, TimeoutError) else exc
             unknown = (": the outcome of the motion command is unknown and it is not retried"
                        if motion else "")
-            raise ControllerError(f"{self.where}: {what!r} failed, link lost ({reason})"
+            raise ControllerLinkError(f"{self.where}: {what!r} failed, link lost ({reason})"
                                   f"{unknown}") from None
         parsed: list[dict[str, str]] = []
         for line, reply in zip(lines, replies, strict=True):

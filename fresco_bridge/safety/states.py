@@ -5,8 +5,11 @@ RUNNING  a session is open and commands are forwarded within the limits.
 PAUSED   commands are not forwarded; the integrator's request waits for an operator
          (``ctl resume`` / ``ctl abort``). Persists across sessions until resumed.
 HOLD     a fault the site survives (controller lost or late, NaN/inf, limit violation,
-         integrator lost mid-step): nothing is forwarded, requests are answered from the last
-         good measurement; the session end returns the site to IDLE.
+         integrator lost mid-step): nothing is forwarded. A controller that was only lost or
+         late is probed inside the integrator's waiting request for up to
+         ``bridge.controller_recovery`` s: back in time → RECOVERED → RUNNING (the failed call
+         is made again over the verified link); not back → the session is ended. Every other
+         HOLD answers from the last good measurement until the session ends (→ IDLE).
 FAULT    an operator abort (anything that needs a human): the current session is ended at
          its next request and new sessions are refused until an operator resumes.
 """
@@ -34,6 +37,7 @@ class Trigger(enum.StrEnum):
     PAUSE = "pause"
     RESUME = "resume"
     ABORT = "abort"
+    RECOVERED = "recovered"
 
 
 class TransitionRefused(Exception):
@@ -64,6 +68,7 @@ TRANSITIONS: dict[tuple[SiteState, Trigger], tuple[SiteState | None, SiteState |
     (HOLD, T.HOLD):               (HOLD, None),
     (HOLD, T.INTEGRATOR_LOST):    (HOLD, None),
     (HOLD, T.ABORT):              (FAULT, None),
+    (HOLD, T.RECOVERED):          (RUNNING, None),
     (FAULT, T.SESSION_CLOSE):     (FAULT, None),
     (FAULT, T.HOLD):              (FAULT, None),
     (FAULT, T.INTEGRATOR_LOST):   (FAULT, None),
@@ -72,10 +77,15 @@ TRANSITIONS: dict[tuple[SiteState, Trigger], tuple[SiteState | None, SiteState |
 }
 
 _HINTS: dict[tuple[SiteState, Trigger], str] = {
+    (IDLE, T.RECOVERED): "only a HOLD with an open session can recover",
+    (RUNNING, T.RECOVERED): "only a HOLD with an open session can recover",
+    (PAUSED, T.RECOVERED): "only a HOLD with an open session can recover",
+    (FAULT, T.RECOVERED): "the site was aborted by the operator; it does not recover by itself",
     (IDLE, T.RESUME): "the site is not paused",
     (RUNNING, T.RESUME): "the site is not paused",
-    (HOLD, T.RESUME): "HOLD ends when the integrator session ends (its answers since the fault "
-                      "were stale); use abort to end the session now",
+    (HOLD, T.RESUME): "HOLD ends by itself when a lost controller answers again within "
+                      "bridge.controller_recovery, otherwise when the integrator session ends "
+                      "(its answers since the fault were stale); use abort to end it now",
     (HOLD, T.PAUSE): "the site is in HOLD: nothing is forwarded already",
     (FAULT, T.PAUSE): "the site is in FAULT: nothing is forwarded already",
     (FAULT, T.RESUME): "the aborted client is still connected; it is disconnected at its next "

@@ -5,8 +5,11 @@ The site outlives connections: it owns the controller, the limits and the state 
 limit violation under ``reject``, a measured force past its daq limit, a controller failure or
 timeout, or an integrator lost with an uncommitted command puts it in HOLD: nothing more is
 forwarded, requests are answered from the last good measurement, and the reason is logged,
-recorded and published. PAUSED makes the integrator's next command wait for an operator;
-FAULT (operator abort) ends the session at its next request and refuses new ones until resumed.
+recorded and published. A controller that is only lost or silent is waited for inside the
+request instead (``recovery``, up to ``controller_recovery`` s): the run goes on with fresh data
+or the session is ended, never answered from a stale measurement. PAUSED makes the
+integrator's next command wait for an operator; FAULT (operator abort) ends the session at
+its next request and refuses new ones until resumed.
 """
 
 from __future__ import annotations
@@ -15,17 +18,18 @@ import asyncio
 import logging
 import math
 import time as _time
-from collections.abc import Awaitable, Coroutine
+from collections.abc import Awaitable, Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from protocol import Signals, SignalSizes
 
 from ..config import SiteConfig
-from ..controls.base import Controller, ControllerError, Daq
+from ..controls.base import Controller, ControllerError, ControllerLinkError, Daq
 from ..record import RunRecord
 from ..safety import Limiter, LimitHit, SiteState, TransitionRefused, Trigger, next_state
 from ..setups import LinearSetup, make_setup
 from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
+from .recovery import recover
 
 if TYPE_CHECKING:
     from ..indicators import OnlineMonitor
@@ -61,6 +65,7 @@ class ExperimentalSite:
         record: RunRecord | None,
         *,
         controller_timeout: float,
+        controller_recovery: float = 0.0,
     ) -> None:
         self.cfg = cfg
         self.name = cfg.name
@@ -73,6 +78,8 @@ class ExperimentalSite:
                 f"the controller has {controller.n_actuators}"
             )
         self.timeout = controller_timeout
+        self.recovery = controller_recovery  # s to wait for a lost controller; 0: plain HOLD
+        self.recovering_since: float | None = None
         self.state = SiteState.IDLE
         self.reason = ""
         self.session = 0
@@ -93,7 +100,7 @@ class ExperimentalSite:
         self._reference: tuple[float, ...] | None = None  # last command the controller got
         self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
-        self.pending: tuple[float, ...] | None = None  # a command waiting for an operator
+        self.pending: tuple[float, ...] | None = None  # waits for an operator or a recovery
         self._background: set[asyncio.Task[None]] = set()
         self._reset_signals()
 
@@ -274,6 +281,8 @@ class ExperimentalSite:
             "daq_disp": list(self.daq.disp), "daq_force": list(self.daq.force),
             "pending": None if self.pending is None else list(self.pending),
             "paused_for": None if since is None else round(_time.monotonic() - since, 3),
+            "recovering_for": None if self.recovering_since is None
+            else round(_time.monotonic() - self.recovering_since, 3),
             "holds": self.holds, "limit_events": dict(self.limit_counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
         }
@@ -342,14 +351,43 @@ class ExperimentalSite:
             return coro
         return asyncio.wait_for(coro, self.timeout)
 
-    async def _guard(self, coro: Coroutine[Any, Any, T], what: str) -> T | None:
-        try:
-            return await self._call(coro)
-        except TimeoutError:
-            self.enter_hold(f"controller did not answer {what} within {self.timeout:g} s")
-        except ControllerError as exc:
-            self.enter_hold(f"controller failed on {what}: {exc}")
-        return None
+    async def _guard(self, what: str, call: Callable[[], Coroutine[Any, Any, T]],
+                     command: tuple[float, ...] | None = None) -> T | None:
+        """``call()`` under the deadline; a failure HOLDs (None). A lost or silent controller
+        is waited for first (``recovery``), then the call is made again: ``command`` is the
+        setpoint ``call`` sends, a read re-sends the last setpoint before reading again."""
+        deadline: float | None = None
+        resend: tuple[float, ...] | None = None
+        while True:
+            started, doing = self.state, what
+            try:
+                if resend is not None:
+                    doing = f"set_ctrl {list(resend)} (re-sent after the controller came back)"
+                    await self._call(self.controller.set_ctrl(resend))
+                    resend = None
+                    doing = what
+                return await self._call(call())
+            except TimeoutError:
+                reason, lost = f"controller did not answer {doing} within {self.timeout:g} s", True
+            except ControllerError as exc:
+                reason = f"controller failed on {doing}: {exc}"
+                lost = isinstance(exc, ControllerLinkError)
+            self.enter_hold(reason)
+            if not lost or self.recovery <= 0.0 or started is not RUNNING or self.state is not HOLD:
+                return None
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + self.recovery if deadline is None else deadline
+            if resend is None:
+                resend = command if command is not None else self._sent_ctrl
+            why = await recover(self, reason, deadline, resend)
+            if self.state is FAULT:
+                raise self._fault_error()
+            if why is not None:
+                log.error("site %s: %s; session %d ended so the integrator stops instead of "
+                          "going on with stale forces", self.name, why, self.session)
+                raise SiteError(f"site {self.name}: {why}; session ended (HOLD)")
+            if command is not None:
+                resend = None  # ``call`` itself sends ``command`` again
 
     # -- the step ------------------------------------------------------------------------------
     async def set_trial(self, trial: Signals) -> None:
@@ -401,7 +439,7 @@ class ExperimentalSite:
     async def _send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
         self._uncommitted = True
-        await self._guard(self.controller.set_ctrl(command), "set_ctrl")
+        await self._guard("set_ctrl", lambda: self.controller.set_ctrl(command), command)
         if self.state is HOLD or self.state is FAULT:
             self._reference = None  # where the actuator stopped is not known
             return False
@@ -437,7 +475,7 @@ class ExperimentalSite:
         limiter = self._ctrl_limiter
         assert limiter is not None
         if self._reference is None and limiter.needs_reference:
-            daq = await self._guard(self.controller.get_daq(), "get_daq (reference position)")
+            daq = await self._guard("get_daq (reference position)", self.controller.get_daq)
             if daq is None:
                 return None
             self._reference = daq.disp
@@ -474,7 +512,7 @@ class ExperimentalSite:
         """The measurement for the current command, acquired once per trial."""
         if self._daq_valid or self.state is HOLD:
             return self.daq
-        daq = await self._guard(self.controller.get_daq(), "get_daq")
+        daq = await self._guard("get_daq", self.controller.get_daq)
         if daq is None:
             return self.daq
         if not all(math.isfinite(v) for v in daq.disp + daq.force):
@@ -502,7 +540,7 @@ class ExperimentalSite:
         await self.acquire()  # every committed step has its measurement in the record
         if self.state is HOLD:
             return
-        await self._guard(self.controller.commit(), "commit")
+        await self._guard("commit", self.controller.commit)
         self.step += 1
         self._uncommitted = False
         self._commit_time = self.time
@@ -543,7 +581,7 @@ class ExperimentalSite:
         if self.state is FAULT:
             raise self._fault_error()
         if self.state is not HOLD:
-            k = await self._guard(self.controller.tangent_stiffness(), "tangent_stiffness")
+            k = await self._guard("tangent_stiffness", self.controller.tangent_stiffness)
             if k is not None:
                 self._k_tangent = self.setup.basic_matrix(k)
         return self._k_tangent
@@ -552,7 +590,7 @@ class ExperimentalSite:
         if self.state is FAULT:
             raise self._fault_error()
         if self._k_initial is None or self.state is not HOLD:
-            k = await self._guard(self.controller.initial_stiffness(), "initial_stiffness")
+            k = await self._guard("initial_stiffness", self.controller.initial_stiffness)
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)
         return self._k_initial if self._k_initial is not None else self._k_tangent
