@@ -669,3 +669,31 @@ def test_client_gone_during_recovery_ends_it_and_sends_nothing(tmp_path: Path) -
         run_dir = b.run_dir
     kinds = [str(e.get("event")) for e in site_events(run_dir)]
     assert "recovering" in kinds and "recovered" not in kinds
+
+
+def test_hung_controller_that_wakes_up_within_the_window_is_recovered(tmp_path: Path) -> None:
+    """SIGSTOP: the controller accepts TCP but never answers (the call misses its deadline);
+    SIGCONT within the window: the same request is answered, no move was lost or doubled."""
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=20.0), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0) as link:
+        drive(link, range(1, 6))
+        os.kill(proc.pid, signal.SIGSTOP)
+        link.set_trial((0.3,), time=0.06)
+        wait_recovering(b)
+        time.sleep(TIMEOUT + 0.5)  # past a probe's deadline at least once
+        os.kill(proc.pid, signal.SIGCONT)
+        assert link.force()[0] == pytest.approx(K * 0.3, rel=1e-6)
+        assert site_state(b) == ("RUNNING", "")
+        link.commit()
+        assert drive(link, range(7, 9)) == pytest.approx([-K * 0.35, K * 0.4], rel=1e-6)
+        regs = modbus_registers(port)
+        assert regs["target"] == pytest.approx(0.4) and regs["state"] == 2  # DONE, released
+        run_dir = b.run_dir
+    events = site_events(run_dir)
+    kinds = [str(e.get("event")) for e in events]
+    assert kinds.index("hold") < kinds.index("recovering") < kinds.index("recovered")
+    hold = next(e for e in events if e.get("event") == "hold")
+    assert any(w in str(hold["reason"]) for w in ("No response", "did not answer")), hold
+    assert [s.step for s in committed_steps(run_dir)] == list(range(1, 9))
