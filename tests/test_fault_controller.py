@@ -697,3 +697,35 @@ def test_hung_controller_that_wakes_up_within_the_window_is_recovered(tmp_path: 
     hold = next(e for e in events if e.get("event") == "hold")
     assert any(w in str(hold["reason"]) for w in ("No response", "did not answer")), hold
     assert [s.step for s in committed_steps(run_dir)] == list(range(1, 9))
+
+
+def test_recovery_does_not_jump_a_restarted_actuator_past_the_increment_limit(
+        tmp_path: Path) -> None:
+    """The restarted rig is at 0 mm, the integrator's step wants 0.55 mm: the increment limit
+    (0.2 mm) is checked against the measured position, not the last command (0.5 mm), so the
+    setpoint is not re-sent and the session ends with the reason."""
+    (port,) = free_ports(1)
+    limits = "[[sites.limits]]\ndisp_increment = 0.2\n"
+    with sim_actuator("modbus", port) as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=20.0) + limits, tmp_path) as b:
+        run_dir = b.run_dir
+        link = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=30.0)
+        link.connect()
+        for i in range(1, 11):  # a slow ramp to 0.5 mm, every increment 0.05 mm
+            link.set_trial((0.05 * i,), time=0.01 * i)
+            assert link.force()[0] == pytest.approx(K * 0.05 * i, rel=1e-6)
+            link.commit()
+        proc.kill()
+        proc.wait(5)
+        link.set_trial((0.55,), time=0.11)
+        wait_recovering(b)
+        with sim_actuator("modbus", port):
+            with pytest.raises(LinkError, match="closed the connection"):
+                link.force()
+            _drop(link)
+            wait_idle(b)
+            assert modbus_registers(port)["sequence"] == 0  # the jump was never commanded
+    failed = next(e for e in site_events(run_dir) if e.get("event") == "recovery-failed")
+    reason = str(failed["reason"])
+    assert "actuator at [0.0] mm" in reason and "re-sending [0.55] mm" in reason, reason
+    assert "increment" in reason and "not sent" in reason, reason
