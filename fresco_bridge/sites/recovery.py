@@ -95,11 +95,11 @@ async def recover(site: ExperimentalSite, reason: str, deadline: float,
                     probe.cancel()  # a read: cancelling it is harmless (the link is dropped)
                     with contextlib.suppress(asyncio.CancelledError, Exception):
                         await probe
-            if wake.is_set():
-                continue  # an operator acted: the state says what
+            if wake.is_set():  # an operator aborted: the caller sees FAULT
+                return f"recovery ended by the operator: the site is {site.state}"
             try:
                 daq = probe.result()
-            except asyncio.CancelledError:
+            except (asyncio.CancelledError, TimeoutError):
                 last = f"no answer within {min(site.timeout, remaining):.3g} s"
             except ControllerLinkError as exc:
                 last = str(exc)
@@ -118,8 +118,8 @@ async def recover(site: ExperimentalSite, reason: str, deadline: float,
         while holds and not wake.is_set():
             await asyncio.wait((*holds, waker), return_when=asyncio.FIRST_COMPLETED)
             holds = {t for t in holds if not t.done()}
-        if site.state is not HOLD:
-            return f"recovery ended: the site is {site.state} ({site.reason})"
+        if wake.is_set() or site.state is not HOLD:
+            return f"recovery ended by the operator: the site is {site.state}"
         refused = _limits_refuse(site, resend, daq)
         if refused is not None:
             site._event("recovery-failed", refused, step=site.step, attempts=attempts)
