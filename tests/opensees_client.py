@@ -44,7 +44,7 @@ def static_1dof(p: dict[str, Any]) -> dict[str, Any]:
     ops.numberer("Plain")
     ops.constraints("Plain")
     ops.test("NormDispIncr", 1e-12, 50)
-    ops.algorithm("Newton")
+    ops.algorithm(*p.get("algorithm", ["Newton"]))
     ops.integrator("LoadControl", 1.0 / p["nsteps"])
     ops.analysis("Static")
     u, f = [], []

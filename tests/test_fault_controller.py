@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import os
 import signal
 import struct
@@ -34,7 +35,7 @@ from fresco_bridge.integrator.link import GenericClientLink, LinkError
 from fresco_bridge.record.export import committed_steps, read_record
 from sim_actuator.servers.modbus import Reg, decode_float32
 
-from .bridge_harness import RunningBridge
+from .bridge_harness import OPENSEES_SCRIPT, RunningBridge, opensees_env, run_opensees
 from .lab_harness import free_ports
 
 K = 68.0  # preset ideal-elastic, kN/mm
@@ -729,3 +730,48 @@ def test_recovery_does_not_jump_a_restarted_actuator_past_the_increment_limit(
     reason = str(failed["reason"])
     assert "actuator at [0.0] mm" in reason and "re-sending [0.55] mm" in reason, reason
     assert "increment" in reason and "not sent" in reason, reason
+
+
+@pytest.mark.opensees
+def test_opensees_run_survives_a_controller_restart_with_correct_physics(tmp_path: Path) -> None:
+    """A real OpenSeesPy genericClient (static load ramp on the specimen, ``Linear``): the
+    controller process is killed mid-run (mostly mid-ramp: 20 ms real-time ramps) and restarted;
+    the run completes in the same session and every step equals the pure-OpenSees reference
+    within the float32 register resolution (a stale force would be off by a whole step)."""
+    nsteps, load = 120, 68.0 * 1.2  # u goes to 1.2 mm
+    params = {"load": load, "nsteps": nsteps, "algorithm": ["Linear"]}
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=20.0, ramp_time=0.02),
+                          tmp_path) as b:
+        run_dir = b.run_dir
+        client = subprocess.Popen(
+            [sys.executable, str(OPENSEES_SCRIPT), "static_1dof",
+             json.dumps({**params, "port": b.ports["act"]})],
+            env=opensees_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 60
+            while b.call(lambda: b.bridge.sites["act"].step) < 30:
+                assert time.monotonic() < deadline and client.poll() is None
+                time.sleep(0.005)
+            proc.kill()
+            proc.wait(5)
+            wait_recovering(b)
+            time.sleep(0.3)
+            with sim_actuator("modbus", port, "--time-scale", "1.0"):
+                out, err = client.communicate(timeout=120)
+        finally:
+            if client.poll() is None:
+                client.kill()
+                client.wait(10)
+        wait_idle(b)
+    assert client.returncode == 0, err[-2000:]
+    got = json.loads(next(ln for ln in out.splitlines() if ln.startswith("RESULT "))[7:])
+    ref = run_opensees("static_1dof", port=None, material=["Elastic", 1, 68.0], **params)
+    assert got["u"] == pytest.approx(ref["u"], rel=1e-5)
+    assert got["force"] == pytest.approx(ref["force"], rel=1e-5)
+    kinds = [str(e.get("event")) for e in site_events(run_dir)]
+    assert kinds.index("hold") < kinds.index("recovering") < kinds.index("recovered")
+    assert "recovery-failed" not in kinds
+    assert {s.session for s in committed_steps(run_dir)} == {1}
+    assert len(committed_steps(run_dir)) == nsteps
