@@ -775,3 +775,50 @@ def test_opensees_run_survives_a_controller_restart_with_correct_physics(tmp_pat
     assert "recovery-failed" not in kinds
     assert {s.session for s in committed_steps(run_dir)} == {1}
     assert len(committed_steps(run_dir)) == nsteps
+
+
+@pytest.mark.opensees
+def test_opensees_run_never_finishes_on_frozen_forces_when_the_controller_stays_away(
+        tmp_path: Path) -> None:
+    """Killed for good: after controller_recovery the bridge ends the session, so the real
+    OpenSeesPy client never completes its analysis on frozen forces. (OpenFresco's
+    ``TCP_Socket::recvVector`` ignores recv's 0/-1, so OpenSees does not exit by itself on the
+    close: it spins in its receive loop until stopped; see README.)"""
+    window = 1.5
+    (port,) = free_ports(1)
+    with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \
+            RunningBridge(bridge_toml("modbus", port, recovery=window, ramp_time=0.02),
+                          tmp_path) as b:
+        run_dir = b.run_dir
+        client = subprocess.Popen(
+            [sys.executable, str(OPENSEES_SCRIPT), "static_1dof",
+             json.dumps({"load": 68.0, "nsteps": 120, "algorithm": ["Linear"],
+                         "port": b.ports["act"]})],
+            env=opensees_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 60
+            while b.call(lambda: b.bridge.sites["act"].step) < 30:
+                assert time.monotonic() < deadline and client.poll() is None
+                time.sleep(0.005)
+            proc.kill()
+            t0 = time.monotonic()
+            wait_recovering(b)
+            wait_idle(b, timeout=window + TIMEOUT + 5.0)  # the bridge ended the session
+            assert time.monotonic() - t0 >= window
+            time.sleep(1.0)  # time enough to finish 90 steps of frozen forces, were it served
+        finally:
+            if client.poll() is None:
+                client.kill()
+            out, _ = client.communicate(timeout=10)
+        assert "RESULT" not in out and client.returncode != 0
+        with sim_actuator("modbus", port), \
+                GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
+                                  timeout=10.0) as link:  # the bridge serves the next session
+            assert drive(link, range(1, 3)) == pytest.approx([-K * 0.05, K * 0.1], rel=1e-6)
+        wait_idle(b)
+    events = site_events(run_dir)
+    failed = [e for e in events if e.get("event") == "recovery-failed"]
+    assert len(failed) == 1 and "controller_recovery 1.5 s" in str(failed[0]["reason"])
+    assert "recovered" not in [e.get("event") for e in events]
+    session1 = [s for s in committed_steps(run_dir) if s.session == 1]
+    assert 30 <= len(session1) < 120
