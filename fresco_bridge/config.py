@@ -138,7 +138,8 @@ class BridgeConfig(_Strict):
     """Deadline in seconds for every controller call; past it the site goes to HOLD."""
     controller_recovery: float = Field(default=30.0, ge=0, allow_inf_nan=False)
     """Seconds a site in HOLD for a lost or silent controller keeps probing it inside the
-    integrator's waiting request; back in time: the run continues, else the session is ended.
+    integrator's waiting request; back in time: the run continues, else the integrator is told
+    to stop (NaN answers until its DIE).
     0: no recovery (HOLD answers from the last good measurement until the session ends)."""
     run_dir: Path = Path("runs")
     run_name: Name = "run"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import os
 import signal
 import struct
@@ -31,8 +32,9 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from fresco_bridge.daemon import BridgeThread
-from fresco_bridge.integrator.link import GenericClientLink, LinkError
+from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record.export import committed_steps, read_record
+from protocol import Action
 from sim_actuator.servers.modbus import Reg, decode_float32
 
 from .bridge_harness import OPENSEES_SCRIPT, RunningBridge, opensees_env, run_opensees
@@ -436,8 +438,9 @@ def _drop(link: GenericClientLink) -> None:
 def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
         tmp_path: Path) -> None:
     """The other way out of a controller loss: it does not come back, the operator aborts
-    (``fresco-bridge ctl abort``); the held session is closed at its next request, the record
-    says why, no new session is accepted until the operator resumes."""
+    (``fresco-bridge ctl abort``); the held session's next answers are NaN (so the integrator
+    stops and sends DIE), the record says why, no new session is accepted until the operator
+    resumes."""
     (port,) = free_ports(1)
     with sim_actuator("modbus", port) as proc, \
             RunningBridge(bridge_toml("modbus", port, recovery=NO_RECOVERY), tmp_path) as b:
@@ -453,10 +456,14 @@ def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
         r = _ctl("abort", run_dir)
         assert r.returncode == 0, r.stdout + r.stderr
         assert site_state(b)[0] == "FAULT"
-        with pytest.raises(LinkError, match="closed the connection"):
-            link.set_trial((0.25,), time=0.05)
-            link.force()  # the bridge ends the aborted session instead of answering
-        _drop(link)
+        link.set_trial((0.25,), time=0.05)
+        assert math.isnan(link.force()[0])  # told to stop: NaN, never a stale force
+        link.close()  # the integrator stops and sends DIE
+        deadline = time.monotonic() + 10
+        while b.call(lambda: b.bridge.sites["act"].peer):
+            assert time.monotonic() < deadline, "the aborted session never closed"
+            time.sleep(0.01)
+        assert site_state(b)[0] == "FAULT"
         refused = GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1, timeout=5.0)
         with pytest.raises(ConnectionError):  # closed (LinkError) or reset by the bridge
             refused.connect()
@@ -471,7 +478,8 @@ def test_controller_gone_for_good_the_operator_aborts_the_session_cleanly(
                                                                   rel=1e-6)
             wait_idle(b)
     events = [r.get("event") for r in read_record(run_dir) if r.get("kind") == "event"]
-    assert events.index("hold") < events.index("abort") < events.index("resume")
+    assert events.index("hold") < events.index("abort") < events.index("integrator-stop") \
+        < events.index("resume")
 
 
 # -- controller recovery (bridge.controller_recovery > 0) ------------------------------------
@@ -541,7 +549,7 @@ def test_controller_killed_and_back_within_the_window_the_same_session_goes_on(
 def test_controller_not_back_within_the_window_the_session_ends_cleanly(
         tmp_path: Path, fault: str) -> None:
     """Killed for good, or alive behind a link that stays cut: after controller_recovery the
-    session is ended (the integrator sees the connection close instead of stale forces), the
+    integrator is told to stop (NaN answers instead of stale forces; it sends DIE), the
     actuator's command is the last good one, and the next session is served once it is back."""
     window = 1.5
     (port,) = free_ports(1)
@@ -563,11 +571,13 @@ def test_controller_not_back_within_the_window_the_session_ends_cleanly(
             proxy.mode = "cut"
         t0 = time.monotonic()
         link.set_trial((0.3,), time=0.06)
-        with pytest.raises(LinkError, match="closed the connection"):
-            link.force()
+        assert math.isnan(link.force()[0])
         elapsed = time.monotonic() - t0
         assert window <= elapsed < window + TIMEOUT + 2.0, elapsed
-        _drop(link)
+        link.set_trial((0.35,), time=0.07)  # and so on until the integrator gives up
+        assert math.isnan(link.force()[0])
+        assert all(math.isnan(v) for row in link.matrix(Action.GET_TANGENT_STIFF) for v in row)
+        link.close()  # DIE
         wait_idle(b)
         if fault == "link-cut":  # the live controller kept its last good command
             now = modbus_registers(port)
@@ -587,8 +597,10 @@ def test_controller_not_back_within_the_window_the_session_ends_cleanly(
     failed = next(e for e in events if e.get("event") == "recovery-failed")
     assert f"within controller_recovery {window:g} s" in str(failed["reason"])
     assert "modbus controller" in str(failed["reason"])
+    stop = next(e for e in events if e.get("event") == "integrator-stop")
+    assert "controller_recovery" in str(stop["reason"])
     close = next(e for e in events if e.get("event") == "session-close" and e.get("from") == "HOLD")
-    assert close["to"] == "IDLE" and "controller_recovery" in str(close["reason"])
+    assert close["to"] == "IDLE" and "DIE" in str(close["reason"])
     assert [s.session for s in committed_steps(run_dir)] == [1] * 5 + [2] * 2
 
 
@@ -628,10 +640,9 @@ def test_operator_abort_ends_a_recovery_at_once(tmp_path: Path) -> None:
         t0 = time.monotonic()
         r = _ctl("abort", run_dir)
         assert r.returncode == 0, r.stdout + r.stderr
-        with pytest.raises(LinkError, match="closed the connection"):
-            link.force()
+        assert math.isnan(link.force()[0])  # the waiting request: told to stop at once
         assert time.monotonic() - t0 < 10.0  # not the 60 s window
-        _drop(link)
+        link.close()
         assert site_state(b)[0] == "FAULT"
         assert b.call(lambda: b.bridge.sites["act"].recovering_since) is None
         with sim_actuator("modbus", port) as back:
@@ -704,7 +715,7 @@ def test_recovery_does_not_jump_a_restarted_actuator_past_the_increment_limit(
         tmp_path: Path) -> None:
     """The restarted rig is at 0 mm, the integrator's step wants 0.55 mm: the increment limit
     (0.2 mm) is checked against the measured position, not the last command (0.5 mm), so the
-    setpoint is not re-sent and the session ends with the reason."""
+    setpoint is not re-sent and the integrator is told to stop, with the reason."""
     (port,) = free_ports(1)
     limits = "[[sites.limits]]\ndisp_increment = 0.2\n"
     with sim_actuator("modbus", port) as proc, \
@@ -721,9 +732,8 @@ def test_recovery_does_not_jump_a_restarted_actuator_past_the_increment_limit(
         link.set_trial((0.55,), time=0.11)
         wait_recovering(b)
         with sim_actuator("modbus", port):
-            with pytest.raises(LinkError, match="closed the connection"):
-                link.force()
-            _drop(link)
+            assert math.isnan(link.force()[0])  # told to stop
+            link.close()
             wait_idle(b)
             assert modbus_registers(port)["sequence"] == 0  # the jump was never commanded
     failed = next(e for e in site_events(run_dir) if e.get("event") == "recovery-failed")
@@ -778,12 +788,12 @@ def test_opensees_run_survives_a_controller_restart_with_correct_physics(tmp_pat
 
 
 @pytest.mark.opensees
-def test_opensees_run_never_finishes_on_frozen_forces_when_the_controller_stays_away(
-        tmp_path: Path) -> None:
-    """Killed for good: after controller_recovery the bridge ends the session, so the real
-    OpenSeesPy client never completes its analysis on frozen forces. (OpenFresco's
-    ``TCP_Socket::recvVector`` ignores recv's 0/-1, so OpenSees does not exit by itself on the
-    close: it spins in its receive loop until stopped; see README.)"""
+def test_opensees_stops_by_itself_instead_of_running_on_frozen_forces(tmp_path: Path) -> None:
+    """Killed for good: after controller_recovery the bridge answers NaN, so the real OpenSeesPy
+    client stops on its own — its analysis fails or ends in NaN, never a plausible result built
+    on frozen forces — and its exit closes the session. (Closing the connection instead would
+    not stop it: OpenFresco's ``TCP_Socket::recvVector`` ignores recv's 0/-1 and OpenSees spins
+    in its receive loop forever; see README.)"""
     window = 1.5
     (port,) = free_ports(1)
     with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \
@@ -803,14 +813,19 @@ def test_opensees_run_never_finishes_on_frozen_forces_when_the_controller_stays_
             proc.kill()
             t0 = time.monotonic()
             wait_recovering(b)
-            wait_idle(b, timeout=window + TIMEOUT + 5.0)  # the bridge ended the session
+            out, _ = client.communicate(timeout=window + TIMEOUT + 60)  # no kill: it stops
             assert time.monotonic() - t0 >= window
-            time.sleep(1.0)  # time enough to finish 90 steps of frozen forces, were it served
         finally:
             if client.poll() is None:
                 client.kill()
-            out, _ = client.communicate(timeout=10)
-        assert "RESULT" not in out and client.returncode != 0
+                client.communicate(timeout=10)
+        wait_idle(b)  # the client's exit closed the session
+        result = [ln for ln in out.splitlines() if ln.startswith("RESULT ")]
+        if client.returncode == 0:  # Linear ran to the end: on NaN, unmistakably
+            u = json.loads(result[-1][len("RESULT "):])["u"]
+            assert all(math.isfinite(v) for v in u[:29]) and math.isnan(u[-1]), u
+        else:
+            assert not result  # the analysis failed: no result at all
         with sim_actuator("modbus", port), \
                 GenericClientLink("127.0.0.1", b.ports["act"], 1, data_size=1,
                                   timeout=10.0) as link:  # the bridge serves the next session

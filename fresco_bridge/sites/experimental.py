@@ -7,9 +7,9 @@ timeout, or an integrator lost with an uncommitted command puts it in HOLD: noth
 forwarded, requests are answered from the last good measurement, and the reason is logged,
 recorded and published. A controller that is only lost or silent is waited for inside the
 request instead (``recovery``, up to ``controller_recovery`` s): the run goes on with fresh data
-or the session is ended, never answered from a stale measurement. PAUSED makes the
-integrator's next command wait for an operator; FAULT (operator abort) ends the session at
-its next request and refuses new ones until resumed.
+or the integrator is told to stop (NaN answers until its DIE), never answered from a stale
+measurement. PAUSED makes the integrator's next command wait for an operator; FAULT (operator
+abort) tells the integrator to stop the same way and refuses new sessions until resumed.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from ..safety import Limiter, LimitHit, SiteState, TransitionRefused, Trigger, n
 from ..setups import LinearSetup, make_setup
 from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
 from .recovery import recover
+from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
     from ..indicators import OnlineMonitor
@@ -47,12 +48,6 @@ RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HO
 
 class SiteError(Exception):
     """A session cannot be served by this site (sizes that do not fit, site busy, aborted)."""
-
-
-def _column_major(rows: list[list[float]] | None, n: int) -> tuple[float, ...]:
-    if rows is None:
-        return (0.0,) * (n * n)
-    return tuple(float(rows[r][c]) for c in range(n) for r in range(n))
 
 
 class ExperimentalSite:
@@ -84,8 +79,8 @@ class ExperimentalSite:
         self.reason = ""
         self.session = 0
         self.peer = ""
-        self.damping = _column_major(cfg.damping, cfg.dofs)
-        self.mass = _column_major(cfg.mass, cfg.dofs)
+        self.damping = column_major(cfg.damping, cfg.dofs)
+        self.mass = column_major(cfg.mass, cfg.dofs)
         self.holds = 0
         self.telemetry: Telemetry = NullTelemetry()
         self.monitor: OnlineMonitor | None = None
@@ -123,6 +118,7 @@ class ExperimentalSite:
         self._daq_valid = False
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
         self._k_initial: tuple[float, ...] | None = None
+        self.stop_reason: str | None = None  # set: this session's answers are NaN
 
     @property
     def busy(self) -> bool:
@@ -163,20 +159,7 @@ class ExperimentalSite:
 
     def check_sizes(self, ctrl: SignalSizes, daq: SignalSizes, who: str) -> None:
         """OpenFresco's rule: every non-zero size equals the element's DOFs, time sizes are 1."""
-        n = self.cfg.dofs
-        problems = []
-        if ctrl.disp != n:
-            problems.append(f"ctrl disp size {ctrl.disp} != {n} DOF(s) served by the site")
-        for label, v in (("ctrl vel", ctrl.vel), ("ctrl accel", ctrl.accel),
-                         ("daq disp", daq.disp), ("daq vel", daq.vel),
-                         ("daq accel", daq.accel), ("daq force", daq.force)):
-            if v not in (0, n):
-                problems.append(f"{label} size {v} is neither 0 nor {n}")
-        if ctrl.force:
-            problems.append(f"ctrl force size {ctrl.force}: force control is not supported")
-        for label, v in (("ctrl time", ctrl.time), ("daq time", daq.time)):
-            if v not in (0, 1):
-                problems.append(f"{label} size {v} is neither 0 nor 1")
+        problems = size_problems(self.cfg.dofs, ctrl, daq)
         if problems:
             raise SiteError(f"{who} sizes do not fit site {self.name}: " + "; ".join(problems))
 
@@ -261,7 +244,7 @@ class ExperimentalSite:
         return f"site {self.name} {old} → {new}"
 
     def operator_abort(self, source: str) -> str:
-        """FAULT: hold the controller, end the session at its next request, refuse new ones."""
+        """FAULT: hold the controller, answer the session NaN (it stops), refuse new ones."""
         old = self.state
         self._transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
         log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
@@ -287,9 +270,33 @@ class ExperimentalSite:
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
         }
 
-    def _fault_error(self) -> SiteError:
-        return SiteError(f"site {self.name} was aborted by the operator ({self.reason}); "
-                         "session ended")
+    def _tell_integrator_to_stop(self, why: str) -> None:
+        """From now on this session's answers are NaN, until the client sends DIE or leaves.
+
+        Closing the connection cannot stop OpenSees: its genericClient ignores a failed recv
+        and spins at full CPU forever (measured). A NaN force can: Newton fails to converge
+        (``analyze`` returns < 0, the script stops and sends DIE), a non-iterative scheme ends
+        with NaN results — never a plausible run built on forces the specimen did not give.
+        """
+        if self.stop_reason is not None:
+            return
+        self.stop_reason = why
+        log.error("site %s: %s; answering NaN from now on so the integrator stops (session %d, "
+                  "step %d)", self.name, why, self.session, self.step)
+        self._event("integrator-stop", f"answering NaN so the integrator stops: {why}",
+                    step=self.step)
+
+    def _stopping(self) -> bool:
+        """True when this session must only be told to stop (recovery failed, or aborted)."""
+        if self.state is FAULT and self.stop_reason is None and self.peer:
+            self._tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
+        return self.stop_reason is not None
+
+    def _nan_signals(self, sizes: SignalSizes) -> Signals:
+        nan = (math.nan,) * self.cfg.dofs
+        return Signals(disp=nan if sizes.disp else (), vel=nan if sizes.vel else (),
+                       accel=nan if sizes.accel else (), force=nan if sizes.force else (),
+                       time=(self.time,) if sizes.time else ())
 
     async def _wait_for_operator(self, command: tuple[float, ...]) -> None:
         """Wait (logging every PAUSE_LOG_INTERVAL s) until resumed or aborted."""
@@ -381,11 +388,10 @@ class ExperimentalSite:
                 resend = command if command is not None else self._sent_ctrl
             why = await recover(self, reason, deadline, resend)
             if self.state is FAULT:
-                raise self._fault_error()
+                return None  # aborted meanwhile: the reply is NaN (``_stopping``)
             if why is not None:
-                log.error("site %s: %s; session %d ended so the integrator stops instead of "
-                          "going on with stale forces", self.name, why, self.session)
-                raise SiteError(f"site {self.name}: {why}; session ended (HOLD)")
+                self._tell_integrator_to_stop(why)
+                return None
             if command is not None:
                 resend = None  # ``call`` itself sends ``command`` again
 
@@ -393,8 +399,7 @@ class ExperimentalSite:
     async def set_trial(self, trial: Signals) -> None:
         """Code 3: validate, transform, check limits, forward. Never forwards an unsafe command.
 
-        In FAULT nothing happens here: the session ends at the next request that expects a
-        reply, once the client has nothing more in flight (a clean close, not a reset).
+        In FAULT nothing happens here: the replies of the session are NaN from now on.
         """
         if self.state is FAULT:
             return
@@ -562,10 +567,13 @@ class ExperimentalSite:
         ))
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
-        """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them."""
-        if self.state is FAULT:
-            raise self._fault_error()
+        """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them;
+        NaN once the integrator must stop (see ``_tell_integrator_to_stop``)."""
+        if self._stopping():
+            return self._nan_signals(sizes)
         daq = await self.acquire()
+        if self._stopping():
+            return self._nan_signals(sizes)
         disp = self.setup.out_disp(self.trial.disp, self.target, daq.disp)
         force = self.setup.basic_force(daq.force)
         return Signals(
@@ -577,9 +585,10 @@ class ExperimentalSite:
         )
 
     async def tangent(self) -> tuple[float, ...]:
-        """Tangent in basic DOFs; in HOLD (or on failure) the last good one."""
-        if self.state is FAULT:
-            raise self._fault_error()
+        """Tangent in basic DOFs; in HOLD (or on failure) the last good one; NaN when the
+        integrator must stop."""
+        if self._stopping():
+            return (math.nan,) * (self.cfg.dofs ** 2)
         if self.state is not HOLD:
             k = await self._guard("tangent_stiffness", self.controller.tangent_stiffness)
             if k is not None:
@@ -587,8 +596,8 @@ class ExperimentalSite:
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
-        if self.state is FAULT:
-            raise self._fault_error()
+        if self._stopping():
+            return (math.nan,) * (self.cfg.dofs ** 2)
         if self._k_initial is None or self.state is not HOLD:
             k = await self._guard("initial_stiffness", self.controller.initial_stiffness)
             if k is not None:

@@ -4,9 +4,10 @@
 It runs inside the integrator's request that hit the fault, so the integrator simply waits
 (OpenSees blocks in its socket read): no answer is ever made up from a stale measurement.
 Either the controller answers again in time and the same request is served with fresh data,
-or the session is ended and OpenSees stops with a socket error instead of integrating frozen
-forces. Only ``ControllerLinkError`` / a missed deadline qualify: a latched fault, an
-interlock that is not ours or a refused command needs a human and keeps the plain HOLD.
+or the integrator is told to stop (NaN answers until it sends DIE: OpenSees' Newton then fails
+to converge) instead of integrating frozen forces. Only ``ControllerLinkError`` / a missed
+deadline qualify: a latched fault, an interlock that is not ours or a refused command needs a
+human and keeps the plain HOLD.
 
 Why re-sending the setpoint afterwards is not a blind retry of a motion command:
 
