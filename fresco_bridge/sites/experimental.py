@@ -560,7 +560,7 @@ class ExperimentalSite:
         if self.monitor is not None:
             sample = self.monitor.update(self.ctrl[0], self.daq.disp[0])
             if sample.warning:
-                self._event("monitor-warning", sample.warning)
+                self._event("monitor-warning", sample.warning, step=self.step)
         self.telemetry.publish_step(StepSample(
             self.name, self.session, self.step, self.time, self.trial.disp, self.ctrl,
             self.daq.disp, self.daq.force, str(self.state), None, sample,
