@@ -140,7 +140,7 @@ class BridgeConfig(_Strict):
     """Seconds a site in HOLD for a lost or silent controller keeps probing it inside the
     integrator's waiting request; back in time: the run continues, else the integrator is told
     to stop (NaN answers until its DIE).
-    0: no recovery (HOLD answers from the last good measurement until the session ends)."""
+    0: no recovery (HOLD answers NaN until the session ends, so the integrator stops)."""
     run_dir: Path = Path("runs")
     run_name: Name = "run"
     control_socket: Path | None = None

@@ -9,7 +9,7 @@ HOLD     a fault the site survives (controller lost or late, NaN/inf, limit viol
          late is probed inside the integrator's waiting request for up to
          ``bridge.controller_recovery`` s: back in time → RECOVERED → RUNNING (the failed call
          is made again over the verified link); not back → NaN answers until DIE. Every other
-         HOLD answers from the last good measurement until the session ends (→ IDLE).
+         HOLD answers NaN (the integrator stops) until the session ends (→ IDLE).
 FAULT    an operator abort (anything that needs a human): the current session's answers are
          NaN from its next request on (the integrator stops and sends DIE) and new sessions
          are refused until an operator resumes.

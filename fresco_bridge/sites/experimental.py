@@ -4,7 +4,7 @@ The site outlives connections: it owns the controller, the limits and the state 
 ``safety.states`` (IDLE / RUNNING / PAUSED / HOLD / FAULT, one table). A non-finite trial, a
 limit violation under ``reject``, a measured force past its daq limit, a controller failure or
 timeout, or an integrator lost with an uncommitted command puts it in HOLD: nothing more is
-forwarded, requests are answered from the last good measurement, and the reason is logged,
+forwarded, requests are answered NaN so the integrator stops, and the reason is logged,
 recorded and published. A controller that is only lost or silent is waited for inside the
 request instead (``recovery``, up to ``controller_recovery`` s): the run goes on with fresh data
 or the integrator is told to stop (NaN answers until its DIE), never answered from a stale
@@ -287,9 +287,14 @@ class ExperimentalSite:
                     step=self.step)
 
     def _stopping(self) -> bool:
-        """True when this session must only be told to stop (recovery failed, or aborted)."""
-        if self.state is FAULT and self.stop_reason is None and self.peer:
-            self._tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
+        """True when this session can only be told to stop: HOLD (nothing is forwarded any more,
+        so no true measurement can follow; a recoverable controller loss is waited out inside
+        the request before any reply), FAULT (operator abort), or a failed recovery."""
+        if self.stop_reason is None and self.peer:
+            if self.state is HOLD:
+                self._tell_integrator_to_stop(f"HOLD ({self.reason})")
+            elif self.state is FAULT:
+                self._tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
         return self.stop_reason is not None
 
     def _nan_signals(self, sizes: SignalSizes) -> Signals:
@@ -585,8 +590,8 @@ class ExperimentalSite:
         )
 
     async def tangent(self) -> tuple[float, ...]:
-        """Tangent in basic DOFs; in HOLD (or on failure) the last good one; NaN when the
-        integrator must stop."""
+        """Tangent in basic DOFs (the last good one if the controller cannot give it); NaN
+        when the integrator must stop."""
         if self._stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
         if self.state is not HOLD:
