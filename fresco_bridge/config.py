@@ -24,6 +24,7 @@ from sim_actuator.models import MODEL_PARAMETERS, ModelParameterError, make_mode
 
 from .controls.modbus import ModbusControllerConfig
 from .controls.mts import MtsControllerConfig
+from .controls.rig import RigControllerConfig
 from .safety import ControlPointLimitsConfig
 
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
@@ -67,7 +68,8 @@ def _controller_kind(v: Any) -> str:
 ControllerConfig = Annotated[
     Annotated[SimControllerConfig, Tag("sim")]
     | Annotated[ModbusControllerConfig, Tag("modbus")]
-    | Annotated[MtsControllerConfig, Tag("mts")],
+    | Annotated[MtsControllerConfig, Tag("mts")]
+    | Annotated[RigControllerConfig, Tag("rig")],
     Discriminator(_controller_kind),
 ]
 

@@ -21,6 +21,7 @@ from .config import ConfigError, LabConfig, SiteConfig, TelemetryConfig
 from .controls.base import Controller, ControllerError
 from .controls.modbus import ModbusController
 from .controls.mts import MtsController
+from .controls.rig import RigController
 from .controls.sim import SimController
 from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
@@ -44,6 +45,8 @@ def make_controller(cfg: SiteConfig) -> Controller:
         return ModbusController(c)
     if c.kind == "mts":
         return MtsController(c)
+    if c.kind == "rig":
+        return RigController(c)
     n_act = make_setup(cfg.setup, cfg.dofs).n_actuators
     return SimController.from_params(n_act, c.model, dict(c.params))
 
