@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import socket
 import subprocess
 import time
 import uuid
@@ -15,29 +14,14 @@ import pytest
 from fresco_bridge.integrator.link import GenericClientLink
 
 from .bridge_harness import RunningBridge
+from .mqtt_broker import broker_up
 
 N = 150
 
 
-def _broker_up() -> bool:
-    try:
-        socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-        return True
-    except OSError:
-        if shutil.which("mosquitto") is None:
-            return False
-        subprocess.run(["mosquitto", "-d", "-c", "/etc/mosquitto/mosquitto.conf"], check=False)
-        time.sleep(0.5)
-        try:
-            socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-            return True
-        except OSError:
-            return False
-
-
 @pytest.mark.skipif(shutil.which("mosquitto_sub") is None, reason="mosquitto-clients missing")
 def test_committed_steps_reach_an_independent_subscriber_in_order(tmp_path: Path) -> None:
-    if not _broker_up():
+    if not broker_up():
         pytest.skip("no Mosquitto broker on 127.0.0.1:1883 and none could be started")
     prefix = f"fb-test-{uuid.uuid4().hex[:8]}"
     sub = subprocess.Popen(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import socket
 import subprocess
 import textwrap
 import time
@@ -20,24 +19,9 @@ from fresco_bridge.sites import SiteState
 from fresco_bridge.telemetry import OperatorCommand
 
 from .bridge_harness import RunningBridge
+from .mqtt_broker import broker_up
 
 TOKEN = "operator-token-0123456789"
-
-
-def _broker_up() -> bool:
-    try:
-        socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-        return True
-    except OSError:
-        if shutil.which("mosquitto") is None:
-            return False
-        subprocess.run(["mosquitto", "-d", "-c", "/etc/mosquitto/mosquitto.conf"], check=False)
-        time.sleep(0.5)
-        try:
-            socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-            return True
-        except OSError:
-            return False
 
 
 def _wait_for(predicate: Callable[[], bool], what: str, timeout: float = 10.0) -> None:
@@ -55,7 +39,7 @@ def _publish(prefix: str, site: str, body: str) -> None:
 
 @pytest.mark.skipif(shutil.which("mosquitto_pub") is None, reason="mosquitto-clients missing")
 def test_mqtt_commands_drive_the_same_handler_as_the_control_socket(tmp_path: Path) -> None:
-    if not _broker_up():
+    if not broker_up():
         pytest.skip("no MQTT broker on 127.0.0.1:1883 and no mosquitto binary to start one")
     prefix = f"test-ctl-{uuid.uuid4().hex[:8]}"
     toml = textwrap.dedent(f"""

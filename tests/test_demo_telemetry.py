@@ -17,7 +17,7 @@ import pytest
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.demo import demo_config_text
 
-from .test_bridge_telemetry import _broker_up
+from .mqtt_broker import broker_up
 from .test_telemetry_mqtt import pytestmark  # noqa: F401 (same skip rule: needs mosquitto)
 
 
@@ -31,7 +31,7 @@ def test_demo_telemetry_is_off_unless_asked() -> None:
 
 
 def test_demo_with_mqtt_publishes_every_committed_step_in_order(tmp_path: Path) -> None:
-    if not _broker_up():
+    if not broker_up():
         pytest.skip("no Mosquitto broker on 127.0.0.1:1883 and none could be started")
     prefix = f"fb-demo-{uuid.uuid4().hex[:8]}"
     n_commits = 101  # 1 s at dt 0.01: step 0 (the initial state) + 100 steps

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
-import socket
 import subprocess
 import time
 import uuid
@@ -15,6 +14,8 @@ import pytest
 
 from fresco_bridge.telemetry import MqttTelemetry, StepSample
 from fresco_bridge.telemetry.mqtt_batch import Qos0Batch
+
+from .mqtt_broker import broker_up
 
 
 def _decode(stream: bytes) -> list[tuple[int, str, bytes]]:
@@ -50,25 +51,9 @@ def test_batch_encodes_back_to_back_publish_packets() -> None:
     assert _decode(bytes(data)) == [(0x30, t, p) for t, p in cases]
 
 
-def _broker_up() -> bool:
-    try:
-        socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-        return True
-    except OSError:
-        if shutil.which("mosquitto") is None:
-            return False
-        subprocess.run(["mosquitto", "-d", "-c", "/etc/mosquitto/mosquitto.conf"], check=False)
-        time.sleep(0.5)
-        try:
-            socket.create_connection(("127.0.0.1", 1883), timeout=1).close()
-            return True
-        except OSError:
-            return False
-
-
 @pytest.mark.skipif(shutil.which("mosquitto_sub") is None, reason="mosquitto-clients missing")
 def test_a_burst_of_steps_arrives_in_order_in_few_writes(monkeypatch: pytest.MonkeyPatch) -> None:
-    if not _broker_up():
+    if not broker_up():
         pytest.skip("no Mosquitto broker on 127.0.0.1:1883 and none could be started")
     n = 600
     prefix = f"fb-batch-{uuid.uuid4().hex[:8]}"
