@@ -31,7 +31,6 @@ import argparse
 import asyncio
 import math
 import os
-import platform
 import shutil
 import socket
 import statistics
@@ -44,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.bench_opensees_bridge import machine_info
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.demo import demo_config_text
@@ -188,20 +188,6 @@ def isolated_cost(rounds: int, n: int = 20000) -> str:
     return (f"\nisolated, {n} steps x {rounds} rounds (one event loop, no bridge): NullTelemetry "
             f"{a:.2f} CPU µs/step, MqttTelemetry {b:.2f} -> telemetry costs {b - a:.2f} CPU µs "
             f"per step [per round: {rounds_txt}]")
-
-
-def machine_info() -> dict[str, str]:
-    cpu = "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = os.getloadavg()
-    return {"cpus": str(os.cpu_count()), "cpu": cpu, "python": platform.python_version(),
-            "load": f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}"}
 
 
 Samples = dict[str, list[tuple[float, float, float, float]]]
