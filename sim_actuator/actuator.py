@@ -18,6 +18,8 @@ import math
 from collections import deque
 from typing import Protocol
 
+from sim_actuator.checks import NON_NEGATIVE, POSITIVE, checked
+
 __all__ = [
     "Actuator",
     "ActuatorParameterError",
@@ -33,25 +35,12 @@ class ActuatorParameterError(ValueError):
     """An actuator stage parameter is out of range (names the stage and the parameter)."""
 
 
-def _finite(stage: str, name: str, value: float) -> float:
-    result = float(value)
-    if not math.isfinite(result):
-        raise ActuatorParameterError(f"{stage}: {name} must be finite, got {value!r}")
-    return result
-
-
 def _positive(stage: str, name: str, value: float) -> float:
-    result = _finite(stage, name, value)
-    if result <= 0.0:
-        raise ActuatorParameterError(f"{stage}: {name} must be > 0, got {value!r}")
-    return result
+    return checked(POSITIVE, name, value, ActuatorParameterError, stage)
 
 
 def _non_negative(stage: str, name: str, value: float) -> float:
-    result = _finite(stage, name, value)
-    if result < 0.0:
-        raise ActuatorParameterError(f"{stage}: {name} must be >= 0, got {value!r}")
-    return result
+    return checked(NON_NEGATIVE, name, value, ActuatorParameterError, stage)
 
 
 class ServoStage(Protocol):

@@ -12,17 +12,25 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 from sim_actuator.actuator import Actuator, FirstOrderLag, IdealServo, SecondOrderServo, ServoStage
 from sim_actuator.effects import LoadPath, Sensor
-from sim_actuator.models import ModelParameterError, make_model
+from sim_actuator.models import MODEL_KINDS, ModelParameterError, make_model
 from sim_actuator.rig import Rig
 
 __all__ = [
     "PRESETS",
     "ActuatorConfig",
     "EffectsConfig",
+    "ModelKindName",
     "RigConfig",
     "RigConfigError",
     "SensorsConfig",
@@ -46,10 +54,20 @@ PositiveFloat = Annotated[float, Field(gt=0.0)]
 NonNegativeFloat = Annotated[float, Field(ge=0.0)]
 
 
+def _known_model_kind(kind: str) -> str:
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"unknown model kind {kind!r}; allowed: {', '.join(MODEL_KINDS)}")
+    return kind
+
+
+ModelKindName = Annotated[str, AfterValidator(_known_model_kind)]
+"""A hysteresis model kind of the registry (``sim_actuator.models.MODEL_KINDS``)."""
+
+
 class SpecimenConfig(_Strict):
     """Specimen hysteresis model: ``kind`` and its parameters (see sim_actuator.models)."""
 
-    kind: Literal["elastic", "bilinear", "bouc-wen", "bwbn"]
+    kind: ModelKindName
     params: dict[str, float] = Field(default_factory=dict)
 
     @model_validator(mode="after")

@@ -31,6 +31,8 @@ from typing import Protocol
 
 import numpy as np
 
+from sim_actuator.checks import NON_NEGATIVE, POSITIVE, checked
+
 __all__ = [
     "EffectParameterError",
     "LoadPath",
@@ -64,11 +66,8 @@ class SpecimenModel(Protocol):
 
 
 def _check(effect: str, name: str, value: float, *, positive: bool = False) -> float:
-    result = float(value)
-    if not math.isfinite(result) or result < 0.0 or (positive and result == 0.0):
-        bound = "> 0" if positive else ">= 0"
-        raise EffectParameterError(f"{effect}: {name} must be finite and {bound}, got {value!r}")
-    return result
+    return checked(POSITIVE if positive else NON_NEGATIVE, name, value, EffectParameterError,
+                   effect)
 
 
 @dataclass(frozen=True, slots=True)

@@ -26,7 +26,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from sim_actuator.actuator import Actuator
+from sim_actuator.checks import NON_NEGATIVE
 from sim_actuator.effects import LoadPath, LoadPathState, Sensor
+from sim_actuator.wire.states import FaultCode
 
 __all__ = [
     "FaultCode",
@@ -41,14 +43,6 @@ __all__ = [
 ]
 
 _QUANTUM = 1e-9  # relative slack when converting durations to whole substeps
-
-
-class FaultCode(IntEnum):
-    """Why the rig latched a fault (the numbers are the Modbus fault-code register values)."""
-
-    NONE = 0
-    STROKE_LIMIT = 1
-    FORCE_LIMIT = 2
 
 
 class MoveOutcome(IntEnum):
@@ -126,8 +120,7 @@ class Rig:
                 f"lvdt_location must be 'actuator' or 'specimen', got {lvdt_location!r}"
             )
         for name, value in (("settle_time", settle_time), ("max_ramp_time", max_ramp_time)):
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+            NON_NEGATIVE.check(name, value)  # ParameterRangeError is a ValueError
         self.actuator = actuator
         self.load_path = load_path
         self.lvdt = lvdt if lvdt is not None else Sensor()

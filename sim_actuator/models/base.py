@@ -1,22 +1,40 @@
-"""Shared contract of the specimen hysteresis models: protocol, errors, parameter checks, factory.
+"""Shared contract of the specimen hysteresis models: protocols, parameter declarations, the
+state base every model builds on, and the errors.
 
 Every model follows OpenSees uniaxial-material semantics: ``set_trial(d)`` always starts
 from the last *committed* state, so an integrator may try many trial displacements per step
 and only ``commit()`` the converged one.
+
+A model kind is one class deriving from :class:`HysteresisBase`: it declares its ``name``, its
+parameters (``PARAMS``: meaning, unit, default or required, allowed range), the named tuple of
+its state (``STATE``) and its law (``set_trial``, the virgin state, the initial tangent). The
+base holds the committed and trial states as immutable tuples, so commit, revert, clone,
+``state()`` and ``with_params()`` are written once here. The registry
+(``sim_actuator.models.registry``) lists the kinds; this module imports none of them.
 """
 
 from __future__ import annotations
 
+import copy
 import math
-from typing import Protocol, runtime_checkable
+import sys
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple, Protocol, Self, cast, runtime_checkable
+
+from sim_actuator.checks import Bound, ParameterRangeError
 
 __all__ = [
-    "MODEL_DEFAULTS",
-    "MODEL_PARAMETERS",
+    "HysteresisBase",
     "HysteresisModel",
     "ModelInputError",
+    "ModelKind",
     "ModelParameterError",
-    "make_model",
+    "ModelState",
+    "Param",
+    "ParametricModel",
+    "trial_input_error",
 ]
 
 
@@ -57,6 +75,33 @@ class HysteresisModel(Protocol):
         ...
 
 
+ModelState = tuple[float, ...]
+"""A model's committed state: an immutable named tuple of floats, its first field ``d``."""
+
+
+@runtime_checkable
+class ParametricModel(HysteresisModel, Protocol):
+    """A hysteresis law with named parameters and an explicit state: what a filter needs to
+    propagate candidate parameter sets from one committed state (e.g. UKF sigma points:
+    ``model.with_params(p, model.state()).set_trial(d)``)."""
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The law's parameters by name (as the registry declares them)."""
+        ...
+
+    def state(self) -> ModelState:
+        """The committed state as an immutable value (a named tuple of floats)."""
+        ...
+
+    def with_params(
+        self, params: Mapping[str, float], state: ModelState | None = None
+    ) -> ParametricModel:
+        """A new, independent model of the same kind with ``params`` (the others unchanged),
+        starting from committed ``state`` (virgin when None)."""
+        ...
+
+
 class ModelParameterError(ValueError):
     """A model kind or parameter is unknown, missing or out of range."""
 
@@ -70,137 +115,199 @@ class ModelInputError(ValueError):
     """A trial displacement is not a finite number."""
 
 
-MODEL_PARAMETERS: dict[str, dict[str, str]] = {
-    "elastic": {
-        "k": "stiffness, force/displacement (e.g. kN/mm), > 0",
-    },
-    "bilinear": {
-        "k0": "initial (elastic) stiffness, force/displacement (e.g. kN/mm), > 0",
-        "fy": "yield force, force (e.g. kN), > 0",
-        "alpha": "post-yield to initial stiffness ratio, dimensionless, 0 <= alpha < 1",
-    },
-    "bouc-wen": {
-        "k0": "initial stiffness, force/displacement (e.g. kN/mm), > 0",
-        "fy": "yield force scale: hysteretic force is (1-alpha)*fy*z, force (e.g. kN), > 0",
-        "alpha": "post-yield to initial stiffness ratio, dimensionless, 0 <= alpha < 1",
-        "n": "sharpness of the elastic-plastic transition, dimensionless, >= 1",
-        "beta": "weight of the sign(dd*z) term (loading/unloading shape), dimensionless, > 0",
-        "gamma": "weight of the constant term, dimensionless, beta + gamma > 0",
-        "A": "initial slope of z against d/dy, dimensionless, > 0 (default 1)",
-    },
-    "bwbn": {
-        "k0": "initial stiffness, force/displacement (e.g. kN/mm), > 0",
-        "fy": "yield force scale: hysteretic force is (1-alpha)*fy*z, force (e.g. kN), > 0",
-        "alpha": "post-yield to initial stiffness ratio, dimensionless, 0 <= alpha < 1",
-        "n": "sharpness of the elastic-plastic transition, dimensionless, >= 1",
-        "beta": "weight of the sign(dd*z) term, dimensionless, > 0",
-        "gamma": "weight of the constant term, dimensionless, beta + gamma > 0",
-        "A0": "initial slope of z against d/dy, dimensionless, > 0 (default 1)",
-        "delta_a": "decay rate of A per unit normalised energy e, dimensionless, >= 0 (default 0)",
-        "delta_nu": "growth rate of nu (strength degradation) per unit e, >= 0 (default 0)",
-        "delta_eta": "growth rate of eta (stiffness degradation) per unit e, >= 0 (default 0)",
-        "zeta_s": "pinching severity, dimensionless, 0 <= zeta_s < 1 (default 0 = no pinching)",
-        "p": "rate of pinching build-up with e, dimensionless, >= 0",
-        "q": "pinching centre as a fraction of z_u, dimensionless, 0 <= q < 1",
-        "psi0": "initial pinching spread, dimensionless, > 0",
-        "delta_psi": "growth of the pinching spread per unit e, dimensionless, >= 0",
-        "lam": "coupling of spread and severity (lambda), dimensionless, > 0",
-    },
-}
-"""Model kind -> {parameter: meaning, unit and allowed range}; for docs and config validation."""
-
-MODEL_DEFAULTS: dict[str, dict[str, float]] = {
-    "elastic": {},
-    "bilinear": {},
-    "bouc-wen": {"A": 1.0},
-    "bwbn": {"A0": 1.0, "delta_a": 0.0, "delta_nu": 0.0, "delta_eta": 0.0, "zeta_s": 0.0},
-}
-"""Model kind -> defaults of its optional parameters; every other parameter is required."""
-
-
-def check_finite(model: str, name: str, value: float) -> float:
-    """Return ``value`` as float, or raise if it is not a finite real number."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ModelParameterError(
-            model, f"{name} must be a real number, got {value!r} ({type(value).__name__})", name
-        )
-    result = float(value)
-    if not math.isfinite(result):
-        raise ModelParameterError(model, f"{name} must be finite, got {value!r}", name)
-    return result
-
-
-def check_positive(model: str, name: str, value: float) -> float:
-    """Finite and > 0."""
-    result = check_finite(model, name, value)
-    if result <= 0.0:
-        raise ModelParameterError(model, f"{name} must be > 0, got {value!r}", name)
-    return result
-
-
-def check_non_negative(model: str, name: str, value: float) -> float:
-    """Finite and >= 0."""
-    result = check_finite(model, name, value)
-    if result < 0.0:
-        raise ModelParameterError(model, f"{name} must be >= 0, got {value!r}", name)
-    return result
-
-
-def check_range(model: str, name: str, value: float, low: float, high: float) -> float:
-    """Finite and low <= value < high."""
-    result = check_finite(model, name, value)
-    if not low <= result < high:
-        raise ModelParameterError(
-            model, f"{name} must satisfy {low:g} <= {name} < {high:g}, got {value!r}", name
-        )
-    return result
-
-
-def check_at_least(model: str, name: str, value: float, low: float) -> float:
-    """Finite and >= low."""
-    result = check_finite(model, name, value)
-    if result < low:
-        raise ModelParameterError(model, f"{name} must be >= {low:g}, got {value!r}", name)
-    return result
-
-
 def trial_input_error(model: str, d: float) -> ModelInputError:
     """The error for a non-finite trial displacement."""
     return ModelInputError(f"{model}: trial displacement must be finite, got {d!r}")
 
 
-def make_model(kind: str, **params: float) -> HysteresisModel:
-    """Build a model by kind name ("elastic", "bilinear", "bouc-wen", "bwbn") and parameters."""
-    from sim_actuator.models.bilinear import Bilinear
-    from sim_actuator.models.bouc_wen import BoucWen
-    from sim_actuator.models.bwbn import BoucWenBaberNoori
-    from sim_actuator.models.elastic import Elastic
+@dataclass(frozen=True, slots=True)
+class Param:
+    """One parameter of a model kind: what it means, its unit, its range, its default."""
 
-    constructors: dict[str, type[Elastic | Bilinear | BoucWen | BoucWenBaberNoori]] = {
-        "elastic": Elastic,
-        "bilinear": Bilinear,
-        "bouc-wen": BoucWen,
-        "bwbn": BoucWenBaberNoori,
-    }
-    if kind not in constructors:
-        raise ModelParameterError(
-            "make_model", f"unknown model kind {kind!r}; allowed: {', '.join(sorted(constructors))}"
-        )
-    allowed = MODEL_PARAMETERS[kind]
-    unknown = [name for name in params if name not in allowed]
+    name: str
+    meaning: str
+    unit: str
+    """``kN/mm``, ``kN``, ``mm``…, or ``-`` (dimensionless). Models are unit-agnostic: a
+    consistent set is what matters (the bridge uses mm and kN)."""
+    bound: Bound
+    default: float | None = None
+    """None: the parameter is required."""
+
+    def describe(self) -> str:
+        """One line for docs and error hints: meaning, unit, range, default."""
+        unit = "dimensionless" if self.unit == "-" else self.unit
+        default = "" if self.default is None else f" (default {self.default:g})"
+        return f"{self.meaning}, {unit}, {self.bound.describe(self.name)}{default}"
+
+    def check(self, model: str, value: object) -> float:
+        """``value`` as a float, or :class:`ModelParameterError` naming model and parameter."""
+        try:
+            return self.bound.check(self.name, value)
+        except ParameterRangeError as exc:
+            raise ModelParameterError(model, str(exc), self.name) from None
+
+
+def refuse_unknown(model: str, given: Mapping[str, object], params: tuple[Param, ...]) -> None:
+    """:class:`ModelParameterError` naming the given names that are not parameters of ``model``."""
+    allowed = [p.name for p in params]
+    unknown = [name for name in given if name not in allowed]
     if unknown:
         raise ModelParameterError(
-            kind,
+            model,
             f"unknown parameter(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}",
             unknown[0],
         )
-    defaults = MODEL_DEFAULTS[kind]
-    missing = [name for name in allowed if name not in params and name not in defaults]
-    if missing:
-        raise ModelParameterError(
-            kind,
-            f"missing required parameter(s) {', '.join(missing)}; "
-            f"required: {', '.join(n for n in allowed if n not in defaults)}",
-            missing[0],
-        )
-    return constructors[kind](**params)
+
+
+class HysteresisBase(ABC):
+    """The state base of every model kind: committed and trial states as immutable tuples
+    (so commit and revert are one assignment, a clone shares them), declared parameters."""
+
+    __slots__ = ("_committed", "_trial")
+
+    name: str
+    PARAMS: ClassVar[tuple[Param, ...]]
+    STATE: ClassVar[type[NamedTuple]]
+    """The named tuple ``state()`` returns; its fields are the internal state tuple's, the
+    first two ``d`` and ``f`` (committed displacement and force) unless the kind overrides
+    ``committed``."""
+
+    _committed: tuple[float, ...]
+    _trial: tuple[float, ...]
+
+    # -- what each kind provides -------------------------------------------------------------
+    @abstractmethod
+    def _virgin(self) -> tuple[float, ...]:
+        """The state before any load (d = 0, f = 0), in ``STATE``'s field order."""
+
+    @property
+    @abstractmethod
+    def initial_tangent(self) -> float:
+        """Tangent stiffness of the virgin state."""
+
+    @abstractmethod
+    def set_trial(self, d: float) -> tuple[float, float]:
+        """Trial displacement from the last committed state; returns (force, tangent)."""
+
+    def _check_relations(self) -> None:  # noqa: B027 (optional hook, empty by default)
+        """Constraints between parameters (each one's own range is checked before)."""
+
+    def _settings(self) -> dict[str, Any]:
+        """Construction options that are not parameters (kept by ``with_params``)."""
+        return {}
+
+    # -- written once for every kind ---------------------------------------------------------
+    def _init_params(self, **values: float) -> None:
+        """Check and set the declared parameters, then start from the virgin state."""
+        for param in self.PARAMS:
+            object.__setattr__(self, param.name, param.check(self.name, values[param.name]))
+        self._check_relations()
+
+    def _start(self) -> None:
+        self._committed = self._trial = self._virgin()
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}={v!r}" for k, v in self.parameters.items())
+        return f"{type(self).__name__}({inner})"
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The construction parameters, for rebuilding or reporting."""
+        return {p.name: float(getattr(self, p.name)) for p in self.PARAMS}
+
+    def commit(self) -> None:
+        """Make the current trial state the committed state."""
+        self._committed = self._trial
+
+    def revert_to_last_commit(self) -> None:
+        """Discard the trial state."""
+        self._trial = self._committed
+
+    def revert_to_start(self) -> None:
+        """Return to the virgin state (d = 0, f = 0)."""
+        self._committed = self._trial = self._virgin()
+
+    @property
+    def committed(self) -> tuple[float, float]:
+        """Committed (displacement, force)."""
+        state = self._committed
+        return state[0], state[1]
+
+    def clone(self) -> Self:
+        """Independent copy including committed and trial state."""
+        return copy.copy(self)
+
+    def state(self) -> ModelState:
+        """The committed state as an immutable named tuple (``STATE``)."""
+        return cast(ModelState, self.STATE._make(self._committed))
+
+    def with_params(self, params: Mapping[str, float], state: ModelState | None = None) -> Self:
+        """A new, independent model of this kind with ``params`` (parameters not given keep
+        this model's values), starting from the committed ``state`` (virgin when None).
+
+        ``state`` must come from ``state()`` of a model of the same kind; the new model's next
+        ``set_trial`` integrates the new law from it (its committed force is the state's).
+        """
+        refuse_unknown(self.name, params, self.PARAMS)
+        factory = cast(Callable[..., Self], type(self))
+        model = factory(**{**self.parameters, **params}, **self._settings())
+        if state is not None:
+            model._committed = model._trial = self._checked_state(state)
+        return model
+
+    def _checked_state(self, state: object) -> tuple[float, ...]:
+        if type(state) is not self.STATE:
+            raise ModelParameterError(
+                self.name,
+                f"state must be a {self.STATE.__name__} (from state() of a {self.name} model), "
+                f"got {type(state).__name__}",
+            )
+        values = cast(tuple[float, ...], state)
+        for field, value in zip(self.STATE._fields, values, strict=True):
+            if not math.isfinite(value):
+                raise ModelParameterError(
+                    self.name, f"state.{field} must be finite, got {value!r}"
+                )
+        return values
+
+
+@dataclass(frozen=True, slots=True)
+class ModelKind:
+    """A model kind as the registry lists it: its class, parameters and factory."""
+
+    cls: type[HysteresisBase]
+    factory: Callable[..., ParametricModel] | None = None
+    """Builds a model from keyword parameters; default: the class itself."""
+
+    @property
+    def name(self) -> str:
+        return self.cls.name
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return self.cls.PARAMS
+
+    @property
+    def summary(self) -> str:
+        """First line of the kind's module docstring (for docs and the README table)."""
+        doc = sys.modules[self.cls.__module__].__doc__ or self.cls.__doc__ or self.name
+        return doc.strip().splitlines()[0].replace("``", "`")
+
+    @property
+    def defaults(self) -> dict[str, float]:
+        return {p.name: p.default for p in self.params if p.default is not None}
+
+    def build(self, params: Mapping[str, float]) -> ParametricModel:
+        """Check names (unknown, missing) then build; values are checked by the class."""
+        refuse_unknown(self.name, params, self.params)
+        required = [p.name for p in self.params if p.default is None]
+        missing = [name for name in required if name not in params]
+        if missing:
+            raise ModelParameterError(
+                self.name,
+                f"missing required parameter(s) {', '.join(missing)}; "
+                f"required: {', '.join(required)}",
+                missing[0],
+            )
+        factory = self.factory or cast(Callable[..., ParametricModel], self.cls)
+        return factory(**params)

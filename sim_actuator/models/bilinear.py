@@ -24,50 +24,49 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import NamedTuple
 
-from sim_actuator.models.base import check_positive, check_range, trial_input_error
+from sim_actuator.checks import POSITIVE, within
+from sim_actuator.models.base import HysteresisBase, Param, trial_input_error
 
-__all__ = ["Bilinear"]
+__all__ = ["Bilinear", "BilinearState"]
 
 _DBL_EPSILON = sys.float_info.epsilon  # the C DBL_EPSILON used by Steel01
 
 
-class Bilinear:
+class BilinearState(NamedTuple):
+    """Committed state of a :class:`Bilinear` specimen (Steel01's CStrain, CStress, CTangent)."""
+
+    d: float
+    f: float
+    k: float
+
+
+class Bilinear(HysteresisBase):
     """Elastic-perfectly-plastic with kinematic hardening (Steel01 without isotropic terms)."""
 
-    __slots__ = (
-        "_d_c",
-        "_d_t",
-        "_esh",
-        "_f_c",
-        "_f_t",
-        "_fy_one_minus_alpha",
-        "_k_c",
-        "_k_t",
-        "alpha",
-        "fy",
-        "k0",
-    )
+    __slots__ = ("_esh", "_fy_one_minus_alpha", "alpha", "fy", "k0")
 
     name = "bilinear"
+    PARAMS = (
+        Param("k0", "initial (elastic) stiffness", "force/displacement (e.g. kN/mm)", POSITIVE),
+        Param("fy", "yield force", "force (e.g. kN)", POSITIVE),
+        Param("alpha", "post-yield to initial stiffness ratio", "-", within(0.0, 1.0)),
+    )
+    STATE = BilinearState
+
+    k0: float
+    fy: float
+    alpha: float
 
     def __init__(self, *, k0: float, fy: float, alpha: float) -> None:
-        self.k0 = check_positive(self.name, "k0", k0)
-        self.fy = check_positive(self.name, "fy", fy)
-        self.alpha = check_range(self.name, "alpha", alpha, 0.0, 1.0)
+        self._init_params(k0=k0, fy=fy, alpha=alpha)
         self._esh = self.alpha * self.k0
         self._fy_one_minus_alpha = self.fy * (1.0 - self.alpha)
-        self._d_c = self._d_t = 0.0
-        self._f_c = self._f_t = 0.0
-        self._k_c = self._k_t = self.k0
+        self._start()
 
-    def __repr__(self) -> str:
-        return f"Bilinear(k0={self.k0!r}, fy={self.fy!r}, alpha={self.alpha!r})"
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        """The construction parameters, for rebuilding or reporting."""
-        return {"k0": self.k0, "fy": self.fy, "alpha": self.alpha}
+    def _virgin(self) -> tuple[float, ...]:
+        return (0.0, 0.0, self.k0)
 
     @property
     def yield_displacement(self) -> float:
@@ -75,54 +74,24 @@ class Bilinear:
         return self.fy / self.k0
 
     def set_trial(self, d: float) -> tuple[float, float]:
-        d_step = d - self._d_c
+        d_c, f_c, k_c = self._committed
+        d_step = d - d_c
         if not math.isfinite(d_step):
             raise trial_input_error(self.name, d)
         if abs(d_step) > _DBL_EPSILON:
             c1 = self._esh * d
-            predictor = self._f_c + self.k0 * d_step
+            predictor = f_c + self.k0 * d_step
             upper = c1 + self._fy_one_minus_alpha
             force = upper if upper < predictor else predictor
             lower = c1 - self._fy_one_minus_alpha
             if lower > force:
                 force = lower
             tangent = self.k0 if abs(force - predictor) < _DBL_EPSILON else self._esh
-            self._d_t = d
-            self._f_t = force
-            self._k_t = tangent
+            self._trial = (d, force, tangent)
             return force, tangent
-        self._d_t = self._d_c
-        self._f_t = self._f_c
-        self._k_t = self._k_c
-        return self._f_c, self._k_c
-
-    def commit(self) -> None:
-        self._d_c = self._d_t
-        self._f_c = self._f_t
-        self._k_c = self._k_t
-
-    def revert_to_last_commit(self) -> None:
-        self._d_t = self._d_c
-        self._f_t = self._f_c
-        self._k_t = self._k_c
-
-    def revert_to_start(self) -> None:
-        self._d_c = self._d_t = 0.0
-        self._f_c = self._f_t = 0.0
-        self._k_c = self._k_t = self.k0
+        self._trial = self._committed
+        return f_c, k_c
 
     @property
     def initial_tangent(self) -> float:
         return self.k0
-
-    @property
-    def committed(self) -> tuple[float, float]:
-        return self._d_c, self._f_c
-
-    def clone(self) -> Bilinear:
-        twin = Bilinear.__new__(Bilinear)
-        twin.k0, twin.fy, twin.alpha = self.k0, self.fy, self.alpha
-        twin._esh, twin._fy_one_minus_alpha = self._esh, self._fy_one_minus_alpha
-        twin._d_c, twin._f_c, twin._k_c = self._d_c, self._f_c, self._k_c
-        twin._d_t, twin._f_t, twin._k_t = self._d_t, self._f_t, self._k_t
-        return twin

@@ -29,66 +29,116 @@ flow this is the consistent tangent ``d f_trial / d d_trial``. Results converge 
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
+from sim_actuator.checks import FINITE, POSITIVE, at_least, within
 from sim_actuator.models.base import (
+    HysteresisBase,
     ModelInputError,
     ModelParameterError,
-    check_at_least,
-    check_finite,
-    check_positive,
-    check_range,
+    Param,
     trial_input_error,
 )
 
-__all__ = ["DEFAULT_DZ_MAX", "MAX_SUBSTEPS", "BoucWen"]
+__all__ = [
+    "DEFAULT_DZ_MAX",
+    "DZ_MAX",
+    "MAX_SUBSTEPS",
+    "SHAPE_PARAMS",
+    "BoucWen",
+    "BoucWenFamily",
+    "BoucWenState",
+]
 
 DEFAULT_DZ_MAX = 0.01
 """Largest change of z (dimensionless) per RK4 substep by default."""
 
+DZ_MAX = Param("dz_max", "largest change of z per RK4 substep", "-", within(1e-9, 1.0),
+               DEFAULT_DZ_MAX)
+"""The integration setting (not a law parameter) of the Bouc-Wen family."""
+
 MAX_SUBSTEPS = 200_000
 """A trial step needing more substeps is refused (almost surely a unit or sign error)."""
 
+SHAPE_PARAMS = (
+    Param("k0", "initial stiffness", "force/displacement (e.g. kN/mm)", POSITIVE),
+    Param("fy", "yield force scale: hysteretic force is (1-alpha)*fy*z", "force (e.g. kN)",
+          POSITIVE),
+    Param("alpha", "post-yield to initial stiffness ratio", "-", within(0.0, 1.0)),
+    Param("n", "sharpness of the elastic-plastic transition", "-", at_least(1.0)),
+    Param("beta", "weight of the sign(dd*z) term (loading/unloading shape)", "-", POSITIVE),
+    Param("gamma", "weight of the constant term (beta + gamma > 0)", "-", FINITE),
+)
+"""The parameters the Bouc-Wen family shares (``bwbn`` starts with the same six)."""
 
-class BoucWen:
-    """Bouc-Wen hysteresis with a dimensionless hysteretic variable z (see module docstring)."""
+
+class BoucWenState(NamedTuple):
+    """Committed state of a :class:`BoucWen` specimen."""
+
+    d: float
+    f: float
+    k: float
+    """Tangent stiffness at the committed point."""
+    z: float
+    """Hysteretic variable (dimensionless)."""
+
+
+class BoucWenFamily(HysteresisBase):
+    """What the Bouc-Wen kinds share: the six shape parameters and their relation, the
+    integration setting ``dz_max``, dy and the elastic/hysteretic force split."""
 
     __slots__ = (
-        "A",
-        "_bound_coef",
-        "_d_c",
-        "_d_t",
-        "_dy",
-        "_f_c",
-        "_f_hyst",
-        "_f_t",
-        "_k_c",
-        "_k_el",
-        "_k_hyst",
-        "_k_t",
-        "_loading",
-        "_unloading",
-        "_z_c",
-        "_z_t",
-        "alpha",
-        "beta",
-        "dz_max",
-        "fy",
-        "gamma",
-        "k0",
-        "n",
-        "z_ultimate",
-    )
+        "_dy", "_f_hyst", "_k_el", "_k_hyst", "alpha", "beta", "dz_max", "fy", "gamma", "k0", "n",
+    )  # fmt: skip
+
+    k0: float
+    fy: float
+    alpha: float
+    n: float
+    beta: float
+    gamma: float
+
+    def _init_family(self, dz_max: float, **params: float) -> None:
+        self._init_params(**params)
+        self.dz_max = DZ_MAX.check(self.name, dz_max)
+        self._dy = self.fy / self.k0
+        self._k_el = self.alpha * self.k0
+        self._k_hyst = (1.0 - self.alpha) * self.k0
+        self._f_hyst = (1.0 - self.alpha) * self.fy
+
+    def _check_relations(self) -> None:
+        if self.beta + self.gamma <= 0.0:
+            raise ModelParameterError(
+                self.name, f"beta + gamma must be > 0, got {self.beta!r} + {self.gamma!r}", "gamma"
+            )
+
+    def _settings(self) -> dict[str, Any]:
+        return {"dz_max": self.dz_max}
+
+    @property
+    def yield_displacement(self) -> float:
+        """dy = fy / k0."""
+        return self._dy
+
+    @property
+    def committed_z(self) -> float:
+        """Committed hysteretic variable z (dimensionless)."""
+        return self._committed[3]
+
+
+class BoucWen(BoucWenFamily):
+    """Bouc-Wen hysteresis with a dimensionless hysteretic variable z (see module docstring)."""
+
+    __slots__ = ("A", "_bound_coef", "_loading", "_unloading", "z_ultimate")
 
     name = "bouc-wen"
+    PARAMS = (
+        *SHAPE_PARAMS,
+        Param("A", "initial slope of z against d/dy", "-", POSITIVE, 1.0),
+    )
+    STATE = BoucWenState
 
-    _d_c: float
-    _d_t: float
-    _z_c: float
-    _z_t: float
-    _f_c: float
-    _f_t: float
-    _k_c: float
-    _k_t: float
+    A: float
 
     def __init__(
         self,
@@ -102,55 +152,15 @@ class BoucWen:
         A: float = 1.0,
         dz_max: float = DEFAULT_DZ_MAX,
     ) -> None:
-        model = self.name
-        self.k0 = check_positive(model, "k0", k0)
-        self.fy = check_positive(model, "fy", fy)
-        self.alpha = check_range(model, "alpha", alpha, 0.0, 1.0)
-        self.n = check_at_least(model, "n", n, 1.0)
-        self.beta = check_positive(model, "beta", beta)
-        self.gamma = check_finite(model, "gamma", gamma)
-        if self.beta + self.gamma <= 0.0:
-            raise ModelParameterError(
-                model, f"beta + gamma must be > 0, got {beta!r} + {gamma!r}", "gamma"
-            )
-        self.A = check_positive(model, "A", A)
-        self.dz_max = check_range(model, "dz_max", dz_max, 1e-9, 1.0)
-        self._dy = self.fy / self.k0
-        self._k_el = self.alpha * self.k0
-        self._k_hyst = (1.0 - self.alpha) * self.k0
-        self._f_hyst = (1.0 - self.alpha) * self.fy
+        self._init_family(dz_max, k0=k0, fy=fy, alpha=alpha, n=n, beta=beta, gamma=gamma, A=A)
         self._loading = self.beta + self.gamma  # coefficient when sign(du*z) = +1
         self._unloading = self.gamma - self.beta  # coefficient when sign(du*z) = -1
         self._bound_coef = self.n * (self.beta + abs(self.gamma))
         self.z_ultimate: float = (self.A / self._loading) ** (1.0 / self.n)
-        self.revert_to_start()
+        self._start()
 
-    def __repr__(self) -> str:
-        inner = ", ".join(f"{k}={v!r}" for k, v in self.parameters.items())
-        return f"BoucWen({inner})"
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        """The construction parameters (without dz_max), for rebuilding or reporting."""
-        return {
-            "k0": self.k0,
-            "fy": self.fy,
-            "alpha": self.alpha,
-            "n": self.n,
-            "beta": self.beta,
-            "gamma": self.gamma,
-            "A": self.A,
-        }
-
-    @property
-    def yield_displacement(self) -> float:
-        """dy = fy / k0."""
-        return self._dy
-
-    @property
-    def committed_z(self) -> float:
-        """Committed hysteretic variable z (dimensionless)."""
-        return self._z_c
+    def _virgin(self) -> tuple[float, ...]:
+        return (0.0, 0.0, self.initial_tangent, 0.0)
 
     def _slope(self, z: float, direction: float) -> float:
         """dz/du at z on a path moving in ``direction`` (+1.0 or -1.0)."""
@@ -199,40 +209,19 @@ class BoucWen:
         return z
 
     def set_trial(self, d: float) -> tuple[float, float]:
-        du = (d - self._d_c) / self._dy
+        d_c, f_c, k_c, z_c = self._committed
+        du = (d - d_c) / self._dy
         if not math.isfinite(du):
             raise trial_input_error(self.name, d)
         if du == 0.0:
-            self._d_t, self._z_t, self._f_t, self._k_t = self._d_c, self._z_c, self._f_c, self._k_c
-            return self._f_c, self._k_c
-        z = self._advance(self._z_c, du)
+            self._trial = self._committed
+            return f_c, k_c
+        z = self._advance(z_c, du)
         force = self._k_el * d + self._f_hyst * z
         tangent = self._k_el + self._k_hyst * self._slope(z, 1.0 if du > 0.0 else -1.0)
-        self._d_t, self._z_t, self._f_t, self._k_t = d, z, force, tangent
+        self._trial = (d, force, tangent, z)
         return force, tangent
-
-    def commit(self) -> None:
-        self._d_c, self._z_c, self._f_c, self._k_c = self._d_t, self._z_t, self._f_t, self._k_t
-
-    def revert_to_last_commit(self) -> None:
-        self._d_t, self._z_t, self._f_t, self._k_t = self._d_c, self._z_c, self._f_c, self._k_c
-
-    def revert_to_start(self) -> None:
-        self._d_c = self._d_t = 0.0
-        self._z_c = self._z_t = 0.0
-        self._f_c = self._f_t = 0.0
-        self._k_c = self._k_t = self.initial_tangent
 
     @property
     def initial_tangent(self) -> float:
         return self._k_el + self._k_hyst * self.A
-
-    @property
-    def committed(self) -> tuple[float, float]:
-        return self._d_c, self._f_c
-
-    def clone(self) -> BoucWen:
-        twin = BoucWen.__new__(BoucWen)
-        for slot in BoucWen.__slots__:
-            object.__setattr__(twin, slot, getattr(self, slot))
-        return twin

@@ -37,76 +37,68 @@ the force error is ~5e-9 of fy at the default dz_max = 0.01 (fourth-order conver
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
-from sim_actuator.models.base import (
-    ModelInputError,
-    ModelParameterError,
-    check_at_least,
-    check_finite,
-    check_non_negative,
-    check_positive,
-    check_range,
-    trial_input_error,
+from sim_actuator.checks import NON_NEGATIVE, POSITIVE, within
+from sim_actuator.models.base import ModelInputError, Param, trial_input_error
+from sim_actuator.models.bouc_wen import (
+    DEFAULT_DZ_MAX,
+    MAX_SUBSTEPS,
+    SHAPE_PARAMS,
+    BoucWenFamily,
 )
-from sim_actuator.models.bouc_wen import DEFAULT_DZ_MAX, MAX_SUBSTEPS
 
-__all__ = ["BoucWenBaberNoori"]
-
-_PARAMETER_NAMES = (
-    "k0", "fy", "alpha", "n", "beta", "gamma", "A0", "delta_a", "delta_nu", "delta_eta",
-    "zeta_s", "p", "q", "psi0", "delta_psi", "lam",
-)  # fmt: skip
+__all__ = ["BoucWenBaberNoori", "BwbnState"]
 
 
-class BoucWenBaberNoori:
+class BwbnState(NamedTuple):
+    """Committed state of a :class:`BoucWenBaberNoori` specimen."""
+
+    d: float
+    f: float
+    k: float
+    """Tangent stiffness at the committed point."""
+    z: float
+    """Hysteretic variable (dimensionless)."""
+    e: float
+    """Normalised hysteretic energy e = energy / (fy*dy)."""
+
+
+class BoucWenBaberNoori(BoucWenFamily):
     """BWBN hysteresis with degradation and pinching (see module docstring for equations)."""
 
     __slots__ = (
-        "A0",
-        "_d_c",
-        "_d_t",
-        "_dy",
-        "_e_c",
-        "_e_t",
-        "_f_c",
-        "_f_hyst",
-        "_f_t",
-        "_k_c",
-        "_k_el",
-        "_k_hyst",
-        "_k_t",
-        "_z_c",
-        "_z_t",
-        "alpha",
-        "beta",
-        "delta_a",
-        "delta_eta",
-        "delta_nu",
-        "delta_psi",
-        "dz_max",
-        "fy",
-        "gamma",
-        "k0",
-        "lam",
-        "n",
-        "p",
-        "psi0",
-        "q",
-        "zeta_s",
-    )
+        "A0", "delta_a", "delta_eta", "delta_nu", "delta_psi", "lam", "p", "psi0", "q", "zeta_s",
+    )  # fmt: skip
 
     name = "bwbn"
+    PARAMS = (
+        *SHAPE_PARAMS,
+        Param("A0", "initial slope of z against d/dy", "-", POSITIVE, 1.0),
+        Param("delta_a", "decay rate of A per unit normalised energy e", "-", NON_NEGATIVE, 0.0),
+        Param("delta_nu", "growth rate of nu (strength degradation) per unit e", "-",
+              NON_NEGATIVE, 0.0),
+        Param("delta_eta", "growth rate of eta (stiffness degradation) per unit e", "-",
+              NON_NEGATIVE, 0.0),
+        Param("zeta_s", "pinching severity (0 = no pinching)", "-", within(0.0, 1.0), 0.0),
+        Param("p", "rate of pinching build-up with e", "-", NON_NEGATIVE),
+        Param("q", "pinching centre as a fraction of z_u", "-", within(0.0, 1.0)),
+        Param("psi0", "initial pinching spread", "-", POSITIVE),
+        Param("delta_psi", "growth of the pinching spread per unit e", "-", NON_NEGATIVE),
+        Param("lam", "coupling of spread and severity (lambda)", "-", POSITIVE),
+    )
+    STATE = BwbnState
 
-    _d_c: float
-    _d_t: float
-    _z_c: float
-    _z_t: float
-    _e_c: float
-    _e_t: float
-    _f_c: float
-    _f_t: float
-    _k_c: float
-    _k_t: float
+    A0: float
+    delta_a: float
+    delta_nu: float
+    delta_eta: float
+    zeta_s: float
+    p: float
+    q: float
+    psi0: float
+    delta_psi: float
+    lam: float
 
     def __init__(
         self,
@@ -129,57 +121,20 @@ class BoucWenBaberNoori:
         zeta_s: float = 0.0,
         dz_max: float = DEFAULT_DZ_MAX,
     ) -> None:
-        model = self.name
-        self.k0 = check_positive(model, "k0", k0)
-        self.fy = check_positive(model, "fy", fy)
-        self.alpha = check_range(model, "alpha", alpha, 0.0, 1.0)
-        self.n = check_at_least(model, "n", n, 1.0)
-        self.beta = check_positive(model, "beta", beta)
-        self.gamma = check_finite(model, "gamma", gamma)
-        if self.beta + self.gamma <= 0.0:
-            raise ModelParameterError(
-                model, f"beta + gamma must be > 0, got {beta!r} + {gamma!r}", "gamma"
-            )
-        self.A0 = check_positive(model, "A0", A0)
-        self.delta_a = check_non_negative(model, "delta_a", delta_a)
-        self.delta_nu = check_non_negative(model, "delta_nu", delta_nu)
-        self.delta_eta = check_non_negative(model, "delta_eta", delta_eta)
-        self.zeta_s = check_range(model, "zeta_s", zeta_s, 0.0, 1.0)
-        self.p = check_non_negative(model, "p", p)
-        self.q = check_range(model, "q", q, 0.0, 1.0)
-        self.psi0 = check_positive(model, "psi0", psi0)
-        self.delta_psi = check_non_negative(model, "delta_psi", delta_psi)
-        self.lam = check_positive(model, "lam", lam)
-        self.dz_max = check_range(model, "dz_max", dz_max, 1e-9, 1.0)
-        self._dy = self.fy / self.k0
-        self._k_el = self.alpha * self.k0
-        self._k_hyst = (1.0 - self.alpha) * self.k0
-        self._f_hyst = (1.0 - self.alpha) * self.fy
-        self.revert_to_start()
+        self._init_family(
+            dz_max, k0=k0, fy=fy, alpha=alpha, n=n, beta=beta, gamma=gamma, A0=A0,
+            delta_a=delta_a, delta_nu=delta_nu, delta_eta=delta_eta, zeta_s=zeta_s, p=p, q=q,
+            psi0=psi0, delta_psi=delta_psi, lam=lam,
+        )  # fmt: skip
+        self._start()
 
-    def __repr__(self) -> str:
-        inner = ", ".join(f"{k}={v!r}" for k, v in self.parameters.items())
-        return f"BoucWenBaberNoori({inner})"
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        """The construction parameters (without dz_max), for rebuilding or reporting."""
-        return {name: float(getattr(self, name)) for name in _PARAMETER_NAMES}
-
-    @property
-    def yield_displacement(self) -> float:
-        """dy = fy / k0."""
-        return self._dy
-
-    @property
-    def committed_z(self) -> float:
-        """Committed hysteretic variable z (dimensionless)."""
-        return self._z_c
+    def _virgin(self) -> tuple[float, ...]:
+        return (0.0, 0.0, self.initial_tangent, 0.0, 0.0)
 
     @property
     def committed_energy(self) -> float:
         """Committed normalised hysteretic energy e = energy / (fy*dy)."""
-        return self._e_c
+        return self._committed[4]
 
     def _pinching_spread(self, e: float) -> tuple[float, float]:
         """(zeta1, zeta2) at normalised energy e."""
@@ -273,14 +228,15 @@ class BoucWenBaberNoori:
         return z, e
 
     def set_trial(self, d: float) -> tuple[float, float]:
-        du = (d - self._d_c) / self._dy
+        d_c, f_c, k_c, z_c, e_c = self._committed
+        du = (d - d_c) / self._dy
         if not math.isfinite(du):
             raise trial_input_error(self.name, d)
         if du == 0.0:
-            self.revert_to_last_commit()
-            return self._f_c, self._k_c
+            self._trial = self._committed
+            return f_c, k_c
         direction = 1.0 if du > 0.0 else -1.0
-        z, e = self._advance(self._z_c, self._e_c, du)
+        z, e = self._advance(z_c, e_c, du)
         if self.A0 - self.delta_a * e <= 0.0:
             raise ModelInputError(
                 f"{self.name}: degradation exhausted at d = {d!r}: A = A0 - delta_a*e = "
@@ -288,34 +244,9 @@ class BoucWenBaberNoori:
             )
         force = self._k_el * d + self._f_hyst * z
         tangent = self._k_el + self._k_hyst * self._slope(z, e, direction)
-        self._d_t, self._z_t, self._e_t, self._f_t, self._k_t = d, z, e, force, tangent
+        self._trial = (d, force, tangent, z, e)
         return force, tangent
-
-    def commit(self) -> None:
-        self._d_c, self._z_c, self._e_c = self._d_t, self._z_t, self._e_t
-        self._f_c, self._k_c = self._f_t, self._k_t
-
-    def revert_to_last_commit(self) -> None:
-        self._d_t, self._z_t, self._e_t = self._d_c, self._z_c, self._e_c
-        self._f_t, self._k_t = self._f_c, self._k_c
-
-    def revert_to_start(self) -> None:
-        self._d_c = self._d_t = 0.0
-        self._z_c = self._z_t = 0.0
-        self._e_c = self._e_t = 0.0
-        self._f_c = self._f_t = 0.0
-        self._k_c = self._k_t = self.initial_tangent
 
     @property
     def initial_tangent(self) -> float:
         return self._k_el + self._k_hyst * self.A0
-
-    @property
-    def committed(self) -> tuple[float, float]:
-        return self._d_c, self._f_c
-
-    def clone(self) -> BoucWenBaberNoori:
-        twin = BoucWenBaberNoori.__new__(BoucWenBaberNoori)
-        for slot in BoucWenBaberNoori.__slots__:
-            object.__setattr__(twin, slot, getattr(self, slot))
-        return twin

@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from enum import IntEnum
 
 from sim_actuator.rig import (
     FaultCode,
@@ -30,6 +29,7 @@ from sim_actuator.rig import (
     RigCommandError,
     RigFault,
 )
+from sim_actuator.wire.states import ControllerState
 
 __all__ = [
     "CommandRejected",
@@ -42,16 +42,6 @@ __all__ = [
     "RigController",
     "UnknownMove",
 ]
-
-
-class ControllerState(IntEnum):
-    """The state word (numbers are the Modbus register values)."""
-
-    IDLE = 0
-    MOVING = 1
-    DONE = 2
-    FAULT = 3
-    INTERLOCK = 4
 
 
 class ControllerError(Exception):

@@ -39,8 +39,6 @@ target while MOVING. Any unit id is accepted.
 from __future__ import annotations
 
 import logging
-import math
-import struct
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
@@ -55,6 +53,14 @@ from sim_actuator.servers.controller import (
     LimitExceeded,
     RigController,
 )
+from sim_actuator.wire.modbus_map import (  # the one register map, shared with the bridge
+    CONTROL_HOLD,
+    CONTROL_RESET,
+    MAP_VERSION,
+    Reg,
+    decode_float32,
+    encode_float32,
+)
 
 __all__ = [
     "CONTROL_HOLD",
@@ -68,47 +74,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-MAP_VERSION = 1
-CONTROL_RESET = 0x0001
-CONTROL_HOLD = 0x0002
-
-
-class Reg:
-    """Register addresses (first register of each float32)."""
-
-    COMMAND = 0
-    RAMP_TIME = 2
-    EXECUTE = 4
-    CONTROL = 5
-    STATE = 10
-    FAULT_CODE = 11
-    MEAS_DISP = 12
-    MEAS_FORCE = 14
-    HEARTBEAT = 16
-    SEQUENCE = 17
-    TARGET = 18
-    SIM_TIME = 20
-    MAP_VERSION = 22
-
-
 _WRITE_FUNCTIONS = frozenset((6, 16, 23))
 _BIT_FUNCTIONS = frozenset((1, 2, 5, 15))
-
-
-def encode_float32(value: float) -> list[int]:
-    """Two registers, high word first; values beyond float32 range become +-inf."""
-    try:
-        raw = struct.pack(">f", value)
-    except OverflowError:
-        raw = struct.pack(">f", math.copysign(math.inf, value))
-    high, low = struct.unpack(">HH", raw)
-    return [high, low]
-
-
-def decode_float32(words: list[int]) -> float:
-    """Inverse of :func:`encode_float32`."""
-    value: float = struct.unpack(">f", struct.pack(">HH", words[0], words[1]))[0]
-    return value
 
 
 class ModbusRigServer:

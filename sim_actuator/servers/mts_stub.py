@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 from sim_actuator.rig import Measurement, MoveOutcome
 from sim_actuator.servers.controller import ControllerError, RigController
+from sim_actuator.wire.mts_lines import MAX_LINE, PROTOCOL, PROTOCOL_VERSION, err, ok, split_request
 
 __all__ = ["PROTOCOL_VERSION", "MtsStubServer", "ProtocolError"]
 
-PROTOCOL_VERSION = 1
 _MAX_TIMEOUT = 3600.0
 _TOO_LONG = object()  # marker returned by _read_line for a discarded over-long line
 
@@ -72,17 +72,15 @@ def _timeout(token: str) -> float:
 
 
 def _feedback(move_id: int, m: Measurement) -> str:
-    return (
-        f"OK ramp={move_id} time={m.time!r} displacement={m.displacement!r} "
-        f"force={m.force!r} command={m.command!r}"
-    )
+    return ok(ramp=move_id, time=m.time, displacement=m.displacement, force=m.force,
+              command=m.command)
 
 
 class MtsStubServer:
     """asyncio TCP server speaking the stub protocol; one client may own the test at a time."""
 
     def __init__(self, controller: RigController, *, host: str = "127.0.0.1", port: int = 0,
-                 max_line: int = 1024) -> None:
+                 max_line: int = MAX_LINE) -> None:
         self.controller = controller
         self.host = host
         self.port = port
@@ -179,13 +177,13 @@ class MtsStubServer:
                 text = raw.decode("ascii")
             except UnicodeDecodeError:
                 raise ProtocolError("SYNTAX", "request is not ASCII text") from None
-            tokens = text.split()
-            if not tokens:
+            verb, args = split_request(text)
+            if not verb:
                 raise ProtocolError("SYNTAX", "empty request")
-            verb, args = tokens[0].upper(), tokens[1:]
             if verb not in self._verbs:
                 raise ProtocolError(
-                    "SYNTAX", f"unknown request {tokens[0]!r}; known: {', '.join(self._verbs)}"
+                    "SYNTAX", f"unknown request {text.split()[0]!r}; known: "
+                    f"{', '.join(self._verbs)}"
                 )
             low, high, needs_open, handler = self._verbs[verb]
             if not low <= len(args) <= high:
@@ -199,17 +197,15 @@ class MtsStubServer:
             if asyncio.iscoroutine(result):
                 result = await result
             return str(result)
-        except ProtocolError as exc:
-            return f"ERR {exc.code} {exc}"
-        except ControllerError as exc:
-            return f"ERR {exc.code} {exc}"
+        except (ProtocolError, ControllerError) as exc:
+            return err(exc.code, str(exc))
 
     # -- requests ------------------------------------------------------------------------------
 
     def _info(self, session: _Session) -> str:
         rig = self.controller.rig
         return (
-            f"OK protocol=mts-stub version={PROTOCOL_VERSION} dofs=1 "
+            f"OK protocol={PROTOCOL} version={PROTOCOL_VERSION} dofs=1 "
             "channels=displacement,force,command,time units=mm,kN,mm,s "
             f"stroke={rig.actuator.stroke!r} force_capacity={rig.actuator.force_capacity!r} "
             f"max_ramp_time={rig.max_ramp_time!r} default_ramp_time={rig.default_ramp_time!r}"

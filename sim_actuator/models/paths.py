@@ -1,0 +1,297 @@
+# Indexing a float64 array is typed Any by numpy's stubs; the kernels return floats.
+# mypy: disable-error-code="no-any-return"
+"""Whole-history drives of the hysteresis laws, JIT-compiled (numba): the fast form for fitting.
+
+A fit evaluates a law over a whole displacement history hundreds of times; the per-step Python
+objects (``set_trial``/``commit``) cost tens of ms per 3000-step history, this form well under
+one. It is the *same* algorithm as the scalar models, operation for operation — Steel01 of
+``bilinear``; the BWBN equations, RK4 substeps sized by ``dz_max`` and the split at z = 0 of
+``bwbn`` (classic Bouc-Wen is BWBN with no degradation and no pinching) — and
+``tests/sim_actuator/test_model_paths.py`` checks it against them to ~1e-12. Change a law in
+both places or in neither.
+
+``drive(law, params, d, gap, dz_max)`` commits the law at every sample of ``d`` (material
+semantics: each sample is one trial from the last committed state, then committed) and returns
+the force history. ``gap > 0`` puts the law behind a pin with that clearance on each side, as
+``sim_actuator.effects.LoadPath`` does with a rigid frame: the force is zero while the pin is
+free, and the specimen rests where its own force is zero.
+
+A history the law refuses (degradation exhausted, a step needing more than ``MAX_SUBSTEPS``)
+returns NaN from that sample on: the fitter reads NaN as "not this parameter set".
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from sim_actuator.models.bouc_wen import DEFAULT_DZ_MAX, MAX_SUBSTEPS
+
+__all__ = [
+    "BWBN_PARAMETERS",
+    "LAW_BILINEAR",
+    "LAW_BWBN",
+    "bwbn_vector",
+    "drive",
+    "drive_many",
+    "law_vector",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+LAW_BILINEAR = 0
+"""``params`` = [k0, fy, alpha]."""
+LAW_BWBN = 1
+"""``params`` = :data:`BWBN_PARAMETERS` in that order (Bouc-Wen: A0 = A, the rest zero)."""
+
+BWBN_PARAMETERS = (
+    "k0", "fy", "alpha", "n", "beta", "gamma", "A0", "delta_a", "delta_nu", "delta_eta",
+    "zeta_s", "p", "q", "psi0", "delta_psi", "lam",
+)  # fmt: skip
+_BWBN_DEFAULTS = {"A0": 1.0, "delta_a": 0.0, "delta_nu": 0.0, "delta_eta": 0.0, "zeta_s": 0.0,
+                  "p": 0.0, "q": 0.0, "psi0": 1.0, "delta_psi": 0.0, "lam": 1.0}
+_DBL_EPSILON = float(np.finfo(np.float64).eps)
+
+
+def bwbn_vector(params: Mapping[str, float]) -> FloatArray:
+    """The BWBN parameter vector from a ``bwbn`` or ``bouc-wen`` parameter dict."""
+    values = dict(_BWBN_DEFAULTS)
+    for name, value in params.items():
+        values["A0" if name == "A" else name] = float(value)
+    return np.array([values[name] for name in BWBN_PARAMETERS], dtype=np.float64)
+
+
+def law_vector(kind: str, params: Mapping[str, float]) -> tuple[int, FloatArray]:
+    """(law code, parameter vector) for a model kind of ``sim_actuator.models``."""
+    if kind == "bilinear":
+        return LAW_BILINEAR, np.array([params["k0"], params["fy"], params["alpha"]], np.float64)
+    if kind in ("bouc-wen", "bwbn"):
+        return LAW_BWBN, bwbn_vector(params)
+    raise ValueError(f"no fast drive for model kind {kind!r} (bilinear, bouc-wen, bwbn)")
+
+
+# -- BWBN (bwbn.py, line by line) ----------------------------------------------------------------
+@njit(cache=True)
+def _slope(prm: FloatArray, z: float, e: float, direction: float) -> float:
+    n, beta, gamma = prm[3], prm[4], prm[5]
+    a0, delta_a, delta_nu, delta_eta = prm[6], prm[7], prm[8], prm[9]
+    zeta_s = prm[10]
+    nu = 1.0 + delta_nu * e
+    core = a0 - delta_a * e
+    if z != 0.0:
+        sign = 1.0 if (z > 0.0) == (direction > 0.0) else -1.0
+        core -= nu * abs(z) ** n * (beta * sign + gamma)
+    if zeta_s > 0.0:
+        e_pos = e if e > 0.0 else 0.0
+        zeta1 = zeta_s * (1.0 - math.exp(-prm[11] * e_pos))
+        if zeta1 > 0.0:
+            zeta2 = (prm[13] + prm[14] * e_pos) * (prm[15] + zeta1)
+            z_u = (1.0 / (nu * (beta + gamma))) ** (1.0 / n)
+            x = (z * direction - prm[12] * z_u) / zeta2
+            core *= 1.0 - zeta1 * math.exp(-x * x)
+    return core / (1.0 + delta_eta * e)
+
+
+@njit(cache=True)
+def _rk4(prm: FloatArray, z: float, e: float, h: float, direction: float) -> tuple[float, float]:
+    w = 1.0 - prm[2]
+    k1 = _slope(prm, z, e, direction)
+    z2, e2 = z + 0.5 * h * k1, e + 0.5 * h * w * z
+    k2 = _slope(prm, z2, e2, direction)
+    z3, e3 = z + 0.5 * h * k2, e + 0.5 * h * w * z2
+    k3 = _slope(prm, z3, e3, direction)
+    z4, e4 = z + h * k3, e + h * w * z3
+    k4 = _slope(prm, z4, e4, direction)
+    return (
+        z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4),
+        e + h / 6.0 * w * (z + 2.0 * z2 + 2.0 * z3 + z4),
+    )
+
+
+@njit(cache=True)
+def _substep(prm: FloatArray, z: float, e: float, h: float,
+             direction: float) -> tuple[float, float]:
+    z_end, e_end = _rk4(prm, z, e, h, direction)
+    if z * z_end >= 0.0:
+        return z_end, e_end
+    # the u-distance to z = 0 by one RK4 step in z (bwbn._to_zero)
+    w = 1.0 - prm[2]
+    dz = -z
+    s1 = _slope(prm, z, e, direction)
+    if s1 <= 0.0:
+        return z_end, e_end
+    z2 = z + 0.5 * dz
+    e2 = e + 0.5 * dz * w * z / s1
+    s2 = _slope(prm, z2, e2, direction)
+    if s2 <= 0.0:
+        return z_end, e_end
+    e3 = e + 0.5 * dz * w * z2 / s2
+    s3 = _slope(prm, z2, e3, direction)
+    if s3 <= 0.0:
+        return z_end, e_end
+    e4 = e + dz * w * z2 / s3
+    s4 = _slope(prm, 0.0, e4, direction)
+    if s4 <= 0.0:
+        return z_end, e_end
+    to_zero = dz / 6.0 * (1.0 / s1 + 2.0 / s2 + 2.0 / s3 + 1.0 / s4)
+    e_zero = e + dz / 6.0 * w * (z / s1 + 2.0 * z2 / s2 + 2.0 * z2 / s3)
+    if not 0.0 < to_zero / h < 1.0:
+        return z_end, e_end
+    return _rk4(prm, 0.0, e_zero, h - to_zero, direction)
+
+
+@njit(cache=True)
+def _bwbn_trial(prm: FloatArray, d_c: float, z_c: float, e_c: float, f_c: float, d: float,
+                dz_max: float) -> tuple[float, float, float, bool]:
+    """(force, z, e, ok) of a trial to ``d`` from the committed (d_c, z_c, e_c, f_c)."""
+    k0, fy, alpha, n = prm[0], prm[1], prm[2], prm[3]
+    du = (d - d_c) / (fy / k0)
+    if not math.isfinite(du):
+        return math.nan, z_c, e_c, False
+    if du == 0.0:
+        return f_c, z_c, e_c, True
+    direction = 1.0 if du > 0.0 else -1.0
+    nu = 1.0 + prm[8] * e_c
+    z_scale = max(abs(z_c), (prm[6] / (nu * (prm[4] + prm[5]))) ** (1.0 / n))
+    bound = (prm[6] + n * nu * (prm[4] + abs(prm[5])) * z_scale**n) / (1.0 + prm[9] * e_c)
+    count = int(abs(du) * bound / dz_max) + 1
+    if count > MAX_SUBSTEPS:
+        return math.nan, z_c, e_c, False
+    h = du / count
+    z, e = z_c, e_c
+    for _ in range(count):
+        z, e = _substep(prm, z, e, h, direction)
+    if prm[6] - prm[7] * e <= 0.0:
+        return math.nan, z, e, False
+    force = alpha * k0 * d + (1.0 - alpha) * fy * z
+    return force, z, e, True
+
+
+# -- Steel01 without isotropic hardening (bilinear.py) -----------------------------------------
+@njit(cache=True)
+def _bilinear_trial(prm: FloatArray, d_c: float, f_c: float, d: float) -> float:
+    k0, fy, alpha = prm[0], prm[1], prm[2]
+    d_step = d - d_c
+    if abs(d_step) > _DBL_EPSILON:
+        c1 = alpha * k0 * d
+        predictor = f_c + k0 * d_step
+        upper = c1 + fy * (1.0 - alpha)
+        force = upper if upper < predictor else predictor
+        lower = c1 - fy * (1.0 - alpha)
+        if lower > force:
+            force = lower
+        return force
+    return f_c
+
+
+@njit(cache=True)
+def _trial(law: int, prm: FloatArray, state: FloatArray, d: float,
+           dz_max: float) -> tuple[float, float, float, bool]:
+    """(force, z, e, ok); ``state`` = [d_c, f_c, z_c, e_c]."""
+    if law == LAW_BILINEAR:
+        f = _bilinear_trial(prm, state[0], state[1], d)
+        return f, 0.0, 0.0, math.isfinite(f)
+    return _bwbn_trial(prm, state[0], state[2], state[3], state[1], d, dz_max)
+
+
+@njit(cache=True)
+def _commit(state: FloatArray, d: float, f: float, z: float, e: float) -> None:
+    state[0], state[1], state[2], state[3] = d, f, z, e
+
+
+@njit(cache=True)
+def _free_position(law: int, prm: FloatArray, state: FloatArray, lo: float, hi: float,
+                   dz_max: float) -> float:
+    """Where the unloaded specimen rests inside [lo, hi]: its force is zero there (bisection)."""
+    d_c = state[0]
+    guess = min(max(d_c, lo), hi)
+    tol = 1e-12 * (1.0 + abs(hi))
+    u = guess
+    for _ in range(200):
+        f, _z, _e, ok = _trial(law, prm, state, u, dz_max)
+        if not ok:
+            return math.nan
+        if f == 0.0:
+            return u
+        if f > 0.0:
+            hi = u
+        else:
+            lo = u
+        if hi - lo <= tol:
+            return u
+        u = 0.5 * (lo + hi)
+    return u
+
+
+@njit(cache=True)
+def _drive(law: int, prm: FloatArray, d: FloatArray, gap: float, dz_max: float) -> FloatArray:
+    out = np.empty(d.size)
+    state = np.zeros(4)
+    free = gap > 0.0
+    for k in range(d.size):
+        p = d[k]
+        if gap == 0.0:
+            f, z, e, ok = _trial(law, prm, state, p, dz_max)
+            if not ok:
+                out[k:] = math.nan
+                return out
+            _commit(state, p, f, z, e)
+            out[k] = f
+            continue
+        f, z, e, ok = _trial(law, prm, state, p - gap, dz_max)
+        if ok and f > 0.0:
+            _commit(state, p - gap, f, z, e)
+            out[k] = f
+            free = False
+            continue
+        if ok:
+            f, z, e, ok = _trial(law, prm, state, p + gap, dz_max)
+        if ok and f < 0.0:
+            _commit(state, p + gap, f, z, e)
+            out[k] = f
+            free = False
+            continue
+        if not ok:
+            out[k:] = math.nan
+            return out
+        if free and p - gap <= state[0] <= p + gap:
+            u = state[0]
+        else:
+            u = _free_position(law, prm, state, p - gap, p + gap, dz_max)
+        f, z, e, ok = _trial(law, prm, state, u, dz_max)
+        if not ok:
+            out[k:] = math.nan
+            return out
+        _commit(state, u, f, z, e)
+        out[k] = 0.0
+        free = True
+    return out
+
+
+def drive(law: int, params: FloatArray, d: FloatArray, gap: float = 0.0,
+          dz_max: float = DEFAULT_DZ_MAX) -> FloatArray:
+    """Force history of the law committed at every sample of ``d`` (see module docstring)."""
+    prm = np.ascontiguousarray(params, dtype=np.float64)
+    path = np.ascontiguousarray(d, dtype=np.float64)
+    result: FloatArray = _drive(int(law), prm, path, float(gap), float(dz_max))
+    return result
+
+
+def drive_many(law: int, params: FloatArray, paths: FloatArray, gaps: FloatArray,
+               dz_max: float = DEFAULT_DZ_MAX) -> FloatArray:
+    """``drive`` for a population: row i drives ``params[i]`` along ``paths[i]`` with
+    ``gaps[i]`` (a finite-difference Jacobian is one population). One call, one thread:
+    parallelism belongs to the records (a process per record), which scales on a loaded
+    machine where threads inside one fit did not (measured: slower than serial at load 3)."""
+    prm = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
+    rows = np.ascontiguousarray(np.atleast_2d(paths), dtype=np.float64)
+    gap = np.broadcast_to(np.asarray(gaps, dtype=np.float64), (prm.shape[0],))
+    out = np.empty((prm.shape[0], rows.shape[1]))
+    for i in range(prm.shape[0]):  # a Python loop: one compiled kernel less (compile time)
+        out[i] = _drive(int(law), prm[i], rows[i if rows.shape[0] > 1 else 0], float(gap[i]),
+                        float(dz_max))
+    return out
