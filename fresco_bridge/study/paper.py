@@ -1,0 +1,237 @@
+"""``fresco-bridge study paper``: the source paper's case study, both layouts, every case.
+
+A *run* is one (record, specimen, noise, seed). Each run has two phases, each a sweep through
+``run_sweep`` (serial, local process pool or a Dask cluster):
+
+1. *prepare*: a noise-free reference run fixes the noise scale (``--noise`` is a percentage of
+   the tested damper's peak force in it); a conventional run (paper layout, the paper's
+   Bilinear twin) is the offline database, as in the paper (first ``OFFLINE_SAMPLES`` measured
+   steps); the calibrated Bilinear is fitted to it;
+2. *cases*: every (layout, case) simulated independently.
+
+Scores (``fresco_bridge.indicators``): paper layout against the tested damper's *measured*
+force (the paper's Table 3); generalisation layout against the twin's *true* force. MAESD is
+against the same layout's ``reference`` case, which shares the run's noise.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fresco_bridge import indicators
+from fresco_bridge.integrator import GroundMotion
+from fresco_bridge.study.calibrate import calibrate_bilinear
+from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES, PAPER_BILINEAR
+from fresco_bridge.study.simulate import CaseHistory, FixedModel, simulate_case, specimen_model
+from fresco_bridge.sweeps import run_sweep
+from fresco_bridge.updating.base import Updater
+from sim_actuator.models import make_model
+
+__all__ = [
+    "FIXED_CASES",
+    "Prepared",
+    "RunSpec",
+    "StudyError",
+    "available_cases",
+    "case_metrics",
+    "make_case_updater",
+    "run_study",
+]
+
+FIXED_CASES = ("reference", "conventional_paper", "conventional_calibrated")
+"""Cases whose twin never learns (a fixed model)."""
+
+
+class StudyError(ValueError):
+    """The study cannot run as asked (unknown case or specimen, unreadable record, …)."""
+
+
+@dataclass(frozen=True, eq=False)
+class RunSpec:
+    """One run: a record, a specimen, a noise level and a seed."""
+
+    record: str
+    """Label: the record file's name, or ``synthetic-seed<N>``."""
+    motion: GroundMotion
+    specimen: str
+    noise_pct: float
+    seed: int
+    steps: int | None = None
+
+    @property
+    def label(self) -> str:
+        noise = f"{self.noise_pct:g}".replace(".", "p")
+        return f"{self.record.removesuffix('.AT2')}_{self.specimen}_noise{noise}_seed{self.seed}"
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """What phase 1 gives every case of a run."""
+
+    run: RunSpec
+    noise_std: float
+    offline_disp: np.ndarray[Any, np.dtype[np.float64]]
+    offline_force: np.ndarray[Any, np.dtype[np.float64]]
+    calibrated: dict[str, float]
+    ann: Any = None
+    """The network pre-trained on the offline database (offline_ann, online_ann), if needed."""
+
+
+def _updater_registry() -> Callable[..., Updater] | None:
+    """``make_updater`` of the updater registry, or None in a build without it."""
+    try:
+        registry = importlib.import_module("fresco_bridge.updating.registry")
+    except ImportError:
+        return None
+    factory: Callable[..., Updater] = registry.make_updater
+    return factory
+
+
+def available_cases() -> tuple[str, ...]:
+    """The cases this build can run (the learning ones need their updater registered)."""
+    if _updater_registry() is None:
+        return (*FIXED_CASES, "online_improved")
+    registered = importlib.import_module("fresco_bridge.updating.registry").UPDATERS
+    return tuple(c for c in CASES if c in FIXED_CASES or c in registered)
+
+
+def make_case_updater(case: str, prepared: Prepared) -> Updater:
+    """The updater (and so the twin) of one case."""
+    if case == "reference":
+        return FixedModel(specimen_model(prepared.run.specimen), "reference")
+    if case == "conventional_paper":
+        return FixedModel(make_model("bilinear", **PAPER_BILINEAR), "conventional_paper")
+    if case == "conventional_calibrated":
+        return FixedModel(make_model("bilinear", **prepared.calibrated), "conventional_calibrated")
+    offline = (prepared.offline_disp, prepared.offline_force)
+    factory = _updater_registry()
+    if case == "online_improved" and factory is None:
+        from fresco_bridge.updating.improved import OnlineImproved
+
+        return OnlineImproved(offline=offline)
+    if case not in available_cases() or factory is None:
+        raise StudyError(f"case {case!r} is not available; available: "
+                         f"{', '.join(available_cases())}")  # fmt: skip
+    if case == "online_improved":
+        return factory(case, offline=offline)
+    if case == "online_ukf":
+        return factory(case)  # the paper's start values and covariances
+    # Each case gets its own copy: online_ann trains its network in place.
+    return factory(case, model=copy.deepcopy(prepared.ann), seed=prepared.run.seed)
+
+
+def _prepare(job: tuple[RunSpec, tuple[str, ...]]) -> Prepared:
+    """Phase 1 of a run (a sweep task): noise scale, offline database, calibrated Bilinear and,
+    when an ANN case is asked for, the network pre-trained on the offline database."""
+    run, cases = job
+    clean = simulate_case("paper", run.specimen, FixedModel(specimen_model(run.specimen)),
+                          run.motion, steps=run.steps)  # fmt: skip
+    noise_std = run.noise_pct / 100.0 * float(np.max(np.abs(clean.tested_force)))
+    conventional = simulate_case(
+        "paper", run.specimen, FixedModel(make_model("bilinear", **PAPER_BILINEAR)), run.motion,
+        noise_std=noise_std, noise_seed=run.seed, steps=run.steps,
+    )  # fmt: skip
+    disp = conventional.tested_drift[:OFFLINE_SAMPLES].copy()
+    force = conventional.tested_force[:OFFLINE_SAMPLES].copy()
+    ann = None
+    if {"offline_ann", "online_ann"} & set(cases):
+        pretrain = importlib.import_module("fresco_bridge.updating.ann").pretrain
+        ann = pretrain(disp, force, seed=run.seed, source=f"conventional run {run.label}")
+    return Prepared(run, noise_std, disp, force, calibrate_bilinear(disp, force), ann)
+
+
+@dataclass(frozen=True)
+class _CaseTask:
+    prepared: Prepared
+    layout: str
+    case: str
+
+
+def _run_case(task: _CaseTask) -> CaseHistory:
+    """Phase 2 (a sweep task): one (layout, case) of a run."""
+    run = task.prepared.run
+    updater = make_case_updater(task.case, task.prepared)
+    return simulate_case(task.layout, run.specimen, updater, run.motion,
+                         noise_std=task.prepared.noise_std, noise_seed=run.seed,
+                         steps=run.steps)  # fmt: skip
+
+
+def case_metrics(layout: str, history: CaseHistory, reference: CaseHistory) -> dict[str, Any]:
+    """The issue's keys for one case: Table 3 values, MAESD, one-step RMSE, update times."""
+    truth = history.tested_force if layout == "paper" else history.twin_true_force
+    peaks = indicators.peak_values(truth, history.twin_force)
+    update_ms = history.update_seconds * 1000.0
+    return {
+        "pv_es_pos": peaks.pv_es_pos,
+        "pv_es_neg": peaks.pv_es_neg,
+        "pv_ums_pos": peaks.pv_ums_pos,
+        "pv_ums_neg": peaks.pv_ums_neg,
+        "aepv_pos": peaks.aepv_pos,
+        "aepv_neg": peaks.aepv_neg,
+        "maeth": indicators.maeth(truth, history.twin_force),
+        "maesd": indicators.maesd(history.floor_displacement, reference.floor_displacement),
+        "one_step_rmse": indicators.one_step_rmse(truth, history.twin_ahead_force),
+        "update_time_ms": {
+            "median": float(np.median(update_ms)),
+            "p99": float(np.percentile(update_ms, 99)),
+        },
+    }
+
+
+def run_study(
+    runs: Sequence[RunSpec],
+    cases: Sequence[str],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[tuple[dict[str, Any], dict[str, dict[str, CaseHistory]]]]:
+    """Every run's result document and histories (``histories[layout][case]``)."""
+    unknown = [c for c in cases if c not in available_cases()]
+    if unknown:
+        raise StudyError(f"unknown or unavailable case(s) {', '.join(unknown)}; available: "
+                         f"{', '.join(available_cases())}")  # fmt: skip
+    wanted = ["reference", *[c for c in cases if c != "reference"]]
+    jobs = [(run, tuple(wanted)) for run in runs]
+    prepared = run_sweep(_prepare, jobs, workers=workers, scheduler=scheduler)
+    tasks = [_CaseTask(p, layout, case) for p in prepared for layout in LAYOUTS for case in wanted]
+    histories = run_sweep(_run_case, tasks, workers=workers, scheduler=scheduler,
+                          progress=progress)  # fmt: skip
+    results = []
+    by_run: dict[int, dict[str, dict[str, CaseHistory]]] = {}
+    for task, history in zip(tasks, histories, strict=True):
+        by_run.setdefault(id(task.prepared), {}).setdefault(task.layout, {})[task.case] = history
+    for p in prepared:
+        per_layout = by_run[id(p)]
+        document: dict[str, Any] = {
+            "study": "paper",
+            "record": p.run.record,
+            "record_pga_m_s2": p.run.motion.pga_m_s2,
+            "specimen": p.run.specimen,
+            "noise_pct": p.run.noise_pct,
+            "noise_std_kN": p.noise_std,
+            "seed": p.run.seed,
+            "steps": int(per_layout["paper"]["reference"].tested_drift.size),
+            "offline": {"samples": int(p.offline_disp.size), "calibrated_bilinear": p.calibrated,
+                        "paper_bilinear": dict(PAPER_BILINEAR)},
+            "layouts": {
+                layout: {
+                    "scored_against": "tested damper's measured force" if layout == "paper"
+                    else "twin's true force",
+                    "cases": {
+                        case: case_metrics(layout, per_layout[layout][case],
+                                           per_layout[layout]["reference"])
+                        for case in wanted
+                    },
+                }
+                for layout in LAYOUTS
+            },
+        }
+        results.append((document, per_layout))
+    return results

@@ -1,0 +1,298 @@
+"""``fresco-bridge updater pretrain|replay``: parser and handler (registered in the CLI).
+
+* ``pretrain DATA -o model.pt`` — the paper's Step 1-2: an ANN trained on existing test data
+  (a bridge run directory or a CSV ``time,disp,force``), a fit plot beside the model file.
+* ``replay --source SRC.csv --twin TWIN.csv --updater NAME -o pred.csv`` — any updater on
+  archived data: SRC is the tested element step by step, TWIN the twin's displacement (and its
+  force when known, for scoring). Writes ``step,disp,force_pred[,force_true]`` and a JSON
+  summary beside it, prints MAETH / RMS / peak errors.
+
+Bad input (files, columns, options) is one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .base import UpdaterError
+from .histories import HistoryError, Units, read_csv_history, read_run_history
+from .registry import UPDATERS, make_updater, updater_options
+
+__all__ = ["add_updater_parser", "updater_command"]
+
+
+def _units(text: str) -> Units:
+    try:
+        return Units.parse(text)
+    except HistoryError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _hidden(text: str) -> tuple[int, ...]:
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected sizes like 10,10,10, got {text!r}") from None
+    if not sizes or any(n < 1 for n in sizes):
+        raise argparse.ArgumentTypeError(f"hidden layer sizes must be >= 1, got {text!r}")
+    return sizes
+
+
+def _option(text: str) -> tuple[str, Any]:
+    key, sep, raw = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw  # a bare word: a string option (e.g. model=bwbn)
+    if isinstance(value, list):
+        value = tuple(value)
+    return key.strip(), value
+
+
+def add_updater_parser(sub: Any) -> None:
+    """``updater pretrain`` and ``updater replay``."""
+    p_up = sub.add_parser("updater", help="online model updating: pre-train an ANN, replay an "
+                                          "updater on recorded data")
+    cmds = p_up.add_subparsers(dest="updater_command", required=True)
+    p = cmds.add_parser(
+        "pretrain", help="train the paper's ANN on existing test data (Step 1-2)",
+        description="Train the source paper's restoring-force network (6 -> 10 x 3 tanh -> 1) "
+                    "on the tested element's measured (d, F) history by Levenberg-Marquardt and "
+                    "write a versioned model file (torch format) and a fit plot.")
+    p.add_argument("data", type=Path, metavar="DATA",
+                   help="a bridge run directory, or a CSV with columns time,disp,force")
+    p.add_argument("-o", "--out", type=Path, required=True, help="model file to write (.pt)")
+    p.add_argument("--site", default=None, help="site of a run directory (default: its only one)")
+    p.add_argument("--actuator", type=int, default=1, help="actuator of the site (default 1)")
+    p.add_argument("--session", type=int, default=None,
+                   help="integrator session of a run directory (default: the last)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="use the first N steps (the paper: 2500; default: all)")
+    p.add_argument("--iterations", type=int, default=1000,
+                   help="LM iterations (default 1000, MATLAB trainlm's epochs)")
+    p.add_argument("--hidden", type=_hidden, default=(10, 10, 10),
+                   help="hidden layer sizes (default 10,10,10: the paper's 301 parameters)")
+    p.add_argument("--seed", type=int, default=0, help="weight initialisation seed (default 0)")
+    p.add_argument("--units", type=_units, default=Units(), metavar="DISP,FORCE",
+                   help="units of a CSV's disp and force (default mm,kN)")
+    p.add_argument("--plot", type=Path, default=None,
+                   help="fit plot PNG (default: the model file with .png)")
+    p.add_argument("--no-plot", action="store_true", help="do not draw the fit plot")
+
+    r = cmds.add_parser(
+        "replay", help="evaluate an updater offline on recorded data",
+        description="Step through SRC (the tested element's time,disp,force) and TWIN (the "
+                    "twin's time,disp[,force]) row by row: the updater observes SRC step i and "
+                    "the twin predicts its force at TWIN's disp of step i (with --lag, before "
+                    "observing step i). Writes step,disp,force_pred[,force_true].")
+    r.add_argument("--source", type=Path, required=True, metavar="SRC.csv")
+    r.add_argument("--twin", type=Path, required=True, metavar="TWIN.csv")
+    r.add_argument("--updater", required=True, choices=sorted(UPDATERS),
+                   help="; ".join(f"{k}: {v.description}" for k, v in UPDATERS.items()))
+    r.add_argument("--model", type=Path, default=None, metavar="F",
+                   help="ANN model file from `updater pretrain` (offline_ann, online_ann)")
+    r.add_argument("--offline", type=Path, default=None, metavar="CSV",
+                   help="offline database time,disp,force: the ANN is pre-trained on it in "
+                        "process (instead of --model)")
+    r.add_argument("--lag", action="store_true",
+                   help="the twin's step i only knows the source through step i-1")
+    r.add_argument("--option", type=_option, action="append", default=[], metavar="KEY=VALUE",
+                   help="an updater option (JSON value), repeatable, e.g. max_iterations=50")
+    r.add_argument("--units", type=_units, default=Units(), metavar="DISP,FORCE",
+                   help="units of the CSVs' disp and force, also used for pred.csv "
+                        "(default mm,kN)")
+    r.add_argument("-o", "--out", type=Path, required=True, help="predictions CSV to write")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def updater_command(args: argparse.Namespace) -> int:
+    """Run ``updater pretrain|replay``; bad input -> one line on stderr, exit 2."""
+    try:
+        if args.updater_command == "pretrain":
+            return _pretrain(args)
+        return _replay(args)
+    except UpdaterError as exc:  # HistoryError included
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _load_training_data(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str]:
+    if args.data.is_dir():
+        return read_run_history(args.data, args.site, args.actuator, args.session)
+    cols = read_csv_history(args.data, ("time", "disp", "force"), units=args.units)
+    return cols["disp"], cols["force"], str(args.data)
+
+
+def _pretrain(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from fresco_bridge.progress import ProgressBar
+
+    from .ann import PRETRAIN_LM, pretrain
+    from .modelfile import import_torch, save_model
+
+    import_torch("writing a model file")  # fail before a long training, not after it
+    if args.iterations < 1:
+        raise UpdaterError(f"--iterations must be >= 1, got {args.iterations}")
+    disp, force, source = _load_training_data(args)
+    if args.samples is not None:
+        if args.samples < 2:
+            raise UpdaterError(f"--samples must be >= 2, got {args.samples}")
+        disp, force = disp[: args.samples], force[: args.samples]
+    print(f"pretrain: {len(disp)} samples from {source}; network "
+          f"6-{'-'.join(map(str, args.hidden))}-1, LM up to {args.iterations} iterations",
+          flush=True)
+    bar = ProgressBar("pretrain", args.iterations)
+    start = time.perf_counter()
+    model = pretrain(disp, force, layers=(6, *args.hidden, 1), seed=args.seed,
+                     options=replace(PRETRAIN_LM, max_iterations=args.iterations),
+                     progress=bar, source=source)
+    seconds = time.perf_counter() - start
+    bar(args.iterations, args.iterations)
+    model.training["seconds"] = seconds
+    one_step = model.predict_one_step(disp, force)
+    free_run = model.simulate(disp)
+    model.training["one_step_rmse_kN"] = float(np.sqrt(np.mean((one_step - force) ** 2)))
+    model.training["free_run_maeth_kN"] = float(np.max(np.abs(free_run - force)))
+    save_model(model, args.out)
+    t = model.training
+    print(f"wrote {args.out}: {model.net.n_params} parameters, {t['iterations']} iterations "
+          f"({t['stop']}), {seconds:.1f} s; normalised MSE {t['mse_normalised']:.3g}; "
+          f"one-step RMSE {t['one_step_rmse_kN']:.4g} kN, free-run MAETH "
+          f"{t['free_run_maeth_kN']:.4g} kN (the twin's own recurrence on the training data)")
+    if not args.no_plot:
+        plot = args.plot if args.plot is not None else args.out.with_suffix(".png")
+        _fit_plot(plot, disp, force, one_step, free_run, source)
+        print(f"wrote {plot}")
+    return 0
+
+
+def _fit_plot(path: Path, disp: np.ndarray, force: np.ndarray, one_step: np.ndarray,
+              free_run: np.ndarray, source: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+    ax1.plot(disp, force, color="0.3", lw=1.2, label="measured")
+    ax1.plot(disp, free_run, color="C3", lw=0.9, label="ANN, own recurrence")
+    ax1.set_xlabel("displacement (mm)")
+    ax1.set_ylabel("force (kN)")
+    ax1.set_title("hysteresis")
+    ax1.legend(loc="best", fontsize=8)
+    steps = np.arange(len(force))
+    ax2.plot(steps, one_step - force, color="C0", lw=0.8, label="one-step error")
+    ax2.plot(steps, free_run - force, color="C3", lw=0.8, label="recurrence error")
+    ax2.set_xlabel("step")
+    ax2.set_ylabel("force error (kN)")
+    ax2.set_title("prediction error")
+    ax2.legend(loc="best", fontsize=8)
+    fig.suptitle(f"pre-trained ANN on {source}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from fresco_bridge import indicators
+    from fresco_bridge.progress import ProgressBar
+
+    from .replay import replay
+
+    source = read_csv_history(args.source, ("time", "disp", "force"), units=args.units)
+    twin = read_csv_history(args.twin, ("time", "disp"), ("force",), units=args.units)
+    n_src, n_twin = len(source["disp"]), len(twin["disp"])
+    if n_twin > n_src:
+        raise HistoryError(f"{args.twin}: {n_twin} steps, but {args.source} has only {n_src}: "
+                           "every twin step needs the source's step")
+    options = dict(args.option)
+    accepted = updater_options(args.updater)
+    if args.model is not None:
+        if "model_file" not in accepted:
+            raise UpdaterError(f"--model: updater {args.updater!r} takes no model file")
+        options["model_file"] = args.model
+    if args.offline is not None:
+        if "offline" not in accepted:
+            raise UpdaterError(f"--offline: updater {args.updater!r} takes no offline database")
+        cols = read_csv_history(args.offline, ("time", "disp", "force"), units=args.units)
+        options["offline"] = (cols["disp"], cols["force"])
+    updater = make_updater(args.updater, **options)
+    bar = ProgressBar(f"replay {args.updater}", n_twin, enabled=not args.quiet)
+    start = time.perf_counter()
+    result = replay(updater, source["disp"], source["force"], twin["disp"], lag=args.lag,
+                    progress=bar)
+    wall = time.perf_counter() - start
+    _write_predictions(args.out, result.twin_disp, result.force_pred, twin.get("force"),
+                       args.units)
+    summary: dict[str, Any] = {
+        "updater": args.updater,
+        "options": {k: _jsonable(v) for k, v in options.items() if k != "offline"},
+        "offline": str(args.offline) if args.offline is not None else None,
+        "source": str(args.source), "twin": str(args.twin), "lag": args.lag,
+        "units": str(args.units), "steps": n_twin, "wall_seconds": wall,
+        "update_ms": {"median": float(np.median(result.update_seconds) * 1e3),
+                      "p99": float(np.percentile(result.update_seconds, 99) * 1e3),
+                      "max": float(np.max(result.update_seconds) * 1e3)},
+    }
+    lines = [f"replay {args.updater}{' --lag' if args.lag else ''}: {n_twin} steps in "
+             f"{wall:.2f} s; update median {summary['update_ms']['median']:.2f} ms, "
+             f"p99 {summary['update_ms']['p99']:.2f} ms"]
+    if "force" in twin:
+        true = twin["force"]
+        peaks = indicators.peak_values(true, result.force_pred)
+        metrics = {
+            "maeth": indicators.maeth(true, result.force_pred),
+            "rms": indicators.one_step_rmse(true, result.force_pred),
+            "pv_true_pos": peaks.pv_es_pos, "pv_true_neg": peaks.pv_es_neg,
+            "pv_pred_pos": peaks.pv_ums_pos, "pv_pred_neg": peaks.pv_ums_neg,
+            "aepv_pos": peaks.aepv_pos, "aepv_neg": peaks.aepv_neg,
+        }
+        summary["metrics_kN"] = metrics
+        f = 1.0 / args.units.to_kn
+        unit = args.units.force
+        lines.append(
+            f"MAETH {metrics['maeth'] * f:.4g} {unit}, RMS error {metrics['rms'] * f:.4g} {unit}; "
+            f"peaks true +{peaks.pv_es_pos * f:.4g}/-{peaks.pv_es_neg * f:.4g}, predicted "
+            f"+{peaks.pv_ums_pos * f:.4g}/-{peaks.pv_ums_neg * f:.4g} {unit} (AEPV "
+            f"{peaks.aepv_pos * f:.4g}/{peaks.aepv_neg * f:.4g} {unit})")
+    else:
+        lines.append(f"{args.twin} has no force column: nothing to score against")
+    meta = args.out.with_suffix(".json")
+    meta.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    lines.append(f"wrote {args.out} and {meta}")
+    print("\n".join(lines))
+    return 0
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, tuple):
+        return list(value)
+    return value
+
+
+def _write_predictions(path: Path, disp: np.ndarray, pred: np.ndarray,
+                       true: np.ndarray | None, units: Units) -> None:
+    to_d, to_f = 1.0 / units.to_mm, 1.0 / units.to_kn
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["step", "disp", "force_pred", *(["force_true"] if true is not None else [])])
+        for i in range(len(pred)):
+            row = [i, repr(float(disp[i]) * to_d), repr(float(pred[i]) * to_f)]
+            if true is not None:
+                row.append(repr(float(true[i]) * to_f))
+            w.writerow(row)
+    tmp.replace(path)
