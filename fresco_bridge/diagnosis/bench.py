@@ -1,0 +1,160 @@
+"""``diagnose-bench``: records with known effects from the simulated rig, diagnosed blind.
+
+Record i of a bench with seed S carries effect ``CLASSES[i % len(CLASSES)]`` (``none`` twice
+per cycle, so false alarms are measured on enough records) and is generated from the seed
+``S * 100003 + i``: any record can be regenerated alone. The diagnosis sees only time,
+command, measured displacement and force — never the effect, its magnitude or the specimen.
+Records run through ``fresco_bridge.sweeps.run_sweep`` (serial, local pool, or Dask).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .model import EFFECT_NAMES
+from .synth import synthetic_record
+from .verdict import diagnose
+
+__all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "diagnose_one", "effect_magnitude",
+           "format_bench", "summarise_bench"]
+
+CLASSES = (*EFFECT_NAMES, "none", "none")
+MAGNITUDE_OF = {
+    "actuator_delay": "tau", "actuator_amplitude": "amplitude_error", "backlash": "gap",
+    "friction": "coulomb", "pinching": "zeta_s", "degradation": "delta_mean",
+    "rate_dependence": "viscous", "sensor_bias": "force_bias", "sensor_noise": "force_noise_std",
+}
+"""The parameter whose relative error is the effect's "magnitude" error. For degradation it is
+the mean of delta_nu and delta_eta: on these records strength and stiffness degradation trade
+off against each other (their sum is well determined, each alone is not; both are reported)."""
+
+
+def effect_magnitude(effect: str, values: Mapping[str, float]) -> float | None:
+    """The effect's magnitude from its parameter values (None when absent)."""
+    name = MAGNITUDE_OF.get(effect)
+    if name == "delta_mean":
+        if "delta_nu" not in values or "delta_eta" not in values:
+            return None
+        return 0.5 * (values["delta_nu"] + values["delta_eta"])
+    return None if name is None or name not in values else values[name]
+MAGNITUDE_TOLERANCE = 0.20
+
+
+def bench_items(n: int, seed: int, steps: int) -> list[tuple[int, str, int, int]]:
+    """(index, effect, record seed, steps) of every record of the bench."""
+    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps) for i in range(n)]
+
+
+def diagnose_one(item: tuple[int, str, int, int]) -> dict[str, Any]:
+    """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
+    index, effect, record_seed, steps = item
+    started = time.perf_counter()
+    synthetic = synthetic_record(effect, record_seed, steps=steps)
+    generated = time.perf_counter()
+    result = diagnose(synthetic.record)
+    verdict = result["verdict"]
+    true_candidate = next((e for e in result["effects"] if e["name"] == effect), None)
+    estimates = {} if true_candidate is None else {
+        name: p["value"] for name, p in true_candidate["params"].items()}
+    errors = {name: abs(estimates[name] - value) / abs(value)
+              for name, value in synthetic.truth.items() if name in estimates and value}
+    true_size = effect_magnitude(effect, synthetic.truth)
+    found = effect_magnitude(effect, estimates)
+    if true_size and found is not None:
+        errors["magnitude"] = abs(found - true_size) / abs(true_size)
+    return {
+        "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
+        "confidence": verdict["confidence"], "truth": synthetic.truth, "estimates": estimates,
+        "relative_errors": errors, "specimen": synthetic.specimen,
+        "gap_before_pct": result["baseline"]["gap_withheld"]["total_pct"],
+        "shrink_pct": None if true_candidate is None else true_candidate["shrink_pct"],
+        "verdict_shrink_pct": verdict["shrink_pct"],
+        "generate_seconds": generated - started, "diagnose_seconds": result["seconds"],
+    }
+
+
+def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Confusion matrix, top-1, false alarms, magnitude errors and shrink statistics."""
+    labels = [*EFFECT_NAMES, "none"]
+    predicted_labels = sorted({r["predicted"] for r in rows} - set(labels))
+    matrix = {t: Counter(r["predicted"] for r in rows if r["effect"] == t) for t in labels}
+    correct = [r for r in rows if r["predicted"] == r["effect"]]
+    none_rows = [r for r in rows if r["effect"] == "none"]
+    effect_rows = [r for r in rows if r["effect"] != "none"]
+    magnitude: dict[str, list[float]] = {}
+    for r in correct:
+        if "magnitude" in r["relative_errors"]:
+            magnitude.setdefault(r["effect"], []).append(r["relative_errors"]["magnitude"])
+    all_mag = [e for errs in magnitude.values() for e in errs]
+    shrink = [r["shrink_pct"] for r in correct if r["effect"] != "none"
+              and r["shrink_pct"] is not None]
+    return {
+        "records": len(rows),
+        "top1_pct": 100.0 * len(correct) / len(rows) if rows else math.nan,
+        "effects_top1_pct": 100.0 * sum(r in correct for r in effect_rows) / len(effect_rows)
+        if effect_rows else math.nan,
+        "none_false_alarm_pct": 100.0 * sum(r["predicted"] != "none" for r in none_rows)
+        / len(none_rows) if none_rows else math.nan,
+        "missed_as_none_pct": 100.0 * sum(r["predicted"] == "none" for r in effect_rows)
+        / len(effect_rows) if effect_rows else math.nan,
+        "labels": labels, "extra_predictions": predicted_labels,
+        "confusion": {t: dict(matrix[t]) for t in labels},
+        "magnitude_within_20pct": 100.0 * sum(e <= MAGNITUDE_TOLERANCE for e in all_mag)
+        / len(all_mag) if all_mag else math.nan,
+        "magnitude_error_median_pct": {k: 100.0 * float(np.median(v))
+                                       for k, v in magnitude.items()},
+        "magnitude_error_max_pct": {k: 100.0 * float(np.max(v)) for k, v in magnitude.items()},
+        "shrink_pct": {"mean": float(np.mean(shrink)), "median": float(np.median(shrink)),
+                       "min": float(np.min(shrink))} if shrink else {},
+        "diagnose_seconds": {"median": float(np.median([r["diagnose_seconds"] for r in rows])),
+                             "max": float(np.max([r["diagnose_seconds"] for r in rows]))}
+        if rows else {},
+        "failures": [{k: r[k] for k in ("index", "seed", "effect", "predicted", "confidence",
+                                        "gap_before_pct", "truth")}
+                     for r in rows if r["predicted"] != r["effect"]],
+    }
+
+
+def format_bench(summary: dict[str, Any], seed: int, wall: float) -> str:
+    """The bench's printout: headline numbers, confusion matrix, magnitudes, failures."""
+    labels = summary["labels"]
+    columns = [*labels, *summary["extra_predictions"]]
+    short = {name: name.replace("actuator_", "act_").replace("rate_dependence", "rate")
+             .replace("sensor_", "sens_").replace("degradation", "degrad")[:10]
+             for name in columns}
+    width = max(len(x) for x in labels) + 1
+    lines = [
+        f"diagnose-bench: {summary['records']} records, seed {seed}, {wall:.1f} s wall",
+        f"top-1 {summary['top1_pct']:.1f} % (effects {summary['effects_top1_pct']:.1f} %); "
+        f"none false alarms {summary['none_false_alarm_pct']:.1f} %; effects missed as none "
+        f"{summary['missed_as_none_pct']:.1f} %",
+        f"magnitude within 20 %: {summary['magnitude_within_20pct']:.1f} % of correctly "
+        "named records",
+        "confusion (rows: true effect, columns: verdict):",
+        " " * width + " ".join(f"{short[c]:>10}" for c in columns),
+    ]
+    for t in labels:
+        row = summary["confusion"][t]
+        lines.append(f"{t:<{width}}" + " ".join(f"{row.get(c, 0):>10}" for c in columns))
+    lines.append("magnitude error (median / max, % of the true value):")
+    for effect, median in summary["magnitude_error_median_pct"].items():
+        lines.append(f"  {effect:<20} {MAGNITUDE_OF[effect]:<16} {median:7.2f} / "
+                     f"{summary['magnitude_error_max_pct'][effect]:7.2f}")
+    if summary["shrink_pct"]:
+        s = summary["shrink_pct"]
+        lines.append(f"gap shrink of the true effect (correct records): mean {s['mean']:.1f} %, "
+                     f"median {s['median']:.1f} %, min {s['min']:.1f} %")
+    if summary["diagnose_seconds"]:
+        d = summary["diagnose_seconds"]
+        lines.append(f"diagnosis time per record: median {d['median']:.1f} s, max {d['max']:.1f} s")
+    for f in summary["failures"]:
+        lines.append(f"  failure: record {f['index']} (seed {f['seed']}) {f['effect']} -> "
+                     f"{f['predicted']} (confidence {f['confidence']:.2f}, gap "
+                     f"{f['gap_before_pct']:.2f} %)")
+    return "\n".join(lines)

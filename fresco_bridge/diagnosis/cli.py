@@ -1,0 +1,182 @@
+"""``fresco-bridge diagnose`` and ``diagnose-bench``: parsers and handlers.
+
+Bad input (a record, a baseline file, an option) is one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .load import UNITS, DiagnosisInputError, load_record
+from .names import BASELINES
+
+__all__ = ["COMMANDS", "add_diagnosis_parsers", "diagnosis_command", "read_baseline"]
+
+COMMANDS = frozenset({"diagnose", "diagnose-bench"})
+_TOML_NAMES = {
+    "bilinear": ("k0", "fy", "alpha"),
+    "bouc-wen": ("k0", "fy", "alpha", "n", "beta", "gamma"),
+    "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "delta_nu",
+             "delta_eta"),
+}
+
+
+def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``diagnose`` and ``diagnose-bench`` to the top-level sub-parsers."""
+    units = "; ".join(f"{q}: {', '.join(u)}" for q, u in UNITS.items())
+    p = sub.add_parser(
+        "diagnose", help="where a test departs from its simulation, which unmodelled effect "
+                         "causes it, and how far the gap shrinks once it is added")
+    p.add_argument("record", type=Path,
+                   help="a bridge run directory, or a CSV with time,cmd_disp,meas_force "
+                        "(meas_disp optional)")
+    p.add_argument("--baseline", default="bouc-wen",
+                   help=f"the sim's law: {', '.join(BASELINES)}, or a PARAMS.toml "
+                        "(kind, [params], fit = true|false); default bouc-wen")
+    p.add_argument("--site", default=None, help="the site to diagnose (records with several)")
+    p.add_argument("--json", type=Path, default=None, metavar="OUT",
+                   help="write the diagnosis as JSON (schema: README)")
+    p.add_argument("--report", type=Path, default=None, metavar="DIR",
+                   help="write plots, summary.txt and diagnosis.json into DIR")
+    p.add_argument("--units", default=None,
+                   help=f"units of a CSV as disp=U,force=U,time=U ({units}); default mm,kN,s")
+    p.add_argument("--noise-floor", type=float, default=None, metavar="PCT",
+                   help="withheld gap (NRMS %%) below which the verdict is none (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    b = sub.add_parser("diagnose-bench",
+                       help="generate records with known effects on the simulated rig and "
+                            "diagnose them blind: confusion matrix, top-1, magnitude errors")
+    b.add_argument("--n", type=int, default=55, help="number of records (default 55)")
+    b.add_argument("--seed", type=int, default=1, help="bench seed (default 1)")
+    b.add_argument("--steps", type=int, default=3000, help="samples per record (default 3000)")
+    b.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: one per core; 1 = serial)")
+    b.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on a Dask cluster, e.g. tcp://127.0.0.1:8786")
+    b.add_argument("--json", type=Path, default=None, metavar="OUT",
+                   help="write every record's result and the summary as JSON")
+    b.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def read_baseline(text: str) -> tuple[str, dict[str, float], bool]:
+    """(kind, given parameters in fitting names, fit?) from ``--baseline``."""
+    if text in BASELINES:
+        return text, {}, True
+    path = Path(text)
+    if path.suffix != ".toml":
+        raise DiagnosisInputError(
+            f"--baseline: unknown baseline {text!r}; choose {', '.join(BASELINES)} or a "
+            "PARAMS.toml file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise DiagnosisInputError(f"{path}: cannot read: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DiagnosisInputError(f"{path}: not valid TOML: {exc}") from None
+    kind = data.get("kind")
+    if kind not in BASELINES:
+        raise DiagnosisInputError(f"{path}: kind: must be one of {', '.join(BASELINES)} "
+                                  f"(got {kind!r})")
+    unknown_keys = set(data) - {"kind", "params", "fit"}
+    if unknown_keys:
+        raise DiagnosisInputError(f"{path}: unknown key(s) {', '.join(sorted(unknown_keys))} "
+                                  "(allowed: kind, params, fit)")
+    fit = data.get("fit", True)
+    if not isinstance(fit, bool):
+        raise DiagnosisInputError(f"{path}: fit: must be true or false (got {fit!r})")
+    params = data.get("params", {})
+    if not isinstance(params, dict):
+        raise DiagnosisInputError(f"{path}: params: must be a table")
+    allowed = _TOML_NAMES[kind]
+    for name, value in params.items():
+        if name not in allowed:
+            raise DiagnosisInputError(f"{path}: params.{name}: unknown for {kind} "
+                                      f"(allowed: {', '.join(allowed)})")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise DiagnosisInputError(f"{path}: params.{name}: must be a number (got {value!r})")
+    if not fit:
+        missing = [n for n in allowed if n not in params]
+        if missing:
+            raise DiagnosisInputError(f"{path}: fit = false needs every parameter; missing "
+                                      f"{', '.join(missing)}")
+    values = {k: float(v) for k, v in params.items() if k not in ("beta", "gamma")}
+    if "beta" in params or "gamma" in params:
+        if not ("beta" in params and "gamma" in params):
+            raise DiagnosisInputError(f"{path}: params: give beta and gamma together")
+        total = float(params["beta"]) + float(params["gamma"])
+        if total <= 0.0:
+            raise DiagnosisInputError(f"{path}: params: beta + gamma must be > 0 (got {total})")
+        values["bg_sum"] = total
+        values["beta_share"] = float(params["beta"]) / total
+    return kind, values, fit
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    from ..progress import ProgressBar
+    from .report import summary, write_json, write_report
+    from .verdict import NOISE_FLOOR_PCT, Options, diagnose
+
+    kind, params, fit = read_baseline(args.baseline)
+    if args.noise_floor is not None and not args.noise_floor > 0.0:
+        raise DiagnosisInputError(f"--noise-floor: must be > 0 (got {args.noise_floor})")
+    record = load_record(args.record, site=args.site, units=args.units)
+    options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
+                      noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
+    bar = ProgressBar("diagnose", 1, enabled=not args.no_progress)
+    result = diagnose(record, options, progress=bar)
+    print(summary(result))
+    if args.json is not None:
+        write_json(result, args.json)
+        print(f"json      {args.json}")
+    if args.report is not None:
+        files = write_report(result, args.report)
+        print(f"report    {args.report}/ ({len(files)} files)")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from ..progress import ProgressBar
+    from ..sweeps import run_sweep
+    from .bench import bench_items, diagnose_one, format_bench, summarise_bench
+
+    if args.n < 1:
+        raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
+    if args.steps < 200:
+        raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
+    items = bench_items(args.n, args.seed, args.steps)
+    bar = ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress)
+    started = time.perf_counter()
+    rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
+                     progress=bar)
+    wall = time.perf_counter() - started
+    result = summarise_bench(rows)
+    print(format_bench(result, args.seed, wall))
+    if args.json is not None:
+        doc: dict[str, Any] = {"seed": args.seed, "n": args.n, "steps": args.steps,
+                               "wall_seconds": wall, "summary": result, "records": rows}
+        args.json.write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
+        print(f"json {args.json}")
+    return 0
+
+
+def diagnosis_command(args: argparse.Namespace) -> int:
+    """Run ``diagnose`` or ``diagnose-bench``; bad input -> one line on stderr, exit 2."""
+    from ..sweeps import SweepError
+
+    try:
+        if args.command == "diagnose":
+            return _diagnose(args)
+        return _bench(args)
+    except DiagnosisInputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except SweepError as exc:
+        print(f"error: diagnose-bench: {exc}", file=sys.stderr)
+        return 1

@@ -1,0 +1,292 @@
+"""The simulation of a test and its candidate augmentations: baseline law + one or two effects.
+
+The baseline "sim" is a hysteresis law of ``sim_actuator.models`` driven by the *commanded*
+displacement. Each candidate effect adds a few parameters where the physics puts them, in the
+order of the load path of ``sim_actuator`` (the simulated lab the bench generates with)::
+
+    command c -> [actuator: amplitude a, delay tau] -> piston x  (the LVDT reads x)
+    x -> [pin gap g] -> specimen law (Bouc-Wen, + pinching, + degradation) -> connection force
+    force + fixture friction Fc*sign(v) + viscous c_v*v -> load cell -> [sensor bias, noise]
+
+so every candidate predicts both channels: the measured displacement and the measured force.
+``sensor_noise`` predicts nothing new: it claims the white part of the gap (see ``fit``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from sim_actuator.models.paths import BWBN_PARAMETERS, LAW_BILINEAR, LAW_BWBN, drive
+
+from .load import DiagnosisInputError, Record
+from .names import BASELINES, EFFECT_NAMES
+
+__all__ = [
+    "BASELINES",
+    "EFFECT_NAMES",
+    "Context",
+    "Param",
+    "Spec",
+    "law_parameters",
+]
+
+FloatArray = npt.NDArray[np.float64]
+Role = Literal["law", "path", "gap", "out", "noise"]
+
+DZ_MAX = 0.2
+"""RK4 resolution of the law drives while fitting: the law's force error is ~3e-6 of fy
+(``sim_actuator/models/paths.py`` at this setting, measured), far below any sensor noise."""
+
+
+@dataclass(frozen=True, slots=True)
+class Param:
+    """A fitted parameter: bounds and start relative to the record's scales (see Context)."""
+
+    name: str
+    role: Role
+    unit: str
+    lo: float
+    hi: float
+    init: float
+    meaning: str
+
+
+@dataclass(frozen=True, slots=True)
+class Context:
+    """The record and the scales that bound every parameter."""
+
+    record: Record
+    d_peak: float
+    """max |cmd|, mm."""
+    f_peak: float
+    """max |force|, kN."""
+    k_est: float
+    """Initial stiffness estimated from the first loading, kN/mm."""
+    v_rms: float
+    """RMS command velocity, mm/s."""
+    dt: float
+    """Median sample interval, s."""
+    duration: float
+
+    @classmethod
+    def of(cls, record: Record) -> Context:
+        c, f, t = record.cmd, record.force, record.time
+        d_peak = float(np.max(np.abs(c)))
+        f_peak = float(np.max(np.abs(f)))
+        if f_peak == 0.0:
+            raise DiagnosisInputError(f"{record.source}: meas_force is zero throughout")
+        dt = float(np.median(np.diff(t)))
+        v = np.diff(c) / np.diff(t)
+        return cls(record, d_peak, f_peak, _initial_stiffness(c, f, d_peak, f_peak),
+                   float(np.sqrt(np.mean(v * v))) or 1.0, dt, float(t[-1] - t[0]))
+
+
+def _initial_stiffness(c: FloatArray, f: FloatArray, d_peak: float, f_peak: float) -> float:
+    """The elastic (unloading) stiffness: the 90th percentile of the step slopes dF/dc.
+
+    Unloading branches of every law here start at the initial stiffness, and they are a good
+    share of any cyclic record; friction jumps and gaps are too rare to move the percentile.
+    """
+    dc, df = np.diff(c), np.diff(f)
+    moving = np.abs(dc) > 1e-3 * d_peak
+    slopes = df[moving] / dc[moving]
+    k = float(np.percentile(slopes, 90)) if slopes.size >= 10 else 0.0
+    return k if k > 0.0 and math.isfinite(k) else 3.0 * f_peak / d_peak
+
+
+def law_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
+    """Baseline law parameters per baseline kind, bounded by the record's scales."""
+    k, fp = ctx.k_est, ctx.f_peak
+    stiff = Param("k0", "law", "kN/mm", k / 30.0, k * 30.0, k, "initial stiffness")
+    yield_ = Param("fy", "law", "kN", 0.02 * fp, 3.0 * fp, 0.7 * fp, "yield force scale")
+    alpha = Param("alpha", "law", "1", 0.0, 0.8, 0.05, "post-yield stiffness ratio")
+    shape = (
+        Param("n", "law", "1", 1.0, 10.0, 2.0, "sharpness of the elastic-plastic transition"),
+        Param("bg_sum", "law", "1", 0.1, 5.0, 1.0, "beta + gamma (sets z_u with A = 1)"),
+        Param("beta_share", "law", "1", 0.02, 3.0, 0.5, "beta / (beta + gamma)"),
+    )
+    return {
+        "bilinear": (stiff, yield_, alpha),
+        "bouc-wen": (stiff, yield_, alpha, *shape),
+        "bwbn": (stiff, yield_, alpha, *shape, *_PINCHING, *_DEGRADATION),
+    }
+
+
+_PINCHING = (
+    Param("zeta_s", "law", "1", 0.0, 0.97, 0.3, "pinching severity (BWBN zeta_s)"),
+    Param("psi0", "law", "1", 0.02, 1.5, 0.2, "pinching spread (BWBN psi0)"),
+    Param("q", "law", "1", 0.0, 0.6, 0.1, "pinching centre, fraction of z_u (BWBN q)"),
+)
+_DEGRADATION = (
+    Param("delta_nu", "law", "1", 0.0, 0.5, 2e-4, "strength degradation per unit energy"),
+    Param("delta_eta", "law", "1", 0.0, 0.5, 2e-4, "stiffness degradation per unit energy"),
+)
+PINCHING_FIXED = {"p": 1.0, "lam": 0.5, "delta_psi": 0.0}
+"""BWBN pinching terms the candidate holds fixed: build-up within the first cycle (p = 1 per
+unit normalised energy) and Foliente's coupling lambda = 0.5 (the sim-actuator preset)."""
+
+
+def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
+    """Candidate effects and their parameters, bounded by the record's scales."""
+    d, f = ctx.d_peak, ctx.f_peak
+    tau_max = min(0.5, 0.1 * ctx.duration)
+    return {
+        "actuator_delay": (Param("tau", "path", "s", 0.0, tau_max, 2.0 * ctx.dt,
+                                 "pure delay of the piston behind the command"),),
+        "actuator_amplitude": (Param("amplitude_error", "path", "1", -0.5, 0.5, 0.0,
+                                     "piston/command - 1"),),
+        "backlash": (Param("gap", "gap", "mm", 0.0, 0.3 * d, 0.01 * d,
+                           "clearance of the pin on each side"),),
+        "friction": (Param("coulomb", "out", "kN", 0.0, f, 0.02 * f,
+                           "Coulomb friction of the fixture"),),
+        "pinching": _PINCHING,
+        "degradation": _DEGRADATION,
+        "rate_dependence": (Param("viscous", "out", "kN*s/mm", 0.0, 2.0 * f / ctx.v_rms,
+                                  0.02 * f / ctx.v_rms, "viscous force per velocity"),),
+        "sensor_bias": (Param("force_bias", "out", "kN", -f, f, 0.0, "load-cell offset"),
+                        *([] if ctx.record.meas_disp is None else
+                          [Param("disp_bias", "out", "mm", -d, d, 0.0, "LVDT offset")])),
+        "sensor_noise": (Param("force_noise_std", "noise", "kN", 0.0, math.inf, 0.0,
+                               "white noise on the load cell"),
+                         Param("disp_noise_std", "noise", "mm", 0.0, math.inf, 0.0,
+                               "white noise on the LVDT")),
+    }
+
+
+
+
+@dataclass(frozen=True, slots=True)
+class Spec:
+    """A model to fit: a baseline law kind plus zero or more effects."""
+
+    baseline: str
+    effects: tuple[str, ...]
+    params: tuple[Param, ...]
+    fixed: Mapping[str, float]
+    """Parameters held (user-given baseline values that are not fitted)."""
+
+    @property
+    def name(self) -> str:
+        return "+".join(self.effects) if self.effects else "none"
+
+    @property
+    def law_kind(self) -> str:
+        """The law actually driven: pinching/degradation need the Bouc-Wen family."""
+        if self.baseline == "bilinear" and {"pinching", "degradation"} & set(self.effects):
+            return "bwbn"
+        return self.baseline
+
+
+def make_spec(ctx: Context, baseline: str, effects: Sequence[str],
+              fixed: Mapping[str, float] | None = None) -> Spec:
+    """The parameters of ``baseline`` + ``effects`` (effects already in a bwbn baseline are
+    not added twice; bilinear + pinching/degradation drives BWBN with n fitted)."""
+    law = list(law_parameters(ctx)[baseline])
+    names = {p.name for p in law}
+    eff = effect_parameters(ctx)
+    extra: list[Param] = []
+    for effect in effects:
+        for p in eff[effect]:
+            if p.name not in names:
+                extra.append(p)
+                names.add(p.name)
+    if baseline == "bilinear" and {"pinching", "degradation"} & set(effects):
+        bw = law_parameters(ctx)["bouc-wen"]
+        law = [*law, *(p for p in bw if p.name not in names)]
+        law = [Param("n", "law", "1", 1.0, 20.0, 8.0, p.meaning) if p.name == "n" else p
+               for p in law]
+    held = dict(fixed or {})
+    return Spec(baseline, tuple(effects),
+                tuple(p for p in (*law, *extra) if p.name not in held), held)
+
+
+# -- prediction -----------------------------------------------------------------------------------
+def _law_vector(kind: str, values: Mapping[str, float]) -> tuple[int, FloatArray]:
+    if kind == "bilinear":
+        return LAW_BILINEAR, np.array([values["k0"], values["fy"], values["alpha"]])
+    s, r = values.get("bg_sum", 1.0), values.get("beta_share", 0.5)
+    full = {"k0": values["k0"], "fy": values["fy"], "alpha": values["alpha"],
+            "n": values.get("n", 2.0), "beta": r * s, "gamma": (1.0 - r) * s, "A0": 1.0,
+            "delta_a": 0.0, "delta_nu": values.get("delta_nu", 0.0),
+            "delta_eta": values.get("delta_eta", 0.0), "zeta_s": values.get("zeta_s", 0.0),
+            "q": values.get("q", 0.0), "psi0": values.get("psi0", 0.2), **PINCHING_FIXED}
+    return LAW_BWBN, np.array([full[name] for name in BWBN_PARAMETERS])
+
+
+def baseline_report(kind: str, values: Mapping[str, float]) -> dict[str, float]:
+    """Law parameters in ``sim_actuator.models`` names (beta, gamma instead of sum/share)."""
+    if kind == "bilinear" and "n" not in values:
+        return {k: float(values[k]) for k in ("k0", "fy", "alpha")}
+    s, r = values.get("bg_sum", 1.0), values.get("beta_share", 0.5)
+    out = {k: float(values[k]) for k in ("k0", "fy", "alpha", "n") if k in values}
+    out.update(beta=float(r * s), gamma=float((1.0 - r) * s))
+    for k in ("zeta_s", "psi0", "q", "delta_nu", "delta_eta"):
+        if k in values:
+            out[k] = float(values[k])
+    return out
+
+
+IntArray = npt.NDArray[np.int64]
+
+
+def piston_path(ctx: Context, values: Mapping[str, float]) -> tuple[FloatArray, IntArray]:
+    """(drive path, indices of the record's samples in it): the piston after amplitude and
+    delay. A delayed piecewise-linear command passes through its own vertices between samples,
+    so the vertices are part of the path (a reversal is never cut short)."""
+    rec = ctx.record
+    c = rec.cmd * (1.0 + values.get("amplitude_error", 0.0))
+    tau = values.get("tau", 0.0)
+    if tau <= 0.0:
+        return c, np.arange(c.size, dtype=np.int64)
+    t = rec.time
+    shifted = t - tau
+    x = np.interp(shifted, t, c)
+    vertex_times = t + tau  # the piston reaches c_j at t_j + tau
+    inside = vertex_times < t[-1]
+    merged_t = np.concatenate([t, vertex_times[inside]])
+    merged_x = np.concatenate([x, c[inside]])
+    order = np.argsort(merged_t, kind="stable")
+    where = np.empty(order.size, dtype=np.int64)
+    where[order] = np.arange(order.size)
+    path: FloatArray = merged_x[order]
+    return path, where[: t.size]
+
+
+def law_force(spec: Spec, ctx: Context, values: Mapping[str, float]) -> FloatArray:
+    """Connection force at the record's samples (the law behind the pin gap, if any)."""
+    path, index = piston_path(ctx, values)
+    law, vec = _law_vector(spec.law_kind, values)
+    force: FloatArray = drive(law, vec, path, values.get("gap", 0.0), DZ_MAX)[index]
+    return force
+
+
+def finish(ctx: Context, values: Mapping[str, float],
+           force: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(predicted force, predicted displacement) from the connection force: fixture friction
+    and viscosity on the piston velocity, sensor offsets."""
+    rec = ctx.record
+    x = np.interp(rec.time - values.get("tau", 0.0), rec.time, rec.cmd) if values.get(
+        "tau", 0.0) > 0.0 else rec.cmd
+    x = x * (1.0 + values.get("amplitude_error", 0.0))
+    out = force + values.get("force_bias", 0.0)
+    fc, cv = values.get("coulomb", 0.0), values.get("viscous", 0.0)
+    if fc or cv:
+        v = np.zeros_like(x)
+        v[1:] = np.diff(x) / np.diff(rec.time)
+        out = out + fc * _held_sign(v) + cv * v
+    return out, x + values.get("disp_bias", 0.0)
+
+
+def _held_sign(v: FloatArray) -> FloatArray:
+    """sign(v), keeping the last non-zero sign through holds (Coulomb memory of the rig)."""
+    s = np.sign(v)
+    idx = np.where(s != 0.0, np.arange(s.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    held: FloatArray = s[idx]
+    return held

@@ -1,0 +1,380 @@
+"""The diagnosis: baseline on the calibration part, every candidate scored on the withheld part.
+
+Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
+
+1. Split: the first :data:`CALIBRATION_FRACTION` of the samples calibrate, the rest is
+   withheld. Fits receive ``Record.part(stop)`` only: the withheld samples never reach them.
+2. Baseline: the law driven by the command, every parameter fitted (shape too).
+3. Gap on the withheld part, per channel, as NRMS in % (force: measured − predicted over the
+   RMS measured force; displacement: measured − predicted over the RMS command), and
+   ``total`` = their root sum of squares. Below :data:`NOISE_FLOOR_PCT` the verdict is ``none``.
+4. Each candidate: the baseline plus one effect, all refitted on the calibration part,
+   predicting the withheld part; ``sensor_noise`` claims the white part of the baseline's gap
+   (its std estimated on the calibration residual, never on the withheld one).
+   ``shrink_pct`` = 100 (1 − after/before); ``score`` = shrink − :data:`PARSIMONY_PCT` per
+   parameter. The best score wins if it shrinks the gap by at least :data:`MIN_SHRINK_PCT`.
+5. Pairs: when the best single leaves more than twice the noise-only gap (and more than the
+   floor), pairs of the top three singles are fitted (and each top single with sensor noise);
+   a pair wins only if its score beats the best single's by :data:`PAIR_MARGIN_PCT`.
+6. Confidence: the share of the winner's gap reduction that the runner-up does not achieve,
+   (after_second − after_best) / (before − after_best); for ``none``, 1 − gap/floor.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import indicators as ind
+from .fit import Fit, fit_spec, predict
+from .load import DiagnosisInputError, Record
+from .localise import localise
+from .model import (
+    BASELINES,
+    EFFECT_NAMES,
+    Context,
+    Param,
+    baseline_report,
+    effect_parameters,
+    make_spec,
+)
+
+__all__ = [
+    "CALIBRATION_FRACTION",
+    "MIN_SHRINK_PCT",
+    "NOISE_FLOOR_PCT",
+    "PAIR_MARGIN_PCT",
+    "PARSIMONY_PCT",
+    "SCHEMA",
+    "Options",
+    "diagnose",
+]
+
+FloatArray = npt.NDArray[np.float64]
+Progress = Callable[[int, int], None]
+
+SCHEMA = "fresco-bridge/diagnosis/1"
+CALIBRATION_FRACTION = 0.6
+NOISE_FLOOR_PCT = 1.0
+PARSIMONY_PCT = 2.0
+MIN_SHRINK_PCT = 20.0
+PAIR_MARGIN_PCT = 5.0
+TOP_FOR_PAIRS = 3
+MAX_FIT_SAMPLES = 6000
+"""Longer calibration parts are thinned for the fits (every k-th sample and every reversal of
+the command: the same path for a rate-independent law); scoring uses every sample."""
+BASELINE_RESTARTS = ({"n": 1.2, "beta_share": 0.5}, {"n": 4.0, "beta_share": 0.8})
+"""Further starts of the baseline fit (the best calibration cost wins): a smooth and a sharp
+transition besides the default n = 2, so a record far from n = 2 is not left in a local
+minimum."""
+BASELINE_SCOUT = 15
+"""Evaluations each baseline start gets before the best one is fitted to convergence."""
+RESTART_IF_COST_ABOVE = 0.5
+"""A shape-changing candidate (:data:`RESTARTED`) fitted from the baseline's values that keeps
+more than this share of the baseline's calibration cost, with its effect parameters stuck at
+their lower bounds, is fitted again from the generic start (the better one is kept): a baseline
+bent to mimic a gap or pinching is a trap for them."""
+RESTARTED = frozenset({"backlash", "pinching"})
+
+
+@dataclass(frozen=True)
+class Options:
+    """How to diagnose: baseline law (and optional given parameters), floor, candidates."""
+
+    baseline: str = "bouc-wen"
+    baseline_params: Mapping[str, float] = field(default_factory=dict)
+    fit_baseline: bool = True
+    """False: the given ``baseline_params`` are the sim, held (a PARAMS.toml with fit = false)."""
+    noise_floor_pct: float = NOISE_FLOOR_PCT
+    calibration_fraction: float = CALIBRATION_FRACTION
+    effects: Sequence[str] = EFFECT_NAMES
+    pairs: bool = True
+
+
+@dataclass
+class _Scored:
+    name: str
+    effects: tuple[str, ...]
+    params: list[Param]
+    fit: Fit | None
+    values: dict[str, float]
+    std: dict[str, float]
+    before: dict[str, float | None]
+    after: dict[str, float | None]
+    force: FloatArray | None = None
+    disp: FloatArray | None = None
+
+    @property
+    def shrink(self) -> float:
+        b, a = self.before["total_pct"], self.after["total_pct"]
+        if b is None or a is None or not math.isfinite(a) or b <= 0.0:
+            return -math.inf
+        return 100.0 * (1.0 - a / b)
+
+    @property
+    def score(self) -> float:
+        return self.shrink - PARSIMONY_PCT * len(self.params)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "params": {p.name: {"value": self.values.get(p.name), "std": self.std.get(p.name),
+                                "unit": p.unit, "meaning": p.meaning} for p in self.params},
+            "n_params": len(self.params),
+            "gap_before": self.before, "gap_after": self.after,
+            "shrink_pct": _finite(self.shrink), "score": _finite(self.score),
+            "fit": None if self.fit is None else {
+                "converged": self.fit.ok, "evaluations": self.fit.evaluations,
+                "calibration_cost": self.fit.cost},
+        }
+
+
+def _finite(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def _rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def _gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
+         noise: tuple[float, float] = (0.0, 0.0)) -> dict[str, float | None]:
+    """NRMS gap in % per channel on ``part``; ``noise`` (std) is removed from the variance."""
+    rf = (record.force - force)[part]
+    var_f = max(float(np.mean(rf * rf)) - noise[0] ** 2, 0.0)
+    g_f = 100.0 * math.sqrt(var_f) / (_rms(record.force[part]) or 1.0)
+    g_d: float | None = None
+    if record.meas_disp is not None and disp is not None:
+        rd = (record.meas_disp - disp)[part]
+        var_d = max(float(np.mean(rd * rd)) - noise[1] ** 2, 0.0)
+        g_d = 100.0 * math.sqrt(var_d) / (_rms(record.cmd[part]) or 1.0)
+    total = math.hypot(g_f, g_d or 0.0)
+    if not math.isfinite(total):
+        total = math.inf
+    return {"force_pct": _finite(g_f), "disp_pct": _finite(g_d), "total_pct": total}
+
+
+def _effect_start(effect: str, cal: Context) -> dict[str, float]:
+    """Start values from the interface indicators where they say something directly."""
+    rec = cal.record
+    if rec.meas_disp is None:
+        return {}
+    if effect == "actuator_delay":
+        max_lag = min(50, rec.size - 3)
+        try:
+            tau = ind.xcorr_delay(rec.cmd, rec.meas_disp, cal.dt, max_lag)
+        except ind.IndicatorError:
+            return {}
+        return {"tau": max(tau, 0.1 * cal.dt)}
+    if effect == "actuator_amplitude":
+        c = rec.cmd
+        return {"amplitude_error": float(np.dot(c, rec.meas_disp) / np.dot(c, c)) - 1.0}
+    if effect == "sensor_bias":
+        return {"disp_bias": float(np.mean(rec.meas_disp - rec.cmd))}
+    return {}
+
+
+def diagnose(record: Record, options: Options | None = None,
+             progress: Progress | None = None) -> dict[str, Any]:
+    """Diagnose ``record``; the JSON-ready result (schema in the README)."""
+    opts = options or Options()
+    if opts.baseline not in BASELINES:
+        raise DiagnosisInputError(
+            f"unknown baseline {opts.baseline!r}; choose {', '.join(BASELINES)} or a PARAMS.toml")
+    unknown = [e for e in opts.effects if e not in EFFECT_NAMES]
+    if unknown:
+        raise DiagnosisInputError(f"unknown effect(s) {', '.join(unknown)}; candidates: "
+                                  f"{', '.join(EFFECT_NAMES)}")
+    started = time.perf_counter()
+    n = record.size
+    stop = round(opts.calibration_fraction * n)
+    if stop < 60 or n - stop < 40:
+        raise DiagnosisInputError(
+            f"{record.source}: record too short to split: {n} samples give {stop} to calibrate "
+            f"and {n - stop} to withhold (need >= 60 and >= 40)")
+    calibration = record.part(stop)
+    cal = Context.of(calibration.thinned(MAX_FIT_SAMPLES))
+    full = Context.of(record)
+    withheld = slice(stop, n)
+    effects = [e for e in opts.effects]
+    total_fits = 1 + len(effects) + (TOP_FOR_PAIRS * 2 if opts.pairs else 0)
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(min(done, total_fits), total_fits)
+
+    fixed = {} if opts.fit_baseline else dict(opts.baseline_params)
+    spec0 = make_spec(cal, opts.baseline, [], fixed)
+    starts = [dict(opts.baseline_params)]
+    if opts.fit_baseline and opts.baseline != "bilinear":
+        starts += [{**opts.baseline_params, **extra} for extra in BASELINE_RESTARTS]
+    base_fit = min((fit_spec(spec0, cal, start, max_evaluations=BASELINE_SCOUT)
+                    for start in starts), key=lambda fit: fit.cost)
+    base_fit = fit_spec(spec0, cal, base_fit.values, max_evaluations=60)
+    tick()
+    values0 = base_fit.values
+    f0, d0 = predict(spec0, full, values0)
+    before = _gap(record, f0, d0, withheld)
+    noise_f = ind.white_noise_std((record.force - f0)[:stop])
+    noise_d = (ind.white_noise_std((record.meas_disp - d0)[:stop])
+               if record.meas_disp is not None else 0.0)
+    noise_only = math.hypot(100.0 * noise_f / (_rms(record.force[withheld]) or 1.0),
+                            100.0 * noise_d / (_rms(record.cmd[withheld]) or 1.0)
+                            if record.meas_disp is not None else 0.0)
+    noise_gap = {"force_noise_std": noise_f, "disp_noise_std": noise_d,
+                 "noise_only_gap_pct": noise_only}
+    eff_params = effect_parameters(cal)
+    scored: list[_Scored] = []
+    for effect in effects:
+        if effect == "sensor_noise":
+            params = list(eff_params[effect])
+            if record.meas_disp is None:
+                params = params[:1]
+            std_f = noise_f / math.sqrt(2.0 * (stop - 1))
+            values = {"force_noise_std": noise_f, "disp_noise_std": noise_d}
+            stds = {"force_noise_std": std_f, "disp_noise_std": noise_d / math.sqrt(2.0 * stop)}
+            after = _gap(record, f0, d0, withheld, (noise_f, noise_d))
+            scored.append(_Scored(effect, (effect,), params, None, values, stds, before, after,
+                                  f0, d0))
+            tick()
+            continue
+        scored.append(_fit_candidate(record, cal, full, opts, fixed, (effect,),
+                                     {**values0, **_effect_start(effect, cal)}, before,
+                                     withheld, base_fit.cost))
+        tick()
+    singles = sorted(scored, key=lambda s: s.score, reverse=True)
+    pairs: list[_Scored] = []
+    best = singles[0] if singles else None
+    if (opts.pairs and best is not None and before["total_pct"] is not None
+            and before["total_pct"] >= opts.noise_floor_pct
+            and (best.after["total_pct"] or 0.0) > max(opts.noise_floor_pct, 2.0 * noise_only)):
+        fitted = [s for s in singles if s.fit is not None][:TOP_FOR_PAIRS]
+        for i, a in enumerate(fitted):
+            for b in fitted[i + 1:]:
+                start = {**values0, **b.values, **a.values}
+                pairs.append(_fit_candidate(record, cal, full, opts, fixed,
+                                            (*a.effects, *b.effects), start, before, withheld,
+                                            base_fit.cost))
+                tick()
+            if "sensor_noise" in effects and a.force is not None:
+                after = _gap(record, a.force, a.disp, withheld, (noise_f, noise_d))
+                noise = next(s for s in scored if s.name == "sensor_noise")
+                pairs.append(_Scored(f"{a.name}+sensor_noise", (*a.effects, "sensor_noise"),
+                                     [*a.params, *noise.params], a.fit,
+                                     {**a.values, **noise.values}, {**a.std, **noise.std},
+                                     before, after, a.force, a.disp))
+                tick()
+    verdict = _verdict(before, singles, pairs, opts.noise_floor_pct)
+    if progress is not None:
+        progress(total_fits, total_fits)
+    sim_meas = None
+    if record.meas_disp is not None:
+        from sim_actuator.models.paths import drive
+
+        from .model import DZ_MAX, _law_vector
+
+        law, vec = _law_vector(spec0.law_kind, values0)
+        sim_meas = drive(law, vec, record.meas_disp, 0.0, DZ_MAX)
+    winner = next((s for s in [*singles, *pairs] if s.name == verdict["effect"]), None)
+    return {
+        "schema": SCHEMA,
+        "record": {
+            "source": record.source, "samples": n, "duration_s": float(record.time[-1]
+                                                                       - record.time[0]),
+            "dt_s": full.dt, "channels": ["cmd_disp", "meas_force"]
+            + (["meas_disp"] if record.meas_disp is not None else []),
+            "notes": [*record.notes, *cal.record.notes[len(record.notes):]],
+            "calibration": {"samples": [0, stop], "t_end": float(record.time[stop - 1])},
+            "withheld": {"samples": [stop, n], "t_start": float(record.time[stop])},
+        },
+        "baseline": {
+            "kind": opts.baseline, "fitted": opts.fit_baseline,
+            "params": baseline_report(spec0.law_kind, values0),
+            "std": {k: v for k, v in base_fit.std.items()},
+            "gap_calibration": _gap(record, f0, d0, slice(0, stop)),
+            "gap_withheld": before,
+            "fit": {"converged": base_fit.ok, "evaluations": base_fit.evaluations},
+        },
+        "noise_floor": {"floor_pct": opts.noise_floor_pct, **noise_gap},
+        "localization": localise(record, f0, sim_meas, stop),
+        "effects": [s.as_dict() for s in singles],
+        "pairs": [s.as_dict() for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
+        "verdict": verdict,
+        "seconds": time.perf_counter() - started,
+        "_series": {
+            "time": record.time, "cmd": record.cmd, "meas_disp": record.meas_disp,
+            "force": record.force, "sim": f0, "sim_disp": d0,
+            "best": None if winner is None else winner.force,
+            "best_disp": None if winner is None else winner.disp, "stop": stop,
+        },
+    }
+
+
+def _fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
+                   fixed: Mapping[str, float], effects: tuple[str, ...],
+                   start: Mapping[str, float], before: dict[str, float | None],
+                   withheld: slice, base_cost: float) -> _Scored:
+    spec = make_spec(cal, opts.baseline, effects, fixed)
+    law_names = {p.name for p in make_spec(cal, opts.baseline, [], fixed).params}
+    params = [p for p in spec.params if p.name not in law_names and p.role != "noise"]
+    result = fit_spec(spec, cal, start, max_evaluations=30, tolerance=1e-5)
+    stuck = all(result.values[p.name] <= p.lo + 0.02 * (p.hi - p.lo) for p in params)
+    if (set(effects) & RESTARTED and stuck
+            and result.cost > RESTART_IF_COST_ABOVE * base_cost):
+        generic = {k: v for k, v in start.items() if k not in law_names}
+        again = fit_spec(spec, cal, generic, max_evaluations=30, tolerance=1e-5)
+        if again.cost < result.cost:
+            result = again
+    force, disp = predict(spec, full, result.values)
+    after = _gap(record, force, disp, withheld)
+    return _Scored("+".join(effects), effects, params, result,
+                   {p.name: result.values[p.name] for p in params},
+                   {p.name: result.std.get(p.name, math.nan) for p in params},
+                   before, after, force, disp)
+
+
+def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: list[_Scored],
+             floor: float) -> dict[str, Any]:
+    gap = before["total_pct"] or 0.0
+    if gap < floor:
+        return {"effect": "none", "confidence": max(0.0, 1.0 - gap / floor),
+                "shrink_pct": 0.0, "gap_before_pct": gap, "gap_after_pct": gap,
+                "explanation": f"withheld gap {gap:.2f} % is below the noise floor {floor:g} %"}
+    ranked = sorted([*singles, *pairs], key=lambda s: s.score, reverse=True)
+    best_single = singles[0]
+    best = best_single
+    if pairs:
+        best_pair = max(pairs, key=lambda s: s.score)
+        if best_pair.score > best_single.score + PAIR_MARGIN_PCT:
+            best = best_pair
+    if best.shrink < MIN_SHRINK_PCT:
+        return {"effect": "unexplained", "confidence": 0.0, "shrink_pct": _finite(best.shrink),
+                "gap_before_pct": gap, "gap_after_pct": best.after["total_pct"],
+                "explanation": f"withheld gap {gap:.2f} % is above the floor but no candidate "
+                               f"shrinks it by {MIN_SHRINK_PCT:g} % (best: {best.name}, "
+                               f"{best.shrink:.1f} %)"}
+    others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)]
+    runner = others[0] if others else None
+    after = best.after["total_pct"] or 0.0
+    if runner is None or runner.after["total_pct"] is None:
+        confidence = 1.0
+    else:
+        confidence = (runner.after["total_pct"] - after) / max(gap - after, 1e-12)
+    return {
+        "effect": best.name, "confidence": float(min(max(confidence, 0.0), 1.0)),
+        "shrink_pct": _finite(best.shrink), "gap_before_pct": gap, "gap_after_pct": after,
+        "runner_up": None if runner is None else runner.name,
+        "explanation": f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} %"
+                       + ("" if runner is None else
+                          f"; the runner-up {runner.name} leaves "
+                          f"{runner.after['total_pct']:.2f} %"),
+    }
