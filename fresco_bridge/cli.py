@@ -10,11 +10,16 @@ import sys
 from pathlib import Path
 
 from .config import ConfigError, load_config
+from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
+from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
+from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
 from .lab import LabError, add_lab_parser, lab_command
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
-from .runs import RunDirError
+from .runs import RunDirError, check_resumable, resolve_run
+from .study import add_study_parser, study_command
+from .updating.cli import add_updater_parser, updater_command
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -25,11 +30,17 @@ def _setup_logging(verbose: bool) -> None:
     )
 
 
-async def _serve(config_path: Path) -> int:
+async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
     from .daemon import Bridge
 
+    if config_path is None:  # resume with the run's own snapshot
+        assert resume is not None
+        config_path = resume / "config.toml"
+        if REDACTED in config_path.read_text(encoding="utf-8"):
+            raise ConfigError(f"{config_path}: the snapshot's secrets were redacted; pass "
+                              "--config with the file the run was started with")
     cfg, text = load_config(config_path)
-    bridge = Bridge(cfg, text)
+    bridge = Bridge(cfg, text, resume=resume)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -55,6 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p_serve = sub.add_parser("serve", help="run the bridge daemon from a lab config")
     p_serve.add_argument("--config", type=Path, required=True, help="lab TOML file")
+    p_serve.add_argument("--resume", metavar="RUN", default=None,
+                         help="continue an interrupted run (a run directory, or a name under "
+                              "the config's run_dir) instead of starting a new one")
     p_check = sub.add_parser("check", help="validate a lab config and exit")
     p_check.add_argument("--config", type=Path, required=True)
     p_demo = sub.add_parser("demo", help="the source paper's two-story frame, end to end")
@@ -73,11 +87,21 @@ def main(argv: list[str] | None = None) -> int:
     add_report_parsers(sub)  # report, runs list|show|export, export (alias)
     add_lab_parser(sub)
     add_ctl_parser(sub)
+    add_study_parser(sub)
+    add_updater_parser(sub)
+    add_diagnosis_parsers(sub)  # diagnose, diagnose-bench
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
     try:
         if args.command == "serve":
-            return asyncio.run(_serve(args.config))
+            resume = None
+            if args.resume is not None:
+                cfg, _ = load_config(args.config)
+                resume = check_resumable(resolve_run(args.resume, cfg.bridge.run_dir))
+            return asyncio.run(_serve(args.config, resume))
+        if args.command == "runs" and args.runs_command == "resume":
+            run = check_resumable(resolve_run(args.run, args.runs))
+            return asyncio.run(_serve(args.config, run))
         if args.command == "check":
             cfg, _ = load_config(args.config)
             print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
@@ -94,8 +118,14 @@ def main(argv: list[str] | None = None) -> int:
             return lab_command(args)
         if args.command == "ctl":
             return ctl_command(args)
+        if args.command == "study":
+            return study_command(args)
+        if args.command == "updater":
+            return updater_command(args)
         if args.command in REPORT_COMMANDS:
             return report_command(args)
+        if args.command in DIAGNOSIS_COMMANDS:
+            return diagnosis_command(args)
     except (ConfigError, LabError, RunDirError, ControlError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -7,25 +7,24 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Discriminator,
     Field,
+    SecretStr,
     Tag,
     ValidationError,
     field_validator,
     model_validator,
 )
 
-from sim_actuator.models import MODEL_PARAMETERS, ModelParameterError, make_model
-
-from .controls.modbus import ModbusControllerConfig
-from .controls.mts import MtsControllerConfig
-from .controls.rig import RigControllerConfig
+from .config_model import ClientAddress, ConfigPath, IPv4Address, StrictConfig
+from .controls.kind import ControllerConfigBase
+from .controls.registry import CONTROLLER_KINDS, controller_kind, known_kinds
+from .controls.sim import SimControllerConfig
 from .safety import ControlPointLimitsConfig
+from .setups import SetupError, make_setup
 
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
 
@@ -34,29 +33,7 @@ class ConfigError(ValueError):
     """A configuration problem, already phrased for the user (file, key, reason)."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class SimControllerConfig(_Strict):
-    """In-process simulated specimen (one model per actuator)."""
-
-    kind: Literal["sim"] = "sim"
-    model: Literal["elastic", "bilinear", "bouc-wen", "bwbn"] = "bilinear"
-    params: dict[str, float] = Field(
-        default_factory=lambda: {"k0": 8.0, "fy": 12.0, "alpha": 0.05}
-    )
-    reset_on_new_session: bool = True
-    """A new integrator connection starts from a virgin specimen (a simulation, not a lab)."""
-
-    @model_validator(mode="after")
-    def _params_fit_model(self) -> SimControllerConfig:
-        try:
-            make_model(self.model, **self.params)
-        except ModelParameterError as exc:
-            allowed = ", ".join(MODEL_PARAMETERS.get(self.model, {}))
-            raise ValueError(f"{exc} (parameters of {self.model}: {allowed})") from None
-        return self
+_Strict = StrictConfig  # every model of the lab config shares the one strict base
 
 
 def _controller_kind(v: Any) -> str:
@@ -65,13 +42,13 @@ def _controller_kind(v: Any) -> str:
     return str(kind)
 
 
-ControllerConfig = Annotated[
-    Annotated[SimControllerConfig, Tag("sim")]
-    | Annotated[ModbusControllerConfig, Tag("modbus")]
-    | Annotated[MtsControllerConfig, Tag("mts")]
-    | Annotated[RigControllerConfig, Tag("rig")],
-    Discriminator(_controller_kind),
-]
+if TYPE_CHECKING:
+    ControllerConfig = ControllerConfigBase
+else:  # the discriminated union of every registered kind's config model
+    ControllerConfig = Annotated[
+        Union[tuple(Annotated[k.config, Tag(k.name)] for k in CONTROLLER_KINDS.values())],  # noqa: UP007
+        Discriminator(_controller_kind),
+    ]
 
 
 class SiteConfig(_Strict):
@@ -87,17 +64,30 @@ class SiteConfig(_Strict):
     """Number of basic DOFs of the element served (the -dof entries of genericClient)."""
     setup: Literal["NoTransformation", "OneActuator"] = "NoTransformation"
     controller: ControllerConfig = Field(default_factory=SimControllerConfig)
-    """``sim`` (in-process specimen), ``modbus`` or ``mts`` (a controller over TCP)."""
+    """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
+    ``modbus``, ``mts``."""
     damping: list[list[float]] | None = None
     """n×n damping matrix in basic DOFs, row by row (answers action 14); default zero."""
     mass: list[list[float]] | None = None
     """n×n mass matrix in basic DOFs, row by row (answers action 15); default zero."""
-    allowed_clients: list[str] | None = None
-    """Client IPv4 addresses allowed to connect; default: the bridge-wide list."""
+    allowed_clients: list[ClientAddress] | None = None
+    """Client IPv4 addresses (or CIDR networks) allowed to connect; default: the bridge-wide
+    list. ``[]`` admits anyone and needs ``bridge.allow_any_client = true``."""
     actor_tag: int = 1
     """Tag this site reports to a ShadowExpSite (site protocol only)."""
     limits: list[ControlPointLimitsConfig] = Field(default_factory=list)
     """``[[sites.limits]]``, one per control point (actuator after the setup); default none."""
+    tls: bool = False
+    """Mutual TLS as OpenFresco's ``TCP_SocketSSL``: the site presents ``cert_file`` /
+    ``key_file`` and admits only clients whose certificate ``client_ca_file`` issued directly
+    (verify depth 1). TCP only."""
+    cert_file: ConfigPath | None = None
+    """PEM certificate the site presents (OpenFresco's ``server.crt``)."""
+    key_file: ConfigPath | None = None
+    """PEM private key of ``cert_file`` (OpenFresco's ``server.key``)."""
+    client_ca_file: ConfigPath | None = None
+    """PEM CA certificate(s) that issue the clients' certificates (OpenFresco's
+    ``server_ca.crt``)."""
 
     @field_validator("limits", mode="before")
     @classmethod
@@ -112,14 +102,18 @@ class SiteConfig(_Strict):
             if m is not None and (len(m) != self.dofs or any(len(r) != self.dofs for r in m)):
                 n = self.dofs
                 raise ValueError(f"{key} must be a {n}×{n} matrix (dofs = {n})")
-        n_act = self.dofs if self.setup == "NoTransformation" else 1
-        if self.controller.kind != "sim" and n_act != 1:
-            raise ValueError(
-                f"controller {self.controller.kind} drives one actuator; this site needs {n_act} "
-                "(use setup OneActuator or dofs = 1)"
-            )
         if self.setup == "OneActuator" and self.dofs > 2:
             raise ValueError("setup OneActuator serves dofs = 1 or 2 (two nodes, -dof 1 -dof 1)")
+        try:
+            n_act = make_setup(self.setup, self.dofs).n_actuators  # setups.py owns the count
+        except SetupError as exc:
+            raise ValueError(str(exc)) from None
+        most = controller_kind(self.controller.kind).max_actuators
+        if most is not None and n_act > most:
+            raise ValueError(
+                f"controller {self.controller.kind} drives {most} actuator(s); this site needs "
+                f"{n_act} (use setup OneActuator or dofs = 1)"
+            )
         actuators = [lim.actuator for lim in self.limits]
         if any(a > n_act for a in actuators):
             raise ValueError(f"limits: actuator {max(actuators)} does not exist (setup "
@@ -127,25 +121,55 @@ class SiteConfig(_Strict):
         if len(set(actuators)) != len(actuators):
             raise ValueError(f"limits: one [[sites.limits]] table per actuator; repeated: "
                              f"{sorted({a for a in actuators if actuators.count(a) > 1})}")
+        self._tls_fits()
         return self
+
+    def _tls_fits(self) -> None:
+        files = {"cert_file": self.cert_file, "key_file": self.key_file,
+                 "client_ca_file": self.client_ca_file}
+        if not self.tls:
+            given = [k for k, v in files.items() if v is not None]
+            if given:
+                raise ValueError(f"{', '.join(given)} set but tls = false (set tls = true)")
+            return
+        if self.transport != "tcp":
+            raise ValueError("tls = true needs transport = \"tcp\" (OpenFresco's SSL channel is "
+                             "TCP; there is no TLS over UDP here)")
+        missing = [k for k, v in files.items() if v is None]
+        if missing:
+            raise ValueError(f"tls = true needs {', '.join(missing)} (OpenFresco's server.crt, "
+                             "server.key and server_ca.crt)")
+        for key, path in files.items():
+            assert path is not None
+            if not path.is_file():
+                raise ValueError(f"{key}: no such file {str(path)!r}")
 
 
 class BridgeConfig(_Strict):
-    host: str = "127.0.0.1"
+    host: IPv4Address = "127.0.0.1"
     """Bind address (IPv4: OpenSees clients only speak dotted IPv4)."""
-    allowed_clients: list[str] = Field(default_factory=lambda: ["127.0.0.1"])
+    allowed_clients: list[ClientAddress] = Field(default_factory=lambda: ["127.0.0.1"])
+    """Client IPv4 addresses (or CIDR networks) allowed to connect. ``[]`` (anyone) is refused
+    unless ``allow_any_client = true``."""
+    allow_any_client: bool = False
+    """Admit clients from any address where an allowlist is empty (logged loudly at start)."""
     max_data_size: int = Field(default=4096, ge=5, le=1_000_000)
     """Largest dataSize (doubles per vector) a client may announce."""
+    session_idle_timeout: float = Field(default=60.0, gt=0, le=86_400)
+    """Seconds a session may stay silent while the bridge owes it nothing (no request being
+    answered, no operator wait, no controller call) before it is ended; also a client that
+    does not read its replies. Frees a site whose client vanished without a word (UDP, a
+    half-open TCP connection)."""
     controller_timeout: float = Field(default=5.0, gt=0)
     """Deadline in seconds for every controller call; past it the site goes to HOLD."""
-    controller_recovery: float = Field(default=30.0, ge=0, allow_inf_nan=False)
+    controller_recovery: float = Field(default=30.0, ge=0)
     """Seconds a site in HOLD for a lost or silent controller keeps probing it inside the
     integrator's waiting request; back in time: the run continues, else the integrator is told
     to stop (NaN answers until its DIE).
     0: no recovery (HOLD answers NaN until the session ends, so the integrator stops)."""
-    run_dir: Path = Path("runs")
+    run_dir: ConfigPath = Path("runs")
     run_name: Name = "run"
-    control_socket: Path | None = None
+    control_socket: ConfigPath | None = None
     """Operator control socket (``fresco-bridge ctl``); default ``control.sock`` in the run
     directory (no socket when recording is off unless this is set)."""
 
@@ -153,6 +177,11 @@ class BridgeConfig(_Strict):
 class RecordConfig(_Strict):
     enabled: bool = True
     fsync: Literal["background", "inline", "off"] = "background"
+    """``background``: group commit (fdatasync off the step loop, at most every
+    ``sync_interval``); ``inline``: the step waits for fdatasync at every commit; ``off``."""
+    sync_interval: float = Field(default=0.01, ge=0.0, le=10.0)
+    """Group commit (``fsync = "background"``): seconds between two fdatasyncs at most; a
+    power loss can cost the commits of this long plus one fdatasync. Events sync at once."""
 
 
 class TelemetryConfig(_Strict):
@@ -166,19 +195,20 @@ class TelemetryConfig(_Strict):
     compact: bool = False
     queue_size: int = Field(default=10000, ge=10)
     username: str | None = None
-    password: str | None = None
+    password: SecretStr | None = None
+    """Broker password (never written to the run directory's config snapshot)."""
     tls: bool = False
     """Connect to the broker over TLS, verifying its certificate (system CAs unless
     ``tls_ca_file``) and host name."""
-    tls_ca_file: Path | None = None
+    tls_ca_file: ConfigPath | None = None
     """PEM file of the CA(s) that signed the broker's certificate."""
-    tls_cert_file: Path | None = None
+    tls_cert_file: ConfigPath | None = None
     """PEM client certificate (with ``tls_key_file``), for brokers that authenticate clients."""
-    tls_key_file: Path | None = None
+    tls_key_file: ConfigPath | None = None
     accept_commands: bool = False
     """Accept operator commands (pause/resume/abort) on ``<prefix>/<site>/cmd``; needs
     ``username``/``password`` and ``command_token`` (see README, threat model)."""
-    command_token: str | None = None
+    command_token: SecretStr | None = None
     """Shared secret every command message must carry (at least 16 characters)."""
     monitor_dt: float = Field(default=0.01, gt=0)
     """Integration time step (s) the monitors assume for FEI frequencies and delays."""
@@ -190,7 +220,7 @@ class TelemetryConfig(_Strict):
     written to the run record (``monitor`` lines) when recording is on (~10 µs per step)."""
     metrics_port: int | None = Field(default=None, ge=0, le=65535)
     """Serve Prometheus ``/metrics`` on this port (off when unset; 0 picks a free port)."""
-    metrics_host: str = "127.0.0.1"
+    metrics_host: IPv4Address = "127.0.0.1"
     """Bind address of the metrics endpoint (loopback by default: it has no authentication)."""
 
 
@@ -220,7 +250,8 @@ class TelemetryConfig(_Strict):
         if not ((self.username and self.password) or self.tls_cert_file is not None):
             problems.append("broker credentials (username and password, or a TLS client "
                             "certificate) are required")
-        if self.command_token is None or len(self.command_token) < 16:
+        token = self.command_token
+        if token is None or len(token.get_secret_value()) < 16:
             problems.append("command_token of at least 16 characters is required")
         if problems:
             raise ValueError("accept_commands = true is refused: " + "; ".join(problems)
@@ -248,20 +279,34 @@ class LabConfig(_Strict):
             raise ValueError(f"two sites listen on the same port: {sorted(dupp)}")
         return sites
 
+    @model_validator(mode="after")
+    def _allowlists_explicit(self) -> LabConfig:
+        """An empty allowlist admits anyone: only when written explicitly."""
+        bridge = self.bridge
+        empty = [f"sites[{i}].allowed_clients" for i, s in enumerate(self.sites)
+                 if s.allowed_clients == []]
+        if bridge.allowed_clients == []:
+            empty.insert(0, "bridge.allowed_clients")
+        if empty and not bridge.allow_any_client:
+            raise ValueError(f"{', '.join(empty)} = [] would admit clients from any address; "
+                             "list the integrator hosts, or set bridge.allow_any_client = true "
+                             "to admit anyone on purpose")
+        return self
+
 
 def _format_errors(source: str, exc: ValidationError) -> str:
     lines = [f"{source}: invalid configuration ({exc.error_count()} problem(s))"]
     for err in exc.errors():
         parts = list(err["loc"])
         parts = [p for i, p in enumerate(parts) if not (i and parts[i - 1] == "controller"
-                                                         and p in ("sim", "modbus", "mts"))]
+                                                         and p in CONTROLLER_KINDS)]
         loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in parts)
         loc = loc.replace(".[", "[")
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown key (typo?)"
         elif err["type"] == "union_tag_invalid":
-            msg = f"unknown controller kind {err['ctx']['tag']!r}; expected sim, modbus or mts"
+            msg = f"unknown controller kind {err['ctx']['tag']!r}; expected {known_kinds()}"
         got = err.get("input")
         quiet = err["type"] in ("missing", "extra_forbidden") or isinstance(got, dict | list)
         shown = "" if quiet else f" (got {got!r})"
@@ -284,7 +329,13 @@ def parse_config(text: str, source: str = "<config>") -> LabConfig:
 def load_config(path: Path) -> tuple[LabConfig, str]:
     """Read and validate a config file; returns the model and the text (for the snapshot)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the configuration: {exc.strerror}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(f"{path}: not UTF-8 text (TOML must be UTF-8): byte "
+                          f"0x{data[exc.start]:02x} at line {line}, offset {exc.start}") from None
     return parse_config(text, str(path)), text

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from .safety import TransitionRefused
-from .sites import ExperimentalSite
+from .sites import Site
 from .telemetry import OperatorCommand
 
 log = logging.getLogger("fresco_bridge.ctl")
@@ -50,7 +50,7 @@ class ControlError(Exception):
 class OperatorDesk:
     """The one handler behind every operator path (control socket, MQTT)."""
 
-    def __init__(self, sites: Mapping[str, ExperimentalSite]) -> None:
+    def __init__(self, sites: Mapping[str, Site]) -> None:
         self.sites = sites
 
     def execute(self, command: str, site: str | None = None, *, source: str) -> dict[str, Any]:
@@ -74,7 +74,7 @@ class OperatorDesk:
             "sites": [s.status() for s in targets],
         }
 
-    def _targets(self, site: str | None) -> list[ExperimentalSite]:
+    def _targets(self, site: str | None) -> list[Site]:
         if site is None:
             return list(self.sites.values())
         found = self.sites.get(site)

@@ -14,19 +14,23 @@ import threading
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
+
+from pydantic import SecretStr
 
 from . import __version__
 from .config import ConfigError, LabConfig, SiteConfig, TelemetryConfig
+from .config_model import redact_config_text, secret_values
+from .controls import registry as controls
 from .controls.base import Controller, ControllerError
-from .controls.modbus import ModbusController
-from .controls.mts import MtsController
-from .controls.rig import RigController
-from .controls.sim import SimController
 from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
 from .record import RunRecord
+from .record.recovery import LastCommit, flag_interrupted, last_commits
+from .server.access import Allowlist
+from .server.connection import SiteListener
 from .server.tcp import TcpConnection
+from .server.tls import TlsConfigError, server_context
 from .server.udp import UdpSiteEndpoint
 from .setups import make_setup
 from .sites import ExperimentalSite
@@ -39,16 +43,8 @@ T = TypeVar("T")
 
 
 def make_controller(cfg: SiteConfig) -> Controller:
-    """The controller adapter a site's config asks for."""
-    c = cfg.controller
-    if c.kind == "modbus":
-        return ModbusController(c)
-    if c.kind == "mts":
-        return MtsController(c)
-    if c.kind == "rig":
-        return RigController(c)
-    n_act = make_setup(cfg.setup, cfg.dofs).n_actuators
-    return SimController.from_params(n_act, c.model, dict(c.params))
+    """The controller adapter a site's config asks for (its kind's factory, ``controls/``)."""
+    return controls.make_controller(cfg.controller, make_setup(cfg.setup, cfg.dofs).n_actuators)
 
 
 def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:
@@ -65,14 +61,29 @@ def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:
     return context
 
 
+def _site_tls(scfg: SiteConfig) -> ssl.SSLContext | None:
+    """The site's mutual-TLS server context (OpenFresco's SSL channel), if ``tls = true``."""
+    if not scfg.tls:
+        return None
+    assert scfg.cert_file and scfg.key_file and scfg.client_ca_file
+    return server_context(scfg.cert_file, scfg.key_file, scfg.client_ca_file)
+
+
+def _secret(value: SecretStr | None) -> str | None:
+    return None if value is None else value.get_secret_value()
+
+
 class Bridge:
-    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None) -> None:
+    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
+                 resume: Path | None = None) -> None:
         self.config = config
         self.config_text = config_text
         self.run_dir_override = run_dir
+        self.resume = resume
+        """An interrupted run directory to continue instead of starting a new one."""
         self.record: RunRecord | None = None
         self.sites: dict[str, ExperimentalSite] = {}
-        self._servers: list[Any] = []
+        self._servers: list[asyncio.Server | asyncio.DatagramTransport] = []
         self.ports: dict[str, int] = {}
         self.telemetry: MqttTelemetry | None = None
         self._telemetry_task: asyncio.Task[None] | None = None
@@ -83,14 +94,27 @@ class Bridge:
 
     async def start(self) -> None:
         cfg = self.config
-        if cfg.record.enabled:
+        run_root = self.run_dir_override or cfg.bridge.run_dir
+        resumed: dict[str, LastCommit] = {}
+        if self.resume is not None:
+            if not cfg.record.enabled:
+                raise ConfigError("resuming a run needs [record] enabled = true")
+            self.record = RunRecord.resume(self.resume, fsync=cfg.record.fsync,
+                                           sync_interval=cfg.record.sync_interval)
+            resumed = last_commits(self.resume)
+            log.warning("run record: %s RESUMED (continues after the last committed step of "
+                        "each site: %s)", self.record.directory,
+                        ", ".join(f"{c.site} step {c.step}" for c in resumed.values()) or "none")
+        elif cfg.record.enabled:
             self.record = RunRecord.create(
-                self.run_dir_override or cfg.bridge.run_dir, cfg.bridge.run_name,
-                self.config_text,
+                run_root, cfg.bridge.run_name,
+                redact_config_text(self.config_text, (v for _, v in secret_values(cfg))),
                 {"fresco_bridge": __version__, "sites": [s.name for s in cfg.sites]},
-                fsync=cfg.record.fsync,
+                fsync=cfg.record.fsync, sync_interval=cfg.record.sync_interval,
             )
             log.info("run record: %s", self.record.directory)
+        flag_interrupted(run_root, exclude=None if self.record is None
+                         else self.record.directory)
         loop = asyncio.get_running_loop()
         try:
             for scfg in cfg.sites:
@@ -100,25 +124,28 @@ class Bridge:
                     controller_recovery=cfg.bridge.controller_recovery,
                 )
                 try:
-                    await asyncio.wait_for(site.controller.connect(), site.timeout)
+                    await asyncio.wait_for(site.controller.connect(), site.guard.timeout)
                 except (ControllerError, TimeoutError) as exc:
                     # Not fatal: the site serves anyway and HOLDs at the first command if the
                     # controller is still unreachable (adapters reconnect on reads).
                     log.error("site %s: controller not reachable at start: %s", scfg.name,
                               exc or "timeout")
                 self.sites[scfg.name] = site
-                allowed = frozenset(scfg.allowed_clients or cfg.bridge.allowed_clients)
-                mds = cfg.bridge.max_data_size
+                if scfg.name in resumed:
+                    last = resumed[scfg.name]
+                    site.resume_from(last.session, last.step, last.time)
+                listener = self._listener(site)
                 try:
+                    server: asyncio.Server | asyncio.DatagramTransport
                     if scfg.transport == "tcp":
                         server = await loop.create_server(
-                            partial(TcpConnection, site, allowed, mds),
+                            partial(TcpConnection, listener, _site_tls(scfg)),
                             cfg.bridge.host, scfg.port, reuse_address=True,
                         )
                         port = server.sockets[0].getsockname()[1]
                     else:
                         server, _ = await loop.create_datagram_endpoint(
-                            partial(UdpSiteEndpoint, site, allowed, mds),
+                            partial(UdpSiteEndpoint, listener),
                             local_addr=(cfg.bridge.host, scfg.port),
                         )
                         port = server.get_extra_info("sockname")[1]
@@ -131,7 +158,7 @@ class Bridge:
                 log.info("site %s: listening on %s %s:%d (%s protocol, %d DOF, setup %s)",
                          scfg.name, scfg.transport.upper(), cfg.bridge.host, port,
                          scfg.protocol, scfg.dofs, scfg.setup)
-        except OSError:
+        except (OSError, TlsConfigError):
             await self._abandon_start()
             raise
         await self._start_control()
@@ -140,10 +167,10 @@ class Bridge:
             self.telemetry = MqttTelemetry(
                 host=tcfg.mqtt_host, port=tcfg.mqtt_port, prefix=tcfg.prefix, qos=tcfg.qos,
                 queue_size=tcfg.queue_size, compact=tcfg.compact, username=tcfg.username,
-                password=tcfg.password, tls=_tls_context(tcfg),
+                password=_secret(tcfg.password), tls=_tls_context(tcfg),
                 accept_commands=tcfg.accept_commands,
                 command_handler=self.desk.handle_mqtt if tcfg.accept_commands else None,
-                command_token=tcfg.command_token,
+                command_token=_secret(tcfg.command_token),
             )
             self._telemetry_task = loop.create_task(self.telemetry.run(), name="telemetry.mqtt")
             log.info("telemetry: MQTT %s:%d prefix %s", tcfg.mqtt_host, tcfg.mqtt_port,
@@ -156,12 +183,23 @@ class Bridge:
                 raise
         self._attach_taps()
 
+    def _listener(self, site: ExperimentalSite) -> SiteListener:
+        """What the site's connections share; an open allowlist is said loudly."""
+        bcfg = self.config.bridge
+        entries = site.cfg.allowed_clients
+        allowlist = Allowlist(bcfg.allowed_clients if entries is None else entries)
+        if allowlist.any:
+            log.warning("site %s ADMITS CLIENTS FROM ANY ADDRESS (allow_any_client = true; "
+                        "bound to %s): anyone who can reach the port can drive the actuator",
+                        site.name, bcfg.host)
+        return SiteListener(site, allowlist, bcfg.max_data_size, bcfg.session_idle_timeout)
+
     async def _abandon_start(self) -> None:
         """A start that failed closes what it opened; a run directory that recorded nothing
         is removed, so a failed start does not show up as an empty run."""
         await self.close()
         record = self.record
-        if record is not None and record.lines == 0:
+        if record is not None and record.lines == 0 and self.resume is None:
             shutil.rmtree(record.directory, ignore_errors=True)
             log.info("run record %s removed: the bridge never started", record.directory)
 
@@ -182,14 +220,17 @@ class Bridge:
     def _attach_taps(self) -> None:
         """Give each site its taps: MQTT, metrics and/or monitor lines in the run record."""
         tcfg = self.config.telemetry
-        record = self.record if tcfg.monitors else None
-        if self.telemetry is None and self.metrics is None and record is None:
-            return  # nothing to feed: the site skips building step samples altogether
+        recording = self.record is not None and tcfg.monitors
+        if self.telemetry is None and self.metrics is None and not recording:
+            return  # nothing to feed: the sites' only listener is the record's writer
         for site in self.sites.values():
             monitor = OnlineMonitor(
                 tcfg.monitor_dt, tcfg.monitor_window, warn_tracking_error=tcfg.warn_tracking_error,
             ) if tcfg.monitors else None
-            site.attach_telemetry(SiteTaps(self.telemetry, site.metrics, record), monitor)
+            taps = SiteTaps(self.telemetry, site.metrics,
+                            site.recorder if tcfg.monitors else None, monitor, site.monitor_warning)
+            site.add_listener(taps)
+            taps.publish_status(site.status_now())
 
     async def _start_control(self) -> None:
         """The operator control socket (``fresco-bridge ctl``); a failure stops start()."""
@@ -222,7 +263,7 @@ class Bridge:
         for site in self.sites.values():
             site.close_session("bridge shutting down")
             try:
-                await asyncio.wait_for(site.controller.close(), site.timeout)
+                await asyncio.wait_for(site.controller.close(), site.guard.timeout)
             except Exception as exc:  # closing must go on for the other sites
                 log.warning("site %s: controller close failed: %s", site.name, exc)
         if self.metrics_server is not None:
@@ -252,8 +293,9 @@ class BridgeThread:
     plain blocking sockets in the calling thread, as a separate FE process would.
     """
 
-    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None) -> None:
-        self.bridge = Bridge(config, config_text, run_dir=run_dir)
+    def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
+                 resume: Path | None = None) -> None:
+        self.bridge = Bridge(config, config_text, run_dir=run_dir, resume=resume)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._ready = threading.Event()

@@ -23,12 +23,15 @@ from .integrator import (
     DEMO_DT,
     DEMO_FRAME_STORY_STIFFNESS,
     GroundMotion,
-    demo_integrator,
+    demo_frame_integrator,
+    demo_site_coupling,
     kanai_tajimi,
     paper_two_story_frame,
     read_ground_motion,
+    run_coupled,
 )
 from .integrator.link import GenericClientLink
+from .progress import ProgressBar
 from .record import export_csv
 
 
@@ -71,27 +74,6 @@ alpha = {DEMO_DAMPER['alpha']!r} }}
 {telemetry}"""
 
 
-class _Progress:
-    """A one-line progress bar on stderr (only when it is a terminal, or every 10 %)."""
-
-    def __init__(self, total: int) -> None:
-        self.total = max(total, 1)
-        self.tty = sys.stderr.isatty()
-        self.last = -1
-        self.t0 = time.perf_counter()
-
-    def __call__(self, done: int) -> None:
-        pct = 100 * done // self.total
-        if pct == self.last or (not self.tty and pct % 10):
-            return
-        self.last = pct
-        bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
-        rate = done / max(time.perf_counter() - self.t0, 1e-9)
-        end = "\r" if self.tty and done < self.total else "\n"
-        print(f"  [{bar}] {pct:3d}% step {done}/{self.total} ({rate:,.0f} steps/s)",
-              end=end, file=sys.stderr, flush=True)
-
-
 def run_demo(
     *,
     record: Path | None = None,
@@ -118,25 +100,14 @@ def run_demo(
     with BridgeThread(cfg, text, run_dir=runs) as bridge:
         port = bridge.ports["damper"]
         link = GenericClientLink("127.0.0.1", port, 2, transport=transport, timeout=10.0)
-        forces: list[float] = []
-
-        def damper_force(step: int, t: float, drift: np.ndarray) -> list[float]:
-            link.set_trial((0.0, float(drift[0])), time=t)
-            q = link.force()
-            forces.append(q[1])
-            return [q[1]]
-
-        integ = demo_integrator(damper_force, motion)
-        progress = _Progress(integ.n_steps)
+        coupling = demo_site_coupling(link)
+        integ = demo_frame_integrator(coupling, motion)
+        progress = ProgressBar("demo", integ.n_steps, rate_unit="steps")
         t0 = time.perf_counter()
         with link:
-            while not integ.done:
-                integ.step()
-                link.commit()
-                progress(integ.current_step)
+            response = run_coupled(integ, coupling, progress=progress)
         wall = time.perf_counter() - t0
         run_dir = bridge.run_dir
-    response = integ.response()
     n_rows = export_csv(run_dir, run_dir / "steps.csv")
     summary = _summary(response, motion, wall, integ.n_steps, run_dir, n_rows)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")

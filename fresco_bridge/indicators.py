@@ -17,8 +17,23 @@ asked for, i.e. ctrl) with the *measured* one ``meas`` (x_m, daq). Conventions:
   |X_m|^l in the numerator, which would return (B/A)^(l+1)).
 - Cross-correlation delay: the lag maximising corr(x_m(t + k), x_c(t)) (RTHS benchmark J1),
   refined to a fraction of a sample by a parabola through the peak.
+- Energy error (after Mosqueda et al.'s energy monitors): the hysteretic work ∫F dd of the
+  measured force against that of a simulated force along the same displacement, relative.
+- White-noise level: the robust std of first differences / √2 (MAD-based), which sees the
+  white part of a residual and not its smooth or sparse-jump parts.
 
 Positive delays mean the measurement lags the command. All functions are pure numpy.
+
+Model-updating indicators (source paper, Table 3 and Fig. 14) compare a *true* force history
+``true`` (the tested element's measurement, or in simulation the twin's true force) with the
+force ``pred`` an updatable numerical element predicted:
+
+- peak values PV = (max F, −min F) of each history (both reported as magnitudes, as in Table 3);
+  AEPV = |PV_true − PV_pred| per sign;
+- MAETH = max |true − pred| over the time history (paper eq. 9 maximised);
+- MAESD = max |u − u_ref| per story of the story (floor) displacement against the reference;
+- one-step RMSE = RMS of the twin's force predicted *before* the updater saw the step, against
+  the truth: what the model knew, not what it re-fitted.
 """
 
 from __future__ import annotations
@@ -30,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from sim_actuator.checks import POSITIVE, checked
+
 FloatArray = npt.NDArray[np.float64]
 Signal = Sequence[float] | npt.NDArray[np.floating]
 
@@ -37,10 +54,18 @@ __all__ = [
     "IndicatorError",
     "MonitorSample",
     "OnlineMonitor",
+    "PeakValues",
+    "energy_error",
     "fei",
+    "hysteretic_work",
+    "maesd",
+    "maeth",
     "nrms_error",
+    "one_step_rmse",
     "peak_errors",
+    "peak_values",
     "tracking_indicator",
+    "white_noise_std",
     "xcorr_delay",
 ]
 
@@ -71,9 +96,7 @@ def _pair(
 
 
 def _positive(value: float, name: str, where: str) -> float:
-    if not (math.isfinite(value) and value > 0.0):
-        raise IndicatorError(f"{where}: {name} must be a positive finite number, got {value!r}")
-    return float(value)
+    return checked(POSITIVE, name, value, IndicatorError, where)
 
 
 def nrms_error(cmd: Signal, meas: Signal) -> float:
@@ -92,6 +115,59 @@ def peak_errors(cmd: Signal, meas: Signal) -> tuple[float, float]:
     e_dm = float(np.max(np.abs(m)) - np.max(np.abs(c)))
     e_md = float(np.max(np.abs(m - c)))
     return e_dm, e_md
+
+
+@dataclass(frozen=True, slots=True)
+class PeakValues:
+    """Table 3 of the source paper for one element: peak forces and their absolute errors."""
+
+    pv_es_pos: float
+    """max of the true (experimental-substructure) force."""
+    pv_es_neg: float
+    """−min of the true force (a magnitude)."""
+    pv_ums_pos: float
+    """max of the predicted (updatable-numerical-substructure) force."""
+    pv_ums_neg: float
+    """−min of the predicted force (a magnitude)."""
+
+    @property
+    def aepv_pos(self) -> float:
+        return abs(self.pv_es_pos - self.pv_ums_pos)
+
+    @property
+    def aepv_neg(self) -> float:
+        return abs(self.pv_es_neg - self.pv_ums_neg)
+
+
+def peak_values(true: Signal, pred: Signal) -> PeakValues:
+    """Positive and negative peak values of a true and a predicted force history."""
+    t, p = _pair(true, pred, where="peak_values")
+    return PeakValues(float(t.max()), float(-t.min()), float(p.max()), float(-p.min()))
+
+
+def maeth(true: Signal, pred: Signal) -> float:
+    """Maximum absolute error in the time history, max |true − pred| (paper eq. 9)."""
+    t, p = _pair(true, pred, where="maeth")
+    return float(np.max(np.abs(t - p)))
+
+
+def one_step_rmse(true: Signal, pred_ahead: Signal) -> float:
+    """RMS of one-step-ahead prediction errors sqrt(mean((true − pred_ahead)²))."""
+    t, p = _pair(true, pred_ahead, where="one_step_rmse")
+    return math.sqrt(float(np.mean((t - p) ** 2)))
+
+
+def maesd(disp: npt.ArrayLike, disp_ref: npt.ArrayLike) -> list[float]:
+    """Per story (column) max |u − u_ref| of two (steps, stories) displacement histories."""
+    u = np.asarray(disp, dtype=np.float64)
+    r = np.asarray(disp_ref, dtype=np.float64)
+    if u.ndim != 2 or u.shape != r.shape or u.shape[0] == 0:
+        raise IndicatorError(
+            f"maesd: need two equal (steps, stories) histories, got shapes {u.shape} and {r.shape}"
+        )
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
+        raise IndicatorError("maesd: displacements must be finite (found NaN or inf)")
+    return [float(v) for v in np.max(np.abs(u - r), axis=0)]
 
 
 def tracking_indicator(cmd: Signal, meas: Signal) -> FloatArray:
@@ -169,6 +245,32 @@ def xcorr_delay(cmd: Signal, meas: Signal, dt: float, max_lag: int) -> float:
         if curvature < 0.0:
             shift = 0.5 * (left - right) / curvature
     return (float(lags[best]) + shift) * step
+
+
+def hysteretic_work(disp: Signal, force: Signal) -> float:
+    """Work of the force along the displacement, trapezoidal Σ ½(F_i + F_{i−1})(d_i − d_{i−1})."""
+    d, f = _pair(disp, force, where="hysteretic_work", min_len=2)
+    return float(np.dot(0.5 * (f[1:] + f[:-1]), np.diff(d)))
+
+
+def energy_error(disp: Signal, force_meas: Signal, force_sim: Signal) -> float:
+    """(W_meas − W_sim) / |W_meas| along the same displacement; positive: the specimen
+    dissipated more than the simulation says."""
+    measured = hysteretic_work(disp, force_meas)
+    simulated = hysteretic_work(disp, force_sim)
+    if measured == 0.0:
+        raise IndicatorError("energy_error: the measured force does no work, undefined")
+    return (measured - simulated) / abs(measured)
+
+
+def white_noise_std(signal: Signal) -> float:
+    """Std of the white part of ``signal``: 1.4826·MAD(Δx)/√2 (smooth drift and rare jumps,
+    such as friction reversals, barely move the median)."""
+    x = np.asarray(signal, dtype=np.float64)
+    if x.ndim != 1 or x.size < 3 or not np.all(np.isfinite(x)):
+        raise IndicatorError("white_noise_std: needs a finite 1-D signal of >= 3 samples")
+    dx = np.diff(x)
+    return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
 
 
 def _pearson(c: FloatArray, m: FloatArray, k: int) -> float:

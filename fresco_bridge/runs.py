@@ -30,6 +30,7 @@ from .record.export import (
     read_record,
     record_is_torn,
 )
+from .record.recovery import open_sessions, run_state
 from .record.writer import CONFIG_FILE, META_FILE, RECORD_FILE
 
 DEFAULT_DT = 0.01  # TelemetryConfig.monitor_dt's default, for records without integrator time
@@ -151,8 +152,24 @@ def load_run(path: Path) -> Run:
     if torn:
         notes.append(f"{RECORD_FILE} ends with a torn line (the bridge was killed mid-write); "
                      "it was skipped, everything before it is intact")
+    state = run_state(directory, meta)
+    if state == "interrupted":
+        notes.append("the run ended without a clean close (bridge killed or host lost); "
+                     "'fresco-bridge runs resume' continues it")
+    for site, session in open_sessions(directory):
+        if state != "running":
+            notes.append(f"site {site} session {session} was opened and never closed")
     return Run(directory, meta, config_text, steps, events, monitor_data, torn,
                _dir_size(directory), notes)
+
+
+def check_resumable(path: Path) -> Path:
+    """``path`` if it is a run that can be resumed (interrupted, or closed and continued on
+    purpose), else why not."""
+    check_run_dir(path)
+    if run_state(path) == "running":
+        raise RunDirError(f"{path}: the run is live (a bridge holds its record); stop it first")
+    return path
 
 
 def resolve_run(name: str | Path, runs_root: Path) -> Path:
@@ -185,6 +202,7 @@ class RunListing:
     holds: int
     size_bytes: int
     error: str | None = None
+    state: str = "unknown"
 
 
 def scan_run(path: Path) -> RunListing:
@@ -204,7 +222,7 @@ def scan_run(path: Path) -> RunListing:
                     holds += ev == "hold"
         return RunListing(path.name, path, str(meta.get("started_utc", "?")),
                           [str(s) for s in meta.get("sites", [])], steps, sessions, holds,
-                          _dir_size(path))
+                          _dir_size(path), state=run_state(path, meta))
     except (RunDirError, OSError, ValueError) as exc:
         return RunListing(path.name, path, "?", [], 0, 0, 0, 0, error=str(exc))
 
@@ -228,13 +246,13 @@ def human_size(n: int) -> str:
 
 
 def format_listing(runs: list[RunListing]) -> str:
-    header = ("run", "started (UTC)", "sites", "steps", "sessions", "holds", "size")
+    header = ("run", "started (UTC)", "state", "sites", "steps", "sessions", "holds", "size")
     rows = [header]
     for r in runs:
         if r.error is not None:
-            rows.append((r.name, "unreadable", r.error, "", "", "", ""))
+            rows.append((r.name, "unreadable", "", r.error, "", "", "", ""))
             continue
-        rows.append((r.name, r.started_utc[:19], ",".join(r.sites), str(r.steps),
+        rows.append((r.name, r.started_utc[:19], r.state, ",".join(r.sites), str(r.steps),
                      str(r.sessions), str(r.holds), human_size(r.size_bytes)))
     widths = [max(len(row[i]) for row in rows) for i in range(len(header) - 1)]
     return "\n".join(
@@ -392,6 +410,7 @@ def fmt(v: float | None, unit: str = "", digits: int = 4) -> str:
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
     """``runs show``: metadata, then one block per site."""
     lines = [f"run        {run.directory}"]
+    lines.append(f"{'state':<10} {run_state(run.directory, run.meta)}")
     for key in ("started_utc", "host", "fresco_bridge", "format"):
         if key in run.meta:
             lines.append(f"{key:<10} {run.meta[key]}")

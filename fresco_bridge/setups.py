@@ -9,8 +9,11 @@ opposite). Forces go back as ``q = Tᵀ · f`` and stiffness as ``K = Tᵀ · k 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
 
 SetupKind = Literal["NoTransformation", "OneActuator"]
 
@@ -21,20 +24,39 @@ class SetupError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class LinearSetup:
-    """``ctrl = T · trial`` with T of shape (n_actuators, n_basic), stored row by row."""
+    """``ctrl = T · trial`` with T of shape (n_actuators, n_basic), stored row by row.
+
+    The geometry never changes during a run, so what each transform needs is derived once:
+    an identity T (``NoTransformation``) makes every transform a pass-through (nothing to
+    compute at any size), any other T is held as an array too, so ``Tᵀ k T`` is one BLAS
+    product instead of an O(n³) Python loop.
+    """
 
     kind: SetupKind
     n_basic: int
     n_actuators: int
     t: tuple[tuple[float, ...], ...]
+    identity: bool = field(init=False)
+    _t: npt.NDArray[np.float64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        t = np.array(self.t, dtype=np.float64).reshape(self.n_actuators, self.n_basic)
+        object.__setattr__(self, "_t", t)
+        object.__setattr__(self, "identity", self.n_actuators == self.n_basic
+                           and bool(np.array_equal(t, np.eye(self.n_basic))))
 
     def ctrl_disp(self, trial_disp: tuple[float, ...]) -> tuple[float, ...]:
+        if self.identity:
+            return trial_disp
         return tuple(sum(c * u for c, u in zip(row, trial_disp, strict=True)) for row in self.t)
 
     def basic_force(self, daq_force: tuple[float, ...]) -> tuple[float, ...]:
-        n = self.n_basic
+        if self.identity:
+            return daq_force
+        t = self.t
         return tuple(
-            sum(self.t[a][i] * daq_force[a] for a in range(self.n_actuators)) for i in range(n)
+            sum(t[a][i] * daq_force[a] for a in range(self.n_actuators))
+            for i in range(self.n_basic)
         )
 
     def out_disp(
@@ -51,18 +73,11 @@ class LinearSetup:
 
     def basic_matrix(self, k_act: tuple[float, ...]) -> tuple[float, ...]:
         """Tᵀ k T, with ``k_act`` and the result column-major (the wire order)."""
-        na, nb, t = self.n_actuators, self.n_basic, self.t
-        out: list[float] = []
-        for c in range(nb):
-            for r in range(nb):
-                s = 0.0
-                for a in range(na):
-                    tra = t[a][r]
-                    if tra == 0.0:
-                        continue
-                    for b in range(na):
-                        s += tra * k_act[b * na + a] * t[b][c]
-                out.append(s)
+        if self.identity:
+            return k_act
+        na, t = self.n_actuators, self._t
+        k = np.array(k_act, dtype=np.float64).reshape(na, na, order="F")
+        out: list[float] = (t.T @ k @ t).ravel(order="F").tolist()
         return tuple(out)
 
 

@@ -119,12 +119,6 @@ class SignalSizes:
         """The 5 x int32 ID the site protocol sends for sizeTrial / sizeOut (spec §4.3)."""
         return _SIGNAL_SIZES_STRUCT.pack(*self.as_tuple())
 
-    @classmethod
-    def from_sequence(cls, values: Sequence[int]) -> SignalSizes:
-        """Build from five ints in wire order."""
-        if len(values) != 5:
-            raise ValueError(f"signal sizes need 5 entries (d,v,a,f,t), got {len(values)}")
-        return cls(*(int(v) for v in values))
 
 
 _SIGNAL_SIZES_STRUCT: Final = struct.Struct("<5i")

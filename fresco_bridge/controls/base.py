@@ -71,3 +71,20 @@ class Controller(abc.ABC):
 
     async def close(self) -> None:  # noqa: B027 - optional hook
         """Release the link; the actuator keeps holding its last command."""
+
+
+class PhysicalController(Controller):
+    """A controller of a physical (or physically simulated) rig: every move really happens, so
+    there is no trial state to commit, and the rig cannot report its stiffness: tangent and
+    initial stiffness are the configured estimate ``stiffness`` (kN/mm)."""
+
+    stiffness: float
+
+    async def commit(self) -> None:
+        """A physical rig has no trial state to commit."""
+
+    async def tangent_stiffness(self) -> tuple[float, ...]:
+        return (self.stiffness,)
+
+    async def initial_stiffness(self) -> tuple[float, ...]:
+        return (self.stiffness,)

@@ -12,26 +12,25 @@ the same numbers to float32 resolution (tested).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from sim_actuator.config import RigConfig, RigConfigError, build_rig, load_rig_config, preset
 from sim_actuator.rig import Measurement, Rig, RigError
 
-from .base import Controller, ControllerError, Daq
+from ..config_model import ConfigPath
+from .base import ControllerError, Daq, PhysicalController
+from .kind import ControllerConfigBase, ControllerKind
 
 
-class RigControllerConfig(BaseModel):
+class RigControllerConfig(ControllerConfigBase):
     """``kind = "rig"``: a ``sim_actuator`` rig (a preset or a rig TOML file) in process."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     kind: Literal["rig"] = "rig"
     preset: str | None = None
     """A ``sim-actuator presets`` name, e.g. ``servo-hydraulic``."""
-    file: Path | None = None
+    file: ConfigPath | None = None
     """A rig description (TOML, the format of ``sim-actuator serve --rig``)."""
     ramp_time: float | None = Field(None, ge=0.0, le=3600.0, allow_inf_nan=False)
     """Ramp time of every move, s (default: the rig's ``default_ramp_time``)."""
@@ -57,7 +56,7 @@ class RigControllerConfig(BaseModel):
             raise ValueError(str(exc)) from None
 
 
-class RigController(Controller):
+class RigController(PhysicalController):
     """One actuator of an in-process ``sim_actuator`` rig; answers without suspending."""
 
     inline = True
@@ -65,6 +64,7 @@ class RigController(Controller):
 
     def __init__(self, config: RigControllerConfig) -> None:
         self.config = config
+        self.stiffness = config.stiffness
         self._rig_config = config.rig_config()
         self.rig: Rig = build_rig(self._rig_config)
         self._last: Measurement = self.rig.measure(noisy=False)
@@ -78,15 +78,6 @@ class RigController(Controller):
     async def get_daq(self) -> Daq:
         return Daq((self._last.displacement,), (self._last.force,))
 
-    async def commit(self) -> None:
-        """A rig has no trial/commit semantics: every move already happened."""
-
-    async def tangent_stiffness(self) -> tuple[float, ...]:
-        return (self.config.stiffness,)
-
-    async def initial_stiffness(self) -> tuple[float, ...]:
-        return (self.config.stiffness,)
-
     async def hold(self) -> None:
         """Nothing to stop: moves complete inside ``set_ctrl``; the actuator stays where it is."""
 
@@ -94,3 +85,12 @@ class RigController(Controller):
         """A fresh rig: virgin specimen, actuator at rest, noise streams from their seeds."""
         self.rig = build_rig(self._rig_config)
         self._last = self.rig.measure(noisy=False)
+
+
+KIND = ControllerKind(
+    name="rig",
+    config=RigControllerConfig,
+    factory=lambda config, n: RigController(config),
+    summary="the whole simulated lab of `sim-actuator` in process — servo delay/lag, friction, "
+    "backlash, compliance, sensor noise",
+)

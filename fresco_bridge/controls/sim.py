@@ -7,9 +7,36 @@ returns exactly what ``Steel01`` would inside OpenSees.
 
 from __future__ import annotations
 
-from sim_actuator.models import HysteresisModel, make_model
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from sim_actuator.config import ModelKindName
+from sim_actuator.models import MODEL_PARAMETERS, HysteresisModel, ModelParameterError, make_model
 
 from .base import Controller, Daq
+from .kind import ControllerConfigBase, ControllerKind
+
+
+class SimControllerConfig(ControllerConfigBase):
+    """In-process simulated specimen (one model per actuator)."""
+
+    kind: Literal["sim"] = "sim"
+    model: ModelKindName = "bilinear"
+    params: dict[str, float] = Field(
+        default_factory=lambda: {"k0": 8.0, "fy": 12.0, "alpha": 0.05}
+    )
+    reset_on_new_session: bool = True
+    """A new integrator connection starts from a virgin specimen (a simulation, not a lab)."""
+
+    @model_validator(mode="after")
+    def _params_fit_model(self) -> SimControllerConfig:
+        try:
+            make_model(self.model, **self.params)
+        except ModelParameterError as exc:
+            allowed = ", ".join(MODEL_PARAMETERS.get(self.model, {}))
+            raise ValueError(f"{exc} (parameters of {self.model}: {allowed})") from None
+        return self
 
 
 class SimController(Controller):
@@ -63,5 +90,17 @@ class SimController(Controller):
 
 
 def _diagonal(values: tuple[float, ...]) -> tuple[float, ...]:
+    """diag(values), n×n column-major (slice assignment: no Python loop over n² entries)."""
     n = len(values)
-    return tuple(values[c] if r == c else 0.0 for c in range(n) for r in range(n))
+    out = [0.0] * (n * n)
+    out[:: n + 1] = values
+    return tuple(out)
+
+
+KIND = ControllerKind(
+    name="sim",
+    config=SimControllerConfig,
+    factory=lambda config, n: SimController.from_params(n, config.model, dict(config.params)),
+    summary="in-process specimen model (`controller.model`), material semantics = OpenSees",
+    max_actuators=None,
+)

@@ -31,7 +31,14 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.integrator.coupling import (
+    Placement,
+    StoryCoupling,
+    coupled_integrator,
+    frame_integrator,
+)
 from fresco_bridge.integrator.ground_motion import GroundMotion, kanai_tajimi
+from fresco_bridge.integrator.link import GenericClientLink, SiteElement
 from fresco_bridge.integrator.newmark import ExperimentalForce, ExplicitNewmark
 from fresco_bridge.integrator.shear_building import ShearBuilding
 
@@ -44,8 +51,10 @@ __all__ = [
     "DEMO_PGA_M_S2",
     "DEMO_ZETA",
     "demo_damper_story_stiffness",
+    "demo_frame_integrator",
     "demo_ground_motion",
     "demo_integrator",
+    "demo_site_coupling",
     "paper_two_story_frame",
 ]
 
@@ -99,19 +108,23 @@ def demo_integrator(
     Rayleigh damping uses the initial stiffness including the damper's k0; the linear part
     ``K_lin`` is the frame alone, as the damper's force comes from ``experimental_force``.
     """
-    frame = paper_two_story_frame()
-    extra = demo_damper_story_stiffness()
-    _, _, damping = frame.rayleigh(DEMO_ZETA, (1, 2), extra_story_stiffness=extra)
     record = ground_motion if ground_motion is not None else demo_ground_motion()
-    if record.dt != DEMO_DT:
-        record = record.resampled(DEMO_DT)
-    return ExplicitNewmark(
-        frame.mass_matrix(),
-        damping,
-        frame.stiffness_matrix(),
-        DEMO_DT,
-        record,
-        experimental_force,
-        DEMO_EXPERIMENTAL_STORIES,
-        experimental_stiffness=[_DAMPER_K0],
-    )
+    return frame_integrator(paper_two_story_frame(), experimental_force,
+                            DEMO_EXPERIMENTAL_STORIES, demo_damper_story_stiffness(), record,
+                            dt=DEMO_DT, zeta=DEMO_ZETA)
+
+
+def demo_frame_integrator(
+    coupling: StoryCoupling, ground_motion: GroundMotion | None = None
+) -> ExplicitNewmark:
+    """Explicit Newmark for the demo frame with the coupling's elements in their stories
+    (Rayleigh damping with their initial stiffness); drive it with ``run_coupled``."""
+    record = ground_motion if ground_motion is not None else demo_ground_motion()
+    return coupled_integrator(paper_two_story_frame(), coupling, record, dt=DEMO_DT,
+                              zeta=DEMO_ZETA)
+
+
+def demo_site_coupling(link: GenericClientLink) -> StoryCoupling:
+    """The demo's coupling: the bridge's ``damper`` site (2 DOFs, ``OneActuator``) in story 1,
+    reached over ``link``; the committed histories are ``coupling.drift/force("damper")``."""
+    return StoryCoupling({"damper": Placement(0, SiteElement(link, stiffness=_DAMPER_K0))})

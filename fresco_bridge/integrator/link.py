@@ -122,3 +122,36 @@ class GenericClientLink:
 
     def commit(self) -> None:
         self._send(self.session.send_commit())
+
+
+class SiteElement:
+    """A bridge site as a story element of the coupling loop (``integrator/coupling.py``).
+
+    The story drift goes out as the element's trial displacement, the measured force comes back;
+    ``commit`` sends the commit. The element's basic DOFs are the link's: 1 (``NoTransformation``:
+    ``disp = (drift,)``) or 2 (``OneActuator`` on a two-node element whose node i is the
+    reference: ``disp = (0, drift)``, the force is that of node j). Explicit integration needs no
+    tangent, so none is asked of the bridge: ``set_trial`` answers ``stiffness``, the estimate.
+    """
+
+    def __init__(self, link: GenericClientLink, stiffness: float = 0.0) -> None:
+        if link.n not in (1, 2):
+            raise ValueError(f"a story element has 1 or 2 basic DOFs, the link has {link.n}")
+        self.link = link
+        self.stiffness = stiffness
+        self._time = 0.0
+
+    @property
+    def initial_tangent(self) -> float:
+        return self.stiffness
+
+    def begin_step(self, step: int, time: float) -> None:
+        """The step's time, sent with the trial (the bridge records it)."""
+        self._time = time
+
+    def set_trial(self, d: float) -> tuple[float, float]:
+        self.link.set_trial((d,) if self.link.n == 1 else (0.0, d), time=self._time)
+        return self.link.force()[-1], self.stiffness
+
+    def commit(self) -> None:
+        self.link.commit()

@@ -114,9 +114,6 @@ class Response:
     experimental_stories: tuple[int, ...]
     influence: FloatArray
 
-    @property
-    def absolute_acceleration(self) -> FloatArray:
-        return np.asarray(self.acceleration + np.outer(self.ground_accel, self.influence))
 
 
 @dataclass(frozen=True, eq=False)

@@ -66,10 +66,6 @@ class Modes:
     participation: FloatArray
 
     @property
-    def frequency_hz(self) -> FloatArray:
-        return self.omega / (2.0 * np.pi)
-
-    @property
     def period(self) -> FloatArray:
         with np.errstate(divide="ignore"):
             return np.asarray(2.0 * np.pi / self.omega, dtype=np.float64)

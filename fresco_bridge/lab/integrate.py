@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from typing import Any, TextIO
+from typing import TextIO
 
 from .compose import LabError
 
@@ -19,7 +19,13 @@ def run_integrator(host: str, port: int, *, duration: float, pga: float, seed: i
     """
     import numpy as np
 
-    from ..integrator import DEMO_DT, demo_integrator, kanai_tajimi
+    from ..integrator import (
+        DEMO_DT,
+        demo_frame_integrator,
+        demo_site_coupling,
+        kanai_tajimi,
+        run_coupled,
+    )
     from ..integrator.link import GenericClientLink
 
     motion = kanai_tajimi(pga, duration=duration, dt=DEMO_DT, seed=seed)
@@ -34,29 +40,20 @@ def run_integrator(host: str, port: int, *, duration: float, pga: float, seed: i
                 raise LabError(f"integrator: bridge {host}:{port} not reachable within "
                                f"{connect_timeout:g} s: {exc}") from None
             time.sleep(0.2)
-    forces: list[float] = []
-
-    def damper_force(step: int, t: float, drift: Any) -> list[float]:
-        link.set_trial((0.0, float(drift[0])), time=t)
-        q = link.force()
-        forces.append(q[1])
-        return [q[1]]
-
-    integ = demo_integrator(damper_force, motion)
+    coupling = demo_site_coupling(link)
+    integ = demo_frame_integrator(coupling, motion)
     t0 = time.perf_counter()
     try:
-        while not integ.done:
-            integ.step()
-            link.commit()
+        response = run_coupled(integ, coupling)
     finally:
         link.close()
     wall = time.perf_counter() - t0
-    drift = integ.response().drift
+    drift, forces = response.drift, coupling.force("damper")
     summary = {
         "steps": float(integ.n_steps),
         "ms_per_step": 1000.0 * wall / max(integ.n_steps, 1),
         "peak_story1_drift_mm": float(np.max(np.abs(drift[:, 0]))),
-        "peak_damper_force_kN": float(np.max(np.abs(forces))) if forces else 0.0,
+        "peak_damper_force_kN": float(np.max(np.abs(forces))) if forces.size else 0.0,
     }
     out = sys.stdout if out is None else out
     out.write("integrator: " + json.dumps(summary) + "\n")

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .lines import expand
 from .writer import RECORD_FILE
 
 
@@ -53,7 +54,12 @@ def _float(v: Any) -> float:
 
 
 def read_record(run_dir: Path) -> Iterator[dict[str, Any]]:
-    """Yield the record's lines as dicts. A torn last line (crash mid-write) is skipped."""
+    """Yield the record's lines as complete dicts (format 1 or 2, see ``lines.py``). A torn
+    last line (crash mid-write) is skipped."""
+    return expand(_decoded_lines(run_dir))
+
+
+def _decoded_lines(run_dir: Path) -> Iterator[dict[str, Any]]:
     path = run_dir / RECORD_FILE if run_dir.is_dir() else run_dir
     try:
         lines = path.read_text(encoding="utf-8").splitlines()

@@ -7,6 +7,7 @@ raised (``RunDirError``) for ``fresco_bridge.cli`` to turn into an exit code.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..record.export import write_csv
@@ -40,6 +41,13 @@ def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     rs.add_parser("list", parents=[runs_root], help="one line per run directory")
     p_show = rs.add_parser("show", parents=[runs_root], help="metadata and per-site summary")
     p_show.add_argument("run", help="run directory (or a run name/prefix under --runs)")
+    p_res = rs.add_parser("resume", parents=[runs_root],
+                          help="continue an interrupted run (bridge killed, host lost): serve "
+                               "again, appending to its record from the last committed step")
+    p_res.add_argument("run", help="run directory (or a run name/prefix under --runs)")
+    p_res.add_argument("--config", type=Path, default=None,
+                       help="lab TOML the run was started with (default: the run's snapshot, "
+                            "unless its secrets were redacted)")
     for p_exp in (rs.add_parser("export", parents=[runs_root],
                                 help="committed steps to CSV, or the whole run to HDF5"),
                   sub.add_parser("export", parents=[runs_root],
@@ -54,6 +62,8 @@ def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
 
 def _export(args: argparse.Namespace) -> int:
     run = load_run(resolve_run(args.run, args.runs))
+    for note in run.notes:
+        print(f"note: {run.directory}: {note}", file=sys.stderr)
     fmt = args.format or (
         "hdf5" if args.output is not None and args.output.suffix in HDF5_SUFFIXES else "csv")
     if args.site is not None and args.site not in run.sites:

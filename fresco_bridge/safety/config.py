@@ -4,15 +4,15 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
+from ..config_model import StrictConfig
 from .limits import INF, ControlPointLimits
 
 
-class ControlPointLimitsConfig(BaseModel):
-    """Limits of one control point (an actuator DOF, i.e. after the setup). Units mm, kN, s."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class ControlPointLimitsConfig(StrictConfig):
+    """Limits of one control point (an actuator DOF, i.e. after the setup). Units mm, kN, s.
+    Every value is finite (``StrictConfig``): a NaN bound would switch its limit off."""
 
     actuator: int = Field(default=1, ge=1, le=64)
     """Control point, 1-based: the actuator index after the setup transformation."""

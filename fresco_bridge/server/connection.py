@@ -7,29 +7,66 @@ are still handled strictly in order. Reading goes on while a request waits, so a
 vanishes is noticed: an operator wait is then cancelled (its command is never forwarded), while
 a controller call finishes under its own deadline. Only a client that keeps sending more than
 ``HELD_BYTES_CAP`` during one wait is paused (backpressure).
+
+Replies are bounded too: past ``WRITE_HIGH_WATER`` bytes queued for a client that does not read
+them, the pump stops reading and answering that client (its requests wait in its own socket),
+so what is queued never exceeds the high-water mark plus one reply; a client that leaves them
+unread for ``session_idle_timeout`` is ended with the reason. The same deadline ends a session
+that sends nothing while the bridge owes it nothing (no request being answered, no operator
+wait, no controller call): a vanished UDP peer or a half-open TCP connection frees its site.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field
 from time import perf_counter
-from typing import Protocol
+from typing import Any, Literal, Protocol
 
-from protocol import NEED_DATA, PAUSED, ActorSession, ElementServerSession, ProtocolError
+from protocol import ActorSession, ElementServerSession, ProtocolError
 
 from ..eager import Suspended, start_eager
-from ..sites import ExperimentalSite, SiteError
+from ..sites import Site, SiteError
+from .access import Allowlist, RejectionLog
 from .handlers import ActorHandler, ElementHandler, SessionEnded
 
 log = logging.getLogger("fresco_bridge.server")
 HELD_BYTES_CAP = 1 << 20
 """Bytes buffered while a request waits before the transport stops reading."""
+WRITE_HIGH_WATER = 256 * 1024
+"""Bytes queued for a client past which its requests are no longer read nor answered."""
+WRITE_LOW_WATER = 64 * 1024
+"""Queued bytes below which a paused client is read and answered again."""
+
+
+@dataclass(slots=True)
+class SiteListener:
+    """What every connection of one site's listener shares."""
+
+    site: Site
+    allowlist: Allowlist
+    max_data_size: int
+    idle_timeout: float
+    rejections: RejectionLog = field(default_factory=RejectionLog)
+
+    def __post_init__(self) -> None:
+        self.site.rejections = self.rejections
+
+    def refuse(self, kind: str, peer: str, why: str) -> None:
+        """Count a refused connection; log and record it within the rate limit."""
+        site = self.site
+        report = self.rejections.refused(kind, f"refused client {peer}: {why}")
+        if report is None:
+            return
+        log.warning("site %s: %s", site.name, report.message())
+        site.record_refusal(report.message(), refusal=kind, suppressed=report.suppressed,
+                            refused_total=self.rejections.total)
 
 
 class _Handler(Protocol):
-    async def handle(self, ev: object) -> None: ...
+    def next_request(self) -> tuple[object, Coroutine[Any, Any, None]] | None: ...
 
 
 class SessionPump:
@@ -37,14 +74,15 @@ class SessionPump:
 
     def __init__(
         self,
-        site: ExperimentalSite,
+        site: Site,
         peer: str,
         send: Callable[[bytes], None],
         close: Callable[[], None],
         pause: Callable[[bool], None],
         *,
         max_data_size: int,
-        transport: str,
+        transport: Literal["tcp", "udp"],
+        idle_timeout: float | None = None,
     ) -> None:
         self.site = site
         self.peer = peer
@@ -52,43 +90,103 @@ class SessionPump:
         self._pause = pause
         self._pending: asyncio.Task[None] | None = None
         self._held = 0  # bytes received while a request waits
-        self._reading_paused = False
+        self._held_paused = False  # reading paused: too much arrived during one wait
+        self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
+        self._idle_timeout = idle_timeout
+        self._idle_handle: asyncio.TimerHandle | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        if idle_timeout is not None:
+            self._loop = asyncio.get_running_loop()
+            self._activity = self._loop.time()
+            self._idle_handle = self._loop.call_later(idle_timeout, self._idle_check)
+        site.attach_session_end(self.end_by_bridge)
         self.session: ElementServerSession | ActorSession
         self.handler: _Handler
         if site.cfg.protocol == "element":
-            self.session = ElementServerSession(max_data_size=max_data_size)
-            self.handler = ElementHandler(site, self.session, send, peer)
+            element = ElementServerSession(max_data_size=max_data_size)
+            self.session, self.handler = element, ElementHandler(site, element, send, peer)
         else:
-            self.session = ActorSession(transport=transport)  # type: ignore[arg-type]
-            self.handler = ActorHandler(site, self.session, send, peer)
+            actor = ActorSession(transport=transport)
+            self.session, self.handler = actor, ActorHandler(site, actor, send, peer)
 
     def feed(self, data: bytes) -> None:
         if self.closed:
             return
+        if self._loop is not None:
+            self._activity = self._loop.time()
         self.session.receive_data(data)
         if self._pending is None:
-            self._run()
-        elif not self._reading_paused:
+            if not self._write_blocked:
+                self._run()
+        elif not self._held_paused:
             self._held += len(data)
             if self._held > HELD_BYTES_CAP:
-                self._reading_paused = True
+                self._held_paused = True
                 self._pause(True)
 
+    # -- deadlines and backpressure ------------------------------------------------------------
+    def _idle_check(self) -> None:
+        """The session-idle deadline: the clock runs only while the bridge owes the client
+        nothing (a request waiting on the controller or an operator is not silence), or while
+        the client leaves its replies unread."""
+        assert self._loop is not None and self._idle_timeout is not None
+        self._idle_handle = None
+        if self.closed:
+            return
+        now = self._loop.time()
+        if self._pending is not None and not self._write_blocked:
+            self._activity = now
+        idle = now - self._activity
+        if idle >= self._idle_timeout:
+            if self._write_blocked:
+                why = (f"client has not read its replies for {idle:.1f} s "
+                       f"(bridge.session_idle_timeout = {self._idle_timeout:g} s)")
+            else:
+                why = (f"no message from the client for {idle:.1f} s "
+                       f"(bridge.session_idle_timeout = {self._idle_timeout:g} s)")
+            self.abort(why)
+            return
+        self._idle_handle = self._loop.call_later(self._idle_timeout - idle, self._idle_check)
+
+    def writing_paused(self, paused: bool) -> None:
+        """The transport's write buffer crossed its high (True) or low (False) water mark."""
+        if self.closed or paused == self._write_blocked:
+            return
+        self._write_blocked = paused
+        if paused:
+            log.warning("site %s: client %s does not read its replies (over %d KiB queued): "
+                        "not reading nor answering it until it does", self.site.name, self.peer,
+                        WRITE_HIGH_WATER // 1024)
+            if not self._held_paused:
+                self._pause(True)
+            return
+        if self._loop is not None:
+            self._activity = self._loop.time()
+        if not self._held_paused:
+            self._pause(False)
+        if self._pending is None:
+            self._run()
+
+    def end_by_bridge(self, reason: str) -> None:
+        """The bridge ends this session (operator abort, deadline)."""
+        self.abort(reason)
+
     def _run(self) -> None:
-        session, handle, metrics = self.session, self.handler.handle, self.site.metrics
-        while not self.closed:
+        next_request, metrics = self.handler.next_request, self.site.metrics
+        while not self.closed and not self._write_blocked:
             try:
-                ev = session.next_event()
+                request = next_request()
             except ProtocolError as exc:
                 self._end(f"protocol error from {self.peer}: {exc}", error=True)
                 return
-            if ev is NEED_DATA or ev is PAUSED:
+            if request is None:  # NEED_DATA or PAUSED
                 return
+            ev, handling = request
             t0 = perf_counter() if metrics is not None else 0.0
             try:
-                r = start_eager(handle(ev))
+                r = start_eager(handling)
             except SessionEnded as exc:
                 self._end(str(exc))
                 return
@@ -124,15 +222,22 @@ class SessionPump:
         if self._timing is not None and self.site.metrics is not None:
             self.site.metrics.message(self._timing[0], perf_counter() - self._timing[1])
         self._timing = None
-        if self._reading_paused:
-            self._reading_paused = False
-            self._pause(False)
-        self._run()
+        if self._loop is not None:
+            self._activity = self._loop.time()
+        if self._held_paused:
+            self._held_paused = False
+            if not self._write_blocked:
+                self._pause(False)
+        if not self._write_blocked:
+            self._run()
 
     def _end(self, reason: str, *, error: bool = False) -> None:
         if self.closed:
             return
         self.closed = True
+        if self._idle_handle is not None:
+            self._idle_handle.cancel()
+            self._idle_handle = None
         self.site.close_session(reason, error=error)
         self._close()
 

@@ -1,32 +1,38 @@
 """Protocol handlers: turn protocol events into site calls and replies.
 
-One handler per connection. ``handle`` is a coroutine that the connection drives eagerly, so
-with an in-process controller a request is answered inside ``data_received``.
+One handler per connection, ``match`` over the protocol's typed event union (the h11-consumer
+style). ``handle`` is a coroutine that the connection drives eagerly, so with an in-process
+controller a request is answered inside ``data_received``.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
+from typing import Any
 
 from protocol import (
     Action,
+    ActorEvent,
     ActorSession,
     CommitReceived,
     ConnectionClosed,
     DaqRequested,
     DieReceived,
+    ElementServerEvent,
     ElementServerSession,
     Ignored,
     OpenReceived,
     ProbeReceived,
     ReplyRequested,
+    Sentinel,
     SetupReceived,
+    SignalSizes,
     SizeReceived,
     TrialReceived,
 )
 
-from ..sites import ExperimentalSite, SiteError
+from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
 
@@ -40,39 +46,45 @@ class SessionEnded(Exception):
 class ElementHandler:
     """The element-level protocol (OpenSees genericClient, OpenFresco EE*, MATLAB, C clients)."""
 
-    def __init__(self, site: ExperimentalSite, session: ElementServerSession, send: Send,
-                 peer: str) -> None:
+    def __init__(self, site: Site, session: ElementServerSession, send: Send, peer: str) -> None:
         self.site = site
         self.session = session
         self.send = send
         self.peer = peer
 
-    async def handle(self, ev: object) -> None:
+    def next_request(self) -> tuple[ElementServerEvent, Coroutine[Any, Any, None]] | None:
+        """The next event and the coroutine handling it; None when more data is needed (or
+        the session is paused until its reply is sent)."""
+        ev = self.session.next_event()
+        if isinstance(ev, Sentinel):
+            return None
+        return ev, self.handle(ev)
+
+    async def handle(self, ev: ElementServerEvent) -> None:
         site = self.site
-        kind = type(ev)
-        if kind is TrialReceived:
-            await site.set_trial(ev.trial)  # type: ignore[attr-defined]
-        elif kind is ReplyRequested:
-            await self._reply(ev.action)  # type: ignore[attr-defined]
-        elif kind is CommitReceived:
-            await site.commit()
-        elif kind is SizeReceived:
-            sid = ev.size_id  # type: ignore[attr-defined]
-            site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
-            log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name, self.peer,
-                     sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
-        elif kind is DieReceived:
-            raise SessionEnded("client sent DIE (99)")
-        elif kind is ConnectionClosed:
-            if ev.clean:  # type: ignore[attr-defined]
+        match ev:
+            case TrialReceived(trial=trial):
+                await site.set_trial(trial)
+            case ReplyRequested(action=action):
+                await self._reply(action)
+            case CommitReceived():
+                await site.commit()
+            case SizeReceived(size_id=sid):
+                site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
+                log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
+                         self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
+            case DieReceived():
+                raise SessionEnded("client sent DIE (99)")
+            case ConnectionClosed(clean=True):
                 raise SessionEnded("client closed the connection without DIE")
-            raise SiteError(
-                f"client {self.peer} closed the connection in the middle of a message "
-                f"({ev.pending_bytes} byte(s) of a partial item discarded)"  # type: ignore[attr-defined]
-            )
-        elif kind is Ignored:
-            log.info("site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
-                     site.name, ev.code, self.peer)  # type: ignore[attr-defined]
+            case ConnectionClosed(pending_bytes=pending):
+                raise SiteError(
+                    f"client {self.peer} closed the connection in the middle of a message "
+                    f"({pending} byte(s) of a partial item discarded)"
+                )
+            case Ignored(code=code):
+                log.info("site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
+                         site.name, code, self.peer)
 
     async def _reply(self, action: Action) -> None:
         site, session = self.site, self.session
@@ -93,41 +105,46 @@ class ElementHandler:
 class ActorHandler:
     """The site-level protocol: we play OpenFresco's ActorExpSite for a ShadowExpSite client."""
 
-    def __init__(self, site: ExperimentalSite, session: ActorSession, send: Send,
-                 peer: str) -> None:
+    def __init__(self, site: Site, session: ActorSession, send: Send, peer: str) -> None:
         self.site = site
         self.session = session
         self.send = send
         self.peer = peer
-        self.size_out = None
+        self.size_out: SignalSizes | None = None
 
-    async def handle(self, ev: object) -> None:
+    def next_request(self) -> tuple[ActorEvent, Coroutine[Any, Any, None]] | None:
+        """The next event and the coroutine handling it; None when more data is needed."""
+        ev = self.session.next_event()
+        if isinstance(ev, Sentinel):
+            return None
+        return ev, self.handle(ev)
+
+    async def handle(self, ev: ActorEvent) -> None:
         site, session = self.site, self.session
-        kind = type(ev)
-        if kind is TrialReceived:
-            await site.set_trial(ev.trial)  # type: ignore[attr-defined]
-        elif kind is DaqRequested:
-            assert self.size_out is not None
-            self.send(session.send_daq(await site.out_signals(self.size_out)))
-        elif kind is CommitReceived:
-            await site.commit()
-        elif kind is ProbeReceived:
-            self.send(session.send_probe_reply())
-        elif kind is OpenReceived:
-            log.info("site %s: ShadowExpSite %d (OpenFresco %s) opened from %s", site.name,
-                     ev.shadow_tag, ev.version, self.peer)  # type: ignore[attr-defined]
-            # The shadow exits on a version mismatch: echo its own version.
-            self.send(session.send_open_reply(site.cfg.actor_tag, ev.version))  # type: ignore[attr-defined]
-        elif kind is SetupReceived:
-            site.check_sizes(ev.size_trial, ev.size_out, f"shadow site {self.peer}")  # type: ignore[attr-defined]
-            self.size_out = ev.size_out  # type: ignore[attr-defined]
-        elif kind is DieReceived:
-            self.send(session.send_die_reply(site.cfg.actor_tag))
-            raise SessionEnded("shadow site sent DIE (99)")
-        elif kind is ConnectionClosed:
-            if ev.clean:  # type: ignore[attr-defined]
+        match ev:
+            case TrialReceived(trial=trial):
+                await site.set_trial(trial)
+            case DaqRequested():
+                assert self.size_out is not None
+                self.send(session.send_daq(await site.out_signals(self.size_out)))
+            case CommitReceived():
+                await site.commit()
+            case ProbeReceived():
+                self.send(session.send_probe_reply())
+            case OpenReceived(shadow_tag=shadow_tag, version=version):
+                log.info("site %s: ShadowExpSite %d (OpenFresco %s) opened from %s", site.name,
+                         shadow_tag, version, self.peer)
+                # The shadow exits on a version mismatch: echo its own version.
+                self.send(session.send_open_reply(site.cfg.actor_tag, version))
+            case SetupReceived(size_trial=size_trial, size_out=size_out):
+                site.check_sizes(size_trial, size_out, f"shadow site {self.peer}")
+                self.size_out = size_out
+            case DieReceived():
+                self.send(session.send_die_reply(site.cfg.actor_tag))
+                raise SessionEnded("shadow site sent DIE (99)")
+            case ConnectionClosed(clean=True):
                 raise SessionEnded("shadow site closed the connection without DIE")
-            raise SiteError(f"shadow site {self.peer} closed the connection mid-message")
-        elif kind is Ignored:
-            log.info("site %s: ignoring action code %r from %s", site.name,
-                     ev.code, self.peer)  # type: ignore[attr-defined]
+            case ConnectionClosed():
+                raise SiteError(f"shadow site {self.peer} closed the connection mid-message")
+            case Ignored(code=code):
+                log.info("site %s: ignoring action code %r from %s", site.name, code, self.peer)

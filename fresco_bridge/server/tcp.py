@@ -1,8 +1,15 @@
 """TCP listener of a site: one client session at a time, back to accepting after DIE or EOF.
 
 genericClient leaves Nagle on, so after every message that gets no reply (3, 5) its next
-request waits for our delayed ACK (~40 ms). Re-arming ``TCP_QUICKACK`` after every read
-removes that stall (spec §3.11); ``TCP_NODELAY`` keeps our replies from waiting too.
+request waits for our delayed ACK (~40 ms). Setting ``TCP_QUICKACK`` after a read that we do
+not answer (a message without a reply, or part of a message) sends that ACK at once and
+removes the stall (spec §3.11); a reply carries its ACK itself, so reads that are answered
+need no system call. ``TCP_NODELAY`` keeps our replies from waiting too.
+
+TCP keepalive probes a silent peer (a lost host, a cut cable) even while the bridge waits on
+the controller or an operator, when the session-idle deadline does not run: a dead peer is
+noticed within ``KEEPALIVE_IDLE + KEEPALIVE_COUNT * KEEPALIVE_INTERVAL`` s. With ``tls = true``
+the connection is upgraded to mutual TLS (``server/tls.py``) before a session is opened.
 """
 
 from __future__ import annotations
@@ -10,53 +17,107 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import ssl
 from typing import Any
 
-from ..sites import ExperimentalSite, SiteError
-from .connection import SessionPump
+from ..sites import SiteError
+from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
+from .tls import HANDSHAKE_TIMEOUT, check_issued_directly, describe_failure
 
 log = logging.getLogger("fresco_bridge.server")
 _QUICKACK = getattr(socket, "TCP_QUICKACK", None)
+KEEPALIVE_IDLE = 10
+"""Seconds of silence before the first keepalive probe."""
+KEEPALIVE_INTERVAL = 5
+KEEPALIVE_COUNT = 3
+
+
+def _keepalive(sock: socket.socket) -> None:
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for name, value in (("TCP_KEEPIDLE", KEEPALIVE_IDLE), ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL),
+                        ("TCP_KEEPCNT", KEEPALIVE_COUNT)):
+        opt = getattr(socket, name, None)
+        if opt is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, opt, value)
 
 
 class TcpConnection(asyncio.Protocol):
-    def __init__(self, site: ExperimentalSite, allowed: frozenset[str], max_data_size: int) -> None:
-        self.site = site
-        self.allowed = allowed
-        self.max_data_size = max_data_size
+    def __init__(self, listener: SiteListener, tls: ssl.SSLContext | None = None) -> None:
+        self.listener = listener
+        self.site = listener.site
+        self.tls = tls
         self.pump: SessionPump | None = None
         self.transport: asyncio.Transport | None = None
         self._quickack: Any = None
+        self._handshake: asyncio.Task[None] | None = None
+        self._early: list[bytes] = []  # decrypted before the TLS handshake task resumed
+        self._replies = 0  # writes to the client so far
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
         host, port = transport.get_extra_info("peername")[:2]
         peer = f"{host}:{port}"
-        if self.allowed and host not in self.allowed:
-            log.warning("site %s: refused client %s: address not in allowed_clients %s",
-                        self.site.name, peer, sorted(self.allowed))
-            if self.site.record is not None:
-                self.site.record.event(self.site.name, self.site.session, "refused",
-                                       f"client {peer} not in allowed_clients")
-            transport.abort()
-            return
-        try:
-            self.site.open_session(peer)
-        except SiteError as exc:
-            log.warning("site %s: refused client %s: %s", self.site.name, peer, exc)
+        if not self.listener.allowlist.admits(host):
+            self.listener.refuse("address", peer, "address not in allowed_clients "
+                                 f"({self.listener.allowlist})")
             transport.abort()
             return
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            _keepalive(sock)
             if _QUICKACK is not None:
                 self._quickack = sock.setsockopt
                 sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
+        if self.tls is None:
+            self._open(transport, peer)
+        else:
+            self._handshake = asyncio.get_running_loop().create_task(
+                self._start_tls(transport, self.tls, peer), name=f"{self.site.name}.tls")
+
+    async def _start_tls(self, raw: asyncio.Transport, ctx: ssl.SSLContext, peer: str) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            transport = await loop.start_tls(raw, self, ctx, server_side=True,
+                                             ssl_handshake_timeout=HANDSHAKE_TIMEOUT)
+        except (OSError, ssl.SSLError, TimeoutError, ConnectionError) as exc:
+            self.listener.refuse("tls", peer, describe_failure(exc))
+            raw.abort()
+            return
+        if transport is None:  # the peer went away during the handshake
+            raw.abort()
+            return
+        ssl_object = transport.get_extra_info("ssl_object")
+        why = check_issued_directly(ctx, None if ssl_object is None else ssl_object.getpeercert())
+        if why is not None:
+            self.listener.refuse("tls", peer, why)
+            transport.abort()
+            return
+        self.transport = transport
+        self._open(transport, peer)
+
+    def _open(self, transport: asyncio.Transport, peer: str) -> None:
+        try:
+            self.site.open_session(peer)
+        except SiteError as exc:
+            self.listener.refuse("busy" if self.site.busy else "state", peer, str(exc))
+            transport.abort()
+            return
+        transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
         self.pump = SessionPump(
-            self.site, peer, transport.write, transport.close, self._pause,
-            max_data_size=self.max_data_size, transport="tcp",
+            self.site, peer, self._reply, transport.close, self._pause,
+            max_data_size=self.listener.max_data_size, transport="tcp",
+            idle_timeout=self.listener.idle_timeout,
         )
+        early, self._early = self._early, []
+        for data in early:
+            self.pump.feed(data)
+
+    def _reply(self, data: bytes) -> None:
+        self._replies += 1
+        assert self.transport is not None
+        self.transport.write(data)
 
     def _pause(self, on: bool) -> None:
         if self.transport is None or self.transport.is_closing():
@@ -66,11 +127,23 @@ class TcpConnection(asyncio.Protocol):
         else:
             self.transport.resume_reading()
 
-    def data_received(self, data: bytes) -> None:
-        if self._quickack is not None:
-            self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)
+    def pause_writing(self) -> None:
         if self.pump is not None:
-            self.pump.feed(data)
+            self.pump.writing_paused(True)
+
+    def resume_writing(self) -> None:
+        if self.pump is not None:
+            self.pump.writing_paused(False)
+
+    def data_received(self, data: bytes) -> None:
+        pump = self.pump
+        if pump is not None:
+            replies = self._replies
+            pump.feed(data)
+            if self._replies == replies and self._quickack is not None and not pump.closed:
+                self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)  # nothing carries our ACK
+        elif self._handshake is not None and sum(map(len, self._early)) < HELD_BYTES_CAP:
+            self._early.append(data)  # the handshake task has not resumed yet
 
     def eof_received(self) -> bool | None:
         if self.pump is not None:

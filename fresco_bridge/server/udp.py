@@ -4,7 +4,10 @@ The first datagram of a session may be OpenSees' 1-byte ``'a'`` handshake (answe
 or directly the size ID (OpenFresco clients without handshake). Requests are reassembled by
 byte count (9126- or 512-byte chunks alike); replies go to the last peer, cut at 9126 bytes.
 UDP has no EOF: a new handshake (or a datagram from another address after DIE) starts a new
-session; a handshake from another address while a session is live is refused.
+session; a handshake from another address while a session is live is refused. A peer that
+vanished without DIE (killed integrator, lost host) is noticed by the session-idle deadline
+(``bridge.session_idle_timeout``), which ends its session so a new handshake is accepted; a
+new handshake from the same peer ends its old session at once.
 """
 
 from __future__ import annotations
@@ -13,18 +16,18 @@ import asyncio
 import logging
 
 from protocol import UdpServerFraming, chunk_datagrams
+from protocol.udp import HANDSHAKE_REQUEST
 
-from ..sites import ExperimentalSite, SiteError
-from .connection import SessionPump
+from ..sites import SiteError
+from .connection import SessionPump, SiteListener
 
 log = logging.getLogger("fresco_bridge.server")
 
 
 class UdpSiteEndpoint(asyncio.DatagramProtocol):
-    def __init__(self, site: ExperimentalSite, allowed: frozenset[str], max_data_size: int) -> None:
-        self.site = site
-        self.allowed = allowed
-        self.max_data_size = max_data_size
+    def __init__(self, listener: SiteListener) -> None:
+        self.listener = listener
+        self.site = listener.site
         self.transport: asyncio.DatagramTransport | None = None
         self.pump: SessionPump | None = None
         self.framing: UdpServerFraming | None = None
@@ -46,20 +49,22 @@ class UdpSiteEndpoint(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         host = addr[0]
         peer = f"{host}:{addr[1]}"
-        if self.allowed and host not in self.allowed:
-            log.warning("site %s: dropped datagram from %s: address not in allowed_clients",
-                        self.site.name, peer)
+        listener = self.listener
+        if not listener.allowlist.admits(host):
+            listener.refuse("address", peer, f"datagram dropped: address not in allowed_clients "
+                            f"({listener.allowlist})")
             return
         live = self.pump is not None and not self.pump.closed
         if live and addr != self.peer_addr:
-            if data == b"a":
-                log.warning("site %s: refused UDP handshake from %s: busy with %s",
-                            self.site.name, peer, self.peer_addr)
-            else:
-                log.warning("site %s: dropped %d-byte datagram from %s (not the session peer)",
-                            self.site.name, len(data), peer)
+            what = "UDP handshake" if data == HANDSHAKE_REQUEST else f"{len(data)}-byte datagram"
+            listener.refuse("busy", peer, f"{what} while the site serves {self.peer_addr} "
+                            "(one client per site; a silent one is ended after "
+                            "bridge.session_idle_timeout)")
             return
-        if live and data == b"a" and self.framing is not None and self.framing.started:
+        if (live and data == HANDSHAKE_REQUEST and self.framing is not None
+                and self.framing.datagrams_received > 0):
+            # A 1-byte datagram is never stream data (items are 4- or 8-byte words, cut at
+            # 9126 or 512 bytes): the same peer starts over (its integrator was restarted).
             assert self.pump is not None
             self.pump.abort("client started a new UDP session (handshake) without DIE")
             live = False
@@ -67,13 +72,14 @@ class UdpSiteEndpoint(asyncio.DatagramProtocol):
             try:
                 self.site.open_session(peer)
             except SiteError as exc:
-                log.warning("site %s: refused UDP client %s: %s", self.site.name, peer, exc)
+                listener.refuse("busy" if self.site.busy else "state", peer, str(exc))
                 return
             self.peer_addr = addr
             self.framing = UdpServerFraming()
             self.pump = SessionPump(
                 self.site, peer, self._send, self._session_over, lambda on: None,
-                max_data_size=self.max_data_size, transport="udp",
+                max_data_size=listener.max_data_size, transport="udp",
+                idle_timeout=listener.idle_timeout,
             )
         assert self.framing is not None and self.pump is not None
         stream, reply = self.framing.datagram_received(data)

@@ -1,6 +1,7 @@
 """Sites: where trial signals meet a setup and a controller (OpenFresco: experimental sites)."""
 
 from ..safety import SiteState
-from .experimental import ExperimentalSite, SiteError
+from .base import Site, SiteError
+from .experimental import ExperimentalSite
 
-__all__ = ["ExperimentalSite", "SiteError", "SiteState"]
+__all__ = ["ExperimentalSite", "Site", "SiteError", "SiteState"]

@@ -15,43 +15,47 @@ abort) tells the integrator to stop the same way and refuses new sessions until 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 import time as _time
-from collections.abc import Awaitable, Callable, Coroutine
-from typing import TYPE_CHECKING, Any, TypeVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from protocol import Signals, SignalSizes
 
 from ..config import SiteConfig
-from ..controls.base import Controller, ControllerError, ControllerLinkError, Daq
+from ..controls.base import Controller, Daq
 from ..record import RunRecord
+from ..record.site import SiteRecorder
 from ..safety import Limiter, LimitHit, SiteState, TransitionRefused, Trigger, next_state
 from ..setups import LinearSetup, make_setup
-from ..telemetry import NullTelemetry, SiteEvent, SiteStatus, StepSample
-from .recovery import recover
+from ..steps import CommittedStep
+from ..telemetry.schema import SiteStatus
+from .base import SiteError
+from .guard import ControllerGuard
+from .listeners import EventListener, SiteNotice, StepListener
 from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
-    from ..indicators import OnlineMonitor
-    from ..telemetry.base import Telemetry
+    from ..server.access import RejectionLog
     from ..telemetry.metrics import SiteMetrics
 
 log = logging.getLogger("fresco_bridge.site")
-T = TypeVar("T")
 
 PAUSE_LOG_INTERVAL = 30.0
 """While a command waits for an operator, a warning is logged this often (s)."""
+ABORT_GRACE = 5.0
+"""After ``ctl abort`` the session's next request is answered NaN (the integrator stops and
+sends DIE); a session still open this many seconds later is ended by the bridge (an idle or
+half-open client cannot keep an aborted site)."""
 
 RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
 
 
-class SiteError(Exception):
-    """A session cannot be served by this site (sizes that do not fit, site busy, aborted)."""
-
-
 class ExperimentalSite:
-    """One site: config, setup, limits, controller, state, and the current session's signals."""
+    """One site: config, setup, limits, controller (behind its guard), state, the current
+    session's signals, and the listeners its committed steps and events go to."""
 
     def __init__(
         self,
@@ -65,16 +69,14 @@ class ExperimentalSite:
         self.cfg = cfg
         self.name = cfg.name
         self.controller = controller
-        self.record = record
         self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
         if self.setup.n_actuators != controller.n_actuators:
             raise SiteError(
                 f"site {cfg.name}: setup {cfg.setup} needs {self.setup.n_actuators} actuator(s), "
                 f"the controller has {controller.n_actuators}"
             )
-        self.timeout = controller_timeout
-        self.recovery = controller_recovery  # s to wait for a lost controller; 0: plain HOLD
-        self.recovering_since: float | None = None
+        self.guard = ControllerGuard(self, controller, timeout=controller_timeout,
+                                     recovery=controller_recovery)
         self.state = SiteState.IDLE
         self.reason = ""
         self.session = 0
@@ -82,10 +84,13 @@ class ExperimentalSite:
         self.damping = column_major(cfg.damping, cfg.dofs)
         self.mass = column_major(cfg.mass, cfg.dofs)
         self.holds = 0
-        self.telemetry: Telemetry = NullTelemetry()
-        self.monitor: OnlineMonitor | None = None
         self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
-        self._live = False  # telemetry on: publish steps, status and events
+        self._step_listeners: list[StepListener] = []
+        self._event_listeners: list[EventListener] = []
+        self.recorder = None if record is None else SiteRecorder(record, cfg.name)
+        """The one writer of this site's lines in the run record (None: recording off)."""
+        if self.recorder is not None:
+            self.add_listener(self.recorder)
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
@@ -96,12 +101,10 @@ class ExperimentalSite:
         self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
         self.pending: tuple[float, ...] | None = None  # waits for an operator or a recovery
-        self._background: set[asyncio.Task[None]] = set()
+        self._end_session: Callable[[str], None] | None = None  # the transport's, per session
+        self._resume_at: tuple[int, float] | None = None  # (step, time) of a resumed run
+        self.rejections: RejectionLog | None = None  # refused connections (set by the listener)
         self._reset_signals()
-
-    @property
-    def hold_reason(self) -> str:
-        return self.reason
 
     # -- sessions ------------------------------------------------------------------------------
     def _reset_signals(self) -> None:
@@ -112,7 +115,7 @@ class ExperimentalSite:
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
         self.target: tuple[float, ...] = (0.0,) * na  # what the integrator asked for (ctrl)
         self.ctrl: tuple[float, ...] = (0.0,) * na  # what the controller was sent last
-        self._sent_ctrl: tuple[float, ...] | None = None
+        self.guard.sent = None
         self._uncommitted = False
         self.daq = Daq((0.0,) * na, (0.0,) * na)
         self._daq_valid = False
@@ -134,6 +137,10 @@ class ExperimentalSite:
                             f"client {peer}: {exc}") from None
         self.session += 1
         self._reset_signals()
+        if self._resume_at is not None:  # the first session after a crash: numbering goes on
+            self.step, self.time = self._resume_at
+            self._commit_time = self.time
+            self._resume_at = None
         reset = getattr(self.controller, "reset", None)
         if reset is not None and getattr(self.cfg.controller, "reset_on_new_session", False):
             reset()
@@ -156,6 +163,37 @@ class ExperimentalSite:
                         f"{self.step + 1} ({reason})")
         self._transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
         self.peer = ""
+        self._end_session = None
+
+    def resume_from(self, session: int, step: int, time: float) -> None:
+        """A resumed run: the next session is ``session + 1`` and starts after committed
+        ``step`` (pseudo-time ``time``). Nothing is sent to the controller here: the first
+        command is the client's, checked against the measured position."""
+        self.session = session
+        self._resume_at = (step, time)
+        self.event("resumed", f"run resumed after an interruption: site {self.name} continues "
+                    f"from committed step {step} (t = {time:g} s) with session {session + 1}",
+                    step=step, time=time)
+
+    def attach_session_end(self, end: Callable[[str], None]) -> None:
+        """The open session's transport: how the bridge itself ends it (abort, deadline)."""
+        self._end_session = end
+
+    def _end_session_later(self, session: int, reason: str) -> None:
+        """End ``session`` after ``ABORT_GRACE`` s if it is still open (an idle client)."""
+        def end() -> None:
+            if self.session == session and self.peer and self._end_session is not None:
+                log.warning("site %s: session %d still open %g s after the abort: ended",
+                            self.name, session, ABORT_GRACE)
+                self._end_session(reason)
+
+        with contextlib.suppress(RuntimeError):  # no loop (the site alone): nothing to end
+            asyncio.get_running_loop().call_later(ABORT_GRACE, end)
+
+    def record_refusal(self, message: str, **extra: object) -> None:
+        """A refused connection (counted and logged by the transport) goes into the record."""
+        if self.recorder is not None:
+            self.recorder.event(self.session, "refused", message, **extra)
 
     def check_sizes(self, ctrl: SignalSizes, daq: SignalSizes, who: str) -> None:
         """OpenFresco's rule: every non-zero size equals the element's DOFs, time sizes are 1."""
@@ -172,9 +210,12 @@ class ExperimentalSite:
         if new is not old:
             self.reason = reason if new in (PAUSED, HOLD, FAULT) else ""
             self.paused_since = _time.monotonic() if new is PAUSED else None
-        kind = "hold" if new is HOLD and old is not HOLD else str(trigger)
-        self._event(kind, reason, cause=str(trigger), **{"from": str(old), "to": str(new)},
-                    **extra)
+        entered_hold = new is HOLD and old is not HOLD
+        if entered_hold:
+            self.holds += 1  # counted before the event: the status sent with it includes it
+        kind = "hold" if entered_hold else str(trigger)
+        self.event(kind, reason, cause=str(trigger), **{"from": str(old), "to": str(new)},
+                   **extra)
         return new
 
     def _enter(self, trigger: Trigger, reason: str) -> None:
@@ -188,9 +229,8 @@ class ExperimentalSite:
             log.error("site %s: %s (%s)", self.name, exc, reason)
             return
         if new is HOLD:
-            self.holds += 1
             log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason)
-            self._controller_hold()
+            self.guard.hold()
         else:
             log.warning("site %s: %s at step %d: %s (stays %s)", self.name, trigger, self.step,
                         reason, new)
@@ -198,32 +238,28 @@ class ExperimentalSite:
     def enter_hold(self, reason: str) -> None:
         self._enter(Trigger.HOLD, reason)
 
-    def _controller_hold(self) -> None:
-        """Stop the actuator where it is; the adapter itself releases the interlock it engaged
-        at the next command the site forwards (a new session or an operator's resume)."""
-        if self.controller.inline:
-            _run_inline(self.controller.hold())
-        else:
-            task = asyncio.get_running_loop().create_task(self._hold_in_background(),
-                                                          name=f"{self.name}.hold")
-            self._background.add(task)  # the loop keeps only a weak reference
-            task.add_done_callback(self._background.discard)
+    def recovered(self, reason: str, **extra: object) -> None:
+        """HOLD → RUNNING: the guard's recovery found the controller answering again."""
+        self._transition(Trigger.RECOVERED, reason, **extra)
 
-    async def _hold_in_background(self) -> None:
-        """The hold call with its deadline; a failure is logged and recorded, never lost."""
-        try:
-            await asyncio.wait_for(self.controller.hold(), self.timeout)
-        except Exception as exc:  # any failure: logged and recorded, never "never retrieved"
-            detail = (str(exc) if isinstance(exc, ControllerError | TimeoutError)
-                      else f"{type(exc).__name__}: {exc}")
-            reason = f"controller hold failed: {detail or f'no answer within {self.timeout:g} s'}"
-            log.error("site %s: %s (the actuator keeps its last command only if the controller "
-                      "does)", self.name, reason)
-            self._event("controller-hold-failed", reason, step=self.step)
+    def resend_refused(self, command: tuple[float, ...],
+                       measured: tuple[float, ...]) -> str | None:
+        """Why ``command`` may not be re-sent from the ``measured`` position, or None."""
+        limiter = self._ctrl_limiter
+        if limiter is None:
+            return None
+        verdict = limiter.check_ctrl(command, measured, self.time - self._commit_time)
+        if verdict is None:
+            return None
+        what = verdict.describe() or (f"the move needs {len(verdict.commands)} sub-commands "
+                                      "under the velocity limit")
+        return (f"controller answers again with the actuator at {list(measured)} mm; re-sending "
+                f"{list(command)} mm from there is not within the limits ({what}); not sent")
 
     def _wake_waiter(self) -> None:
         if self._wake is not None:
             self._wake.set()
+        self.guard.wake()
 
     # -- operator ------------------------------------------------------------------------------
     def operator_pause(self, source: str) -> str:
@@ -250,8 +286,11 @@ class ExperimentalSite:
         log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
                   "sessions refused until 'fresco-bridge ctl resume'", self.name, source,
                   self.step, old)
-        self._controller_hold()
+        self.guard.hold()
         self._wake_waiter()
+        if self.peer:
+            self._end_session_later(self.session, f"aborted by the operator ({source}); the "
+                                    f"client sent no request within {ABORT_GRACE:g} s")
         return f"site {self.name} {old} → FAULT"
 
     def status(self) -> dict[str, object]:
@@ -264,13 +303,14 @@ class ExperimentalSite:
             "daq_disp": list(self.daq.disp), "daq_force": list(self.daq.force),
             "pending": None if self.pending is None else list(self.pending),
             "paused_for": None if since is None else round(_time.monotonic() - since, 3),
-            "recovering_for": None if self.recovering_since is None
-            else round(_time.monotonic() - self.recovering_since, 3),
+            "recovering_for": None if self.guard.recovering_since is None
+            else round(_time.monotonic() - self.guard.recovering_since, 3),
             "holds": self.holds, "limit_events": dict(self.limit_counts),
+            "refused": {} if self.rejections is None else dict(self.rejections.counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
         }
 
-    def _tell_integrator_to_stop(self, why: str) -> None:
+    def tell_integrator_to_stop(self, why: str) -> None:
         """From now on this session's answers are NaN, until the client sends DIE or leaves.
 
         Closing the connection cannot stop OpenSees: its genericClient ignores a failed recv
@@ -283,8 +323,8 @@ class ExperimentalSite:
         self.stop_reason = why
         log.error("site %s: %s; answering NaN from now on so the integrator stops (session %d, "
                   "step %d)", self.name, why, self.session, self.step)
-        self._event("integrator-stop", f"answering NaN so the integrator stops: {why}",
-                    step=self.step)
+        self.event("integrator-stop", f"answering NaN so the integrator stops: {why}",
+                   step=self.step)
 
     def _stopping(self) -> bool:
         """True when this session can only be told to stop: HOLD (nothing is forwarded any more,
@@ -292,9 +332,9 @@ class ExperimentalSite:
         the request before any reply), FAULT (operator abort), or a failed recovery."""
         if self.stop_reason is None and self.peer:
             if self.state is HOLD:
-                self._tell_integrator_to_stop(f"HOLD ({self.reason})")
+                self.tell_integrator_to_stop(f"HOLD ({self.reason})")
             elif self.state is FAULT:
-                self._tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
+                self.tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
         return self.stop_reason is not None
 
     def _nan_signals(self, sizes: SignalSizes) -> Signals:
@@ -326,79 +366,39 @@ class ExperimentalSite:
             self.pending = None
             self._wake = None
 
-    # -- telemetry -----------------------------------------------------------------------------
-    def attach_telemetry(self, telemetry: Telemetry, monitor: OnlineMonitor | None) -> None:
-        self.telemetry, self.monitor, self._live = telemetry, monitor, True
-        self._publish_status()
+    # -- listeners ------------------------------------------------------------------------------
+    def add_listener(self, listener: StepListener | EventListener) -> None:
+        """Committed steps (``step_committed``) and/or events (``site_event``) go to
+        ``listener`` from now on, after those added before it."""
+        if isinstance(listener, StepListener):
+            self._step_listeners.append(listener)
+        if isinstance(listener, EventListener):
+            self._event_listeners.append(listener)
 
-    def _publish_status(self) -> None:
-        if self._live:
-            self.telemetry.publish_status(SiteStatus(
-                site=self.name, state=str(self.state), session=self.session, step=self.step,
-                time=self.time, reason=self.reason, holds=self.holds,
-            ))
+    def status_now(self) -> SiteStatus:
+        """The site's state for telemetry (retained status)."""
+        return SiteStatus(site=self.name, state=str(self.state), session=self.session,
+                          step=self.step, time=self.time, reason=self.reason, holds=self.holds)
 
-    def _event(self, kind: str, reason: str, **extra: object) -> None:
-        if self.record is not None:
-            self.record.event(self.name, self.session, kind, reason, **extra)
-        if self._live:
-            self.telemetry.publish_event(SiteEvent(
-                site=self.name, kind=kind, reason=reason, session=self.session, step=self.step,
-                time=self.time,
-                extra={k: v for k, v in extra.items() if isinstance(v, str | int | float | bool)},
-            ))
-            self._publish_status()
+    def event(self, kind: str, reason: str, **extra: object) -> None:
+        """An event of this site (a state change, a limit hit, a fault…) to its listeners."""
+        if not self._event_listeners:
+            return
+        notice = SiteNotice(self.name, self.session, self.step, self.time, kind, reason, extra)
+        status = self.status_now()
+        for listener in self._event_listeners:
+            listener.site_event(notice, status)
+
+    def monitor_warning(self, reason: str, step: int) -> None:
+        """An online monitor's warning at committed ``step`` (the taps raise it)."""
+        self.event("monitor-warning", reason, step=step)
 
     def _limit_event(self, hit: LimitHit, action: str) -> None:
         """Every limit hit is counted, logged, recorded and published (also when clamped)."""
         self.limit_counts[hit.limit] = self.limit_counts.get(hit.limit, 0) + 1
         log.warning("site %s: LIMIT at step %d: %s (policy %s: %s)", self.name, self.step + 1,
                     hit.describe(), hit.policy, action)
-        self._event("limit", hit.describe(), **hit.as_record(), action=action, step=self.step)
-
-    # -- controller calls ----------------------------------------------------------------------
-    def _call(self, coro: Coroutine[Any, Any, T]) -> Awaitable[T]:
-        """Every controller call gets the deadline; in-process ones complete at once."""
-        if self.controller.inline:
-            return coro
-        return asyncio.wait_for(coro, self.timeout)
-
-    async def _guard(self, what: str, call: Callable[[], Coroutine[Any, Any, T]],
-                     command: tuple[float, ...] | None = None) -> T | None:
-        """``call()`` under the deadline; a failure HOLDs (None). A lost or silent controller
-        is waited for first (``recovery``), then the call is made again: ``command`` is the
-        setpoint ``call`` sends, a read re-sends the last setpoint before reading again."""
-        deadline: float | None = None
-        resend: tuple[float, ...] | None = None
-        while True:
-            started, doing = self.state, what
-            try:
-                if resend is not None:
-                    doing = f"set_ctrl {list(resend)} (re-sent after the controller came back)"
-                    await self._call(self.controller.set_ctrl(resend))
-                    resend = None
-                    doing = what
-                return await self._call(call())
-            except TimeoutError:
-                reason, lost = f"controller did not answer {doing} within {self.timeout:g} s", True
-            except ControllerError as exc:
-                reason = f"controller failed on {doing}: {exc}"
-                lost = isinstance(exc, ControllerLinkError)
-            self.enter_hold(reason)
-            if not lost or self.recovery <= 0.0 or started is not RUNNING or self.state is not HOLD:
-                return None
-            loop = asyncio.get_running_loop()
-            deadline = loop.time() + self.recovery if deadline is None else deadline
-            if resend is None:
-                resend = command if command is not None else self._sent_ctrl
-            why = await recover(self, reason, deadline, resend)
-            if self.state is FAULT:
-                return None  # aborted meanwhile: the reply is NaN (``_stopping``)
-            if why is not None:
-                self._tell_integrator_to_stop(why)
-                return None
-            if command is not None:
-                resend = None  # ``call`` itself sends ``command`` again
+        self.event("limit", hit.describe(), **hit.as_record(), action=action, step=self.step)
 
     # -- the step ------------------------------------------------------------------------------
     async def set_trial(self, trial: Signals) -> None:
@@ -431,29 +431,29 @@ class ExperimentalSite:
         if self.state is RUNNING and self._ctrl_limiter is None:  # the hot path: no limits
             ctrl = target
             self.ctrl = ctrl
-            if self.record is not None:
-                self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
-            if ctrl != self._sent_ctrl:
+            if self.recorder is not None:
+                self.recorder.trial(self.session, self.step, self.time, trial.disp, ctrl)
+            if ctrl != self.guard.sent:
                 await self._send(ctrl)
             return
         commands = await self._commands_for(target)
         if commands is None:
             return
         ctrl = self.ctrl = commands[-1]
-        if self.record is not None:
-            self.record.trial(self.name, self.session, self.step, self.time, trial.disp, ctrl)
+        if self.recorder is not None:
+            self.recorder.trial(self.session, self.step, self.time, trial.disp, ctrl)
         for command in commands:
-            if command != self._sent_ctrl and not await self._send(command):
+            if command != self.guard.sent and not await self._send(command):
                 return
 
     async def _send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
         self._uncommitted = True
-        await self._guard("set_ctrl", lambda: self.controller.set_ctrl(command), command)
+        await self.guard.guarded("set_ctrl", lambda: self.controller.set_ctrl(command), command)
         if self.state is HOLD or self.state is FAULT:
             self._reference = None  # where the actuator stopped is not known
             return False
-        self._sent_ctrl = self._reference = command
+        self.guard.sent = self._reference = command
         return True
 
     async def _commands_for(
@@ -485,7 +485,7 @@ class ExperimentalSite:
         limiter = self._ctrl_limiter
         assert limiter is not None
         if self._reference is None and limiter.needs_reference:
-            daq = await self._guard("get_daq (reference position)", self.controller.get_daq)
+            daq = await self.guard.guarded("get_daq (reference position)", self.controller.get_daq)
             if daq is None:
                 return None
             self._reference = daq.disp
@@ -513,16 +513,16 @@ class ExperimentalSite:
             if action == "substep":
                 log.info("site %s: step %d sent as %d sub-commands (velocity limit)",
                          self.name, self.step + 1, len(verdict.commands))
-                self._event("substep", f"{len(verdict.commands)} sub-commands within the "
-                            "velocity limit", substeps=len(verdict.commands),
-                            target=list(verdict.commands[-1]), step=self.step)
+                self.event("substep", f"{len(verdict.commands)} sub-commands within the "
+                           "velocity limit", substeps=len(verdict.commands),
+                           target=list(verdict.commands[-1]), step=self.step)
             return verdict.commands
 
     async def acquire(self) -> Daq:
         """The measurement for the current command, acquired once per trial."""
         if self._daq_valid or self.state is HOLD:
             return self.daq
-        daq = await self._guard("get_daq", self.controller.get_daq)
+        daq = await self.guard.guarded("get_daq", self.controller.get_daq)
         if daq is None:
             return self.daq
         if not all(math.isfinite(v) for v in daq.disp + daq.force):
@@ -531,16 +531,15 @@ class ExperimentalSite:
         if self._daq_limiter is not None:
             hit = self._daq_limiter.check_daq(daq.force)
             if hit is not None:
-                if self.record is not None:  # a real measurement: keep it in the record
-                    self.record.measurement(self.name, self.session, self.step, daq.disp,
-                                            daq.force)
+                if self.recorder is not None:  # a real measurement: keep it in the record
+                    self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
                 self._limit_event(hit, "hold")
                 self.enter_hold(f"daq limit exceeded: {hit.describe()}")
                 return self.daq
         self.daq = daq
         self._daq_valid = True
-        if self.record is not None:
-            self.record.measurement(self.name, self.session, self.step, daq.disp, daq.force)
+        if self.recorder is not None:
+            self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
         return daq
 
     async def commit(self) -> None:
@@ -550,26 +549,16 @@ class ExperimentalSite:
         await self.acquire()  # every committed step has its measurement in the record
         if self.state is HOLD:
             return
-        await self._guard("commit", self.controller.commit)
+        await self.guard.guarded("commit", self.controller.commit)
         self.step += 1
         self._uncommitted = False
         self._commit_time = self.time
-        if self.record is not None:
-            self.record.commit(self.name, self.session, self.step, self.time)
-        if self._live:
-            self._publish_step()
-
-    def _publish_step(self) -> None:
-        """Telemetry tap: a bounded-queue append, never a wait (the step loop stays fast)."""
-        sample = None
-        if self.monitor is not None:
-            sample = self.monitor.update(self.ctrl[0], self.daq.disp[0])
-            if sample.warning:
-                self._event("monitor-warning", sample.warning, step=self.step)
-        self.telemetry.publish_step(StepSample(
-            self.name, self.session, self.step, self.time, self.trial.disp, self.ctrl,
-            self.daq.disp, self.daq.force, str(self.state), None, sample,
-        ))
+        if self._step_listeners:
+            committed = CommittedStep(self.name, self.session, self.step, self.time,
+                                      self.trial.disp, self.ctrl, self.daq.disp, self.daq.force,
+                                      str(self.state))
+            for listener in self._step_listeners:
+                listener.step_committed(committed)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
         """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them;
@@ -595,7 +584,7 @@ class ExperimentalSite:
         if self._stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
         if self.state is not HOLD:
-            k = await self._guard("tangent_stiffness", self.controller.tangent_stiffness)
+            k = await self.guard.guarded("tangent_stiffness", self.controller.tangent_stiffness)
             if k is not None:
                 self._k_tangent = self.setup.basic_matrix(k)
         return self._k_tangent
@@ -604,15 +593,8 @@ class ExperimentalSite:
         if self._stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
         if self._k_initial is None or self.state is not HOLD:
-            k = await self._guard("initial_stiffness", self.controller.initial_stiffness)
+            k = await self.guard.guarded("initial_stiffness", self.controller.initial_stiffness)
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)
         return self._k_initial if self._k_initial is not None else self._k_tangent
 
-
-def _run_inline(coro: Coroutine[Any, Any, Any]) -> None:
-    from ..eager import Suspended, start_eager
-
-    r = start_eager(coro)
-    if isinstance(r, Suspended):
-        r.task()

@@ -21,7 +21,6 @@ import contextlib
 import hmac
 import json
 import logging
-import random
 import ssl
 import time
 from collections import deque
@@ -31,6 +30,7 @@ from typing import Any, cast
 import aiomqtt
 from paho.mqtt.client import MQTTMessageInfo
 
+from fresco_bridge.backoff import Backoff
 from fresco_bridge.telemetry.base import (
     COMMANDS,
     CommandHandler,
@@ -165,7 +165,7 @@ class MqttTelemetry:
         self._handler = command_handler
         self._token = (command_token or "").encode()
         self._timeout, self._keepalive = timeout, keepalive
-        self._backoff = (reconnect_min, reconnect_max)
+        self._backoff = Backoff(reconnect_min, reconnect_max)
         self._capacity = queue_size
         self._event_capacity = min(queue_size, 1024)
         self._steps: deque[StepSample] = deque()
@@ -329,7 +329,7 @@ class MqttTelemetry:
                 self._settle(lost=True)
             self._failures += 1
             attempt += 1
-            delay = self._backoff_delay(attempt)
+            delay = self._backoff.failed()
             log.warning("telemetry: MQTT %s:%d unavailable (%s); retry %d in %.2f s",
                         self.host, self.port, reason, attempt, delay)
             self._report_drops(force=True)
@@ -373,11 +373,8 @@ class MqttTelemetry:
             timeout=self._timeout, keepalive=self._keepalive, logger=_paho_log,
         )
 
-    def _backoff_delay(self, attempt: int) -> float:
-        low, high = self._backoff
-        return min(high, low * 2.0 ** min(attempt - 1, 30)) * random.uniform(0.5, 1.0)
-
     def _on_connected(self) -> None:
+        self._backoff.succeeded()
         self._connected = True
         self._connections += 1
         if self._connections > 1:

@@ -18,6 +18,7 @@ from types import MappingProxyType
 from typing import Any
 
 from fresco_bridge.indicators import MonitorSample
+from fresco_bridge.steps import CommittedStep
 
 SCHEMA_VERSION = 1
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
@@ -100,22 +101,13 @@ def _monitor_compact(m: MonitorSample) -> list[Any]:
 
 
 @dataclass(frozen=True, slots=True)
-class StepSample:
+class StepSample(CommittedStep):
     """One committed or answered step of a site: what the integrator asked and what was measured.
 
     ``trial`` is in the element's basic DOFs, ``ctrl``/``daq_*`` in actuator space;
     ``predicted_force`` is the updated model's prediction on updatable sites.
     """
 
-    site: str
-    session: int
-    step: int
-    time: float
-    trial: tuple[float, ...]
-    ctrl: tuple[float, ...]
-    daq_disp: tuple[float, ...]
-    daq_force: tuple[float, ...]
-    state: str
     predicted_force: float | None = None
     monitor: MonitorSample | None = None
 

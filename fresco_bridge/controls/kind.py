@@ -1,0 +1,41 @@
+"""What a controller kind declares, in one place: its config model, its factory, how many
+actuators it can drive, and the line the README's configuration table shows for it.
+
+Each kind's module ends with its ``KIND``; ``controls/registry.py`` lists them (one line each),
+and the config's discriminated union, its error texts and the README table derive from it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from ..config_model import StrictConfig
+from .base import Controller
+
+__all__ = ["ControllerConfigBase", "ControllerKind"]
+
+
+class ControllerConfigBase(StrictConfig):
+    """The ``[sites.controller]`` table of one kind; subclasses set ``kind: Literal[...]``."""
+
+    kind: str
+
+
+@dataclass(frozen=True)
+class ControllerKind:
+    """One controller kind: ``kind = "<name>"`` in ``[sites.controller]``."""
+
+    name: str
+    config: type[ControllerConfigBase]
+    factory: Callable[[Any, int], Controller]
+    """``factory(config, n_actuators)``: the adapter for a site whose setup drives
+    ``n_actuators`` control points (``setups.py`` owns that count)."""
+    summary: str
+    """The README's description of the kind (markdown, one cell)."""
+    max_actuators: int | None = 1
+    """How many actuators one controller of this kind drives (None: any number)."""
+
+    def build(self, config: ControllerConfigBase, n_actuators: int) -> Controller:
+        return self.factory(config, n_actuators)

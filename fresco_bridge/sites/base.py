@@ -1,0 +1,88 @@
+"""The ``Site`` protocol: what the transports (``server/``) and the operator desk (``ctl.py``)
+need of a site, and nothing more.
+
+``ExperimentalSite`` (a controller behind setup and safety) implements it; a second kind of site
+(e.g. an updatable numerical site whose forces come from an updater fed by another site's
+committed steps) implements the same and is served, refused, paused and aborted the same way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
+
+from protocol import Signals, SignalSizes
+
+from ..config import SiteConfig
+
+if TYPE_CHECKING:
+    from ..server.access import RejectionLog
+    from ..telemetry.metrics import SiteMetrics
+
+__all__ = ["Site", "SiteError"]
+
+
+class SiteError(Exception):
+    """A session cannot be served by this site (sizes that do not fit, site busy, aborted)."""
+
+
+class Site(Protocol):
+    """A site as a transport and an operator see it (OpenFresco's *experimental site*)."""
+
+    name: str
+    cfg: SiteConfig
+    session: int
+    """Number of the current (or last) integrator session."""
+    pending: tuple[float, ...] | None
+    """A command waiting inside a request (operator pause, controller recovery), or None."""
+    damping: tuple[float, ...]
+    mass: tuple[float, ...]
+    """Column-major n×n matrices answering actions 14 and 15."""
+    metrics: SiteMetrics | None
+    rejections: RejectionLog | None
+
+    @property
+    def busy(self) -> bool:
+        """A client session is open (one client per site)."""
+        ...
+
+    # -- sessions (the transports) -------------------------------------------------------------
+    def open_session(self, peer: str) -> int:
+        """Accept ``peer``'s session (its number), or raise :class:`SiteError`."""
+        ...
+
+    def close_session(self, reason: str, *, error: bool = False) -> None: ...
+
+    def attach_session_end(self, end: Callable[[str], None]) -> None:
+        """How the site itself ends the open session (operator abort, deadline)."""
+        ...
+
+    def check_sizes(self, ctrl: SignalSizes, daq: SignalSizes, who: str) -> None:
+        """Raise :class:`SiteError` if the client's signal sizes do not fit the site."""
+        ...
+
+    def record_refusal(self, message: str, **extra: object) -> None:
+        """A refused connection, into the site's record (the transport counts and logs it)."""
+        ...
+
+    # -- the step (the protocol handlers) ------------------------------------------------------
+    async def set_trial(self, trial: Signals) -> None: ...
+
+    async def commit(self) -> None: ...
+
+    async def out_signals(self, sizes: SignalSizes) -> Signals: ...
+
+    async def tangent(self) -> tuple[float, ...]: ...
+
+    async def initial(self) -> tuple[float, ...]: ...
+
+    # -- the operator (ctl.py: control socket, MQTT commands) ----------------------------------
+    def operator_pause(self, source: str) -> str: ...
+
+    def operator_resume(self, source: str) -> str: ...
+
+    def operator_abort(self, source: str) -> str: ...
+
+    def status(self) -> dict[str, object]:
+        """A JSON-able snapshot for ``fresco-bridge ctl status``."""
+        ...

@@ -1,0 +1,46 @@
+"""What leaves a site: committed steps and events, to a list of listeners.
+
+A site holds an ordered list of listeners (``Site.add_listener``): the run record's writer
+(``record/site.py``), the telemetry taps with the online monitors (``telemetry/taps.py``), and
+whatever else needs a site's committed steps (an updater learning from a tested element).
+Each gets every committed step (``step_committed``) and/or every event (``site_event``), in
+the order they were added, on the bridge's loop: a listener must not block (a bounded-queue
+append, a buffered line, a counter).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from ..steps import CommittedStep
+from ..telemetry.schema import SiteStatus
+
+__all__ = ["CommittedStep", "EventListener", "SiteNotice", "StepListener"]
+
+
+@dataclass(frozen=True, slots=True)
+class SiteNotice:
+    """An event of a site (``hold``, ``limit``, ``session-open``, …) with its reason; ``extra``
+    is what the record keeps with it (telemetry publishes its scalar entries)."""
+
+    site: str
+    session: int
+    step: int
+    time: float
+    kind: str
+    reason: str
+    extra: Mapping[str, object]
+
+
+@runtime_checkable
+class StepListener(Protocol):
+    def step_committed(self, step: CommittedStep) -> None: ...
+
+
+@runtime_checkable
+class EventListener(Protocol):
+    def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
+        """``status``: the site's status right after the event (telemetry retains it)."""
+        ...
