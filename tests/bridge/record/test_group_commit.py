@@ -1,0 +1,134 @@
+"""Group commit (issue 8): each commit reaches the kernel at once, fdatasync at most every
+``sync_interval`` for all commits since the last one, events synced at once.
+
+``kill -9`` of a real bridge right after its last commit loses nothing even when no
+fdatasync ran for seconds (the page cache survives a killed process; only a power loss needs
+the sync, and then at most ``sync_interval`` of commits is at stake).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.record import RunRecord, read_record
+from fresco_bridge.record.export import committed_steps
+
+DEADLINE = 10.0
+
+
+def wait_for(cond: object, what: str) -> None:
+    deadline = time.monotonic() + DEADLINE
+    while not cond():  # type: ignore[operator]
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.002)
+
+
+def step(record: RunRecord, n: int) -> None:
+    record.trial("s", 1, n - 1, 0.01 * n, (0.1 * n,), (0.1 * n,))
+    record.measurement("s", 1, n - 1, (0.1 * n,), (1.0 * n,))
+    record.commit("s", 1, n, 0.01 * n)
+
+
+def test_commits_are_written_at_once_and_synced_together(tmp_path: Path) -> None:
+    record = RunRecord.create(tmp_path, "g", "", {}, sync_interval=3600.0)
+    path = record.directory / "record.jsonl"
+    try:
+        step(record, 1)
+        wait_for(lambda: record.syncs == 1, "the first commit's sync")  # idle: syncs at once
+        assert record.durable_lines == 3
+        for n in range(2, 51):
+            step(record, n)
+            # in the kernel before the next message is processed: another reader sees it
+            assert path.read_bytes().count(b'"kind":"commit"') == n
+        assert record.syncs == 1 and record.durable_lines == 3  # the rest waits the interval
+        record.event("s", 1, "hold", "limit exceeded")
+        wait_for(lambda: record.syncs == 2, "the event's sync")  # events do not wait
+        assert record.durable_lines == record.lines == 151
+    finally:
+        record.close()
+    assert [s.step for s in committed_steps(record.directory)] == list(range(1, 51))
+
+
+def test_a_short_interval_makes_every_commit_durable_soon(tmp_path: Path) -> None:
+    record = RunRecord.create(tmp_path, "g", "", {}, sync_interval=0.02)
+    try:
+        for n in range(1, 201):
+            step(record, n)
+        wait_for(lambda: record.durable_lines == record.lines, "every line on disk")
+        assert 1 <= record.syncs <= 200
+    finally:
+        record.close()
+
+
+def test_inline_syncs_before_the_commit_returns(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                                ) -> None:
+    calls: list[int] = []
+    real = os.fdatasync
+    monkeypatch.setattr(os, "fdatasync", lambda fd: (calls.append(fd), real(fd))[1])
+    record = RunRecord.create(tmp_path, "g", "", {}, fsync="inline")
+    try:
+        for n in range(1, 4):
+            step(record, n)
+            assert len(calls) == n and record.durable_lines == record.lines
+        record.event("s", 1, "hold", "x")
+        assert len(calls) == 4
+    finally:
+        record.close()
+
+
+READY = re.compile(r"fresco-bridge ready: site=(\d+)")
+
+
+def test_kill_9_after_the_last_commit_loses_no_step_with_a_long_sync_interval(
+        tmp_path: Path) -> None:
+    cfg = tmp_path / "lab.toml"
+    cfg.write_text(textwrap.dedent(f"""
+        [bridge]
+        run_dir = "{tmp_path / 'runs'}"
+        [record]
+        sync_interval = 10.0
+        [[sites]]
+        name = "site"
+        port = 0
+        [sites.controller]
+        model = "elastic"
+        params = {{ k = 10.0 }}
+        """))
+    proc = subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", "serve", "--config",
+                             str(cfg)], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        deadline = time.monotonic() + 30
+        port = None
+        while port is None and time.monotonic() < deadline and proc.poll() is None:
+            m = READY.search(proc.stdout.readline())
+            port = int(m.group(1)) if m else None
+        assert port is not None, "the bridge never became ready"
+        link = GenericClientLink("127.0.0.1", port, 1, data_size=1, timeout=10.0).connect()
+        for i in range(1, 41):
+            link.set_trial((0.01 * i,), time=0.01 * i)
+            link.force()
+            link.commit()
+        link.set_trial((0.5,), time=0.41)
+        link.force()  # answered: the bridge has processed the 40th commit
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        link.sock.close()  # type: ignore[union-attr]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    (run,) = (tmp_path / "runs").iterdir()
+    assert [s.step for s in committed_steps(run)] == list(range(1, 41))
+    assert sum(r["kind"] == "trial" for r in read_record(run)) >= 40

@@ -1,0 +1,317 @@
+"""Sessions cannot lock, exhaust or flood a site (issue 11, defects 1, 3, 4, 5, 8).
+
+A real bridge in a thread, real TCP/UDP sockets on loopback: a UDP client that vanishes
+without DIE, a re-handshake from the same peer, an idle or half-open TCP connection, an idle
+client the operator aborts, a client that never reads its replies, and connection churn from a
+refused address. Each time another (good) client is then served correctly.
+"""
+
+from __future__ import annotations
+
+import gc
+import socket
+import textwrap
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fresco_bridge.cli import main as cli_main
+from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.integrator.link import GenericClientLink, LinkError
+from fresco_bridge.record import read_record
+from fresco_bridge.server.access import Allowlist, RejectionLog
+from fresco_bridge.server.connection import WRITE_HIGH_WATER
+from fresco_bridge.server.tcp import KEEPALIVE_COUNT, KEEPALIVE_IDLE, KEEPALIVE_INTERVAL
+from fresco_bridge.sites import SiteState
+from protocol import Action, ElementClientSession, SizeID
+from tests.support.bridge import RunningBridge
+from tests.support.spied_bridge import refused, wait_for
+
+K = 10.0
+
+
+def config(idle: float = 60.0, extra_site: str = "") -> str:
+    return textwrap.dedent(f"""
+        [bridge]
+        run_name = "sessions"
+        session_idle_timeout = {idle}
+        max_data_size = 4096
+        allowed_clients = ["127.0.0.1"]
+        [[sites]]
+        name = "tcp"
+        port = 0
+        [sites.controller]
+        model = "elastic"
+        params = {{ k = {K} }}
+        [[sites]]
+        name = "udp"
+        port = 0
+        transport = "udp"
+        [sites.controller]
+        model = "elastic"
+        params = {{ k = {K} }}
+        [[sites]]
+        name = "other"
+        port = 0
+        [sites.controller]
+        model = "elastic"
+        params = {{ k = {K} }}
+        """) + extra_site
+
+
+def steps(link: GenericClientLink, n: int = 3, start: int = 1) -> None:
+    for i in range(start, start + n):
+        link.set_trial((0.1 * i,), time=0.1 * i)
+        assert link.force()[0] == pytest.approx(K * 0.1 * i)
+        link.commit()
+
+
+def served(port: int, transport: str = "tcp") -> None:
+    with GenericClientLink("127.0.0.1", port, 1, data_size=1, transport=transport,
+                           timeout=5.0) as link:
+        steps(link)
+
+
+def vanish(link: GenericClientLink) -> None:
+    """The integrator is killed: its socket goes away without DIE."""
+    assert link.sock is not None
+    link.sock.close()
+    link.sock = None
+
+
+def peer(bridge: BridgeThread, site: str) -> str:
+    return bridge.call(lambda: bridge.bridge.sites[site].peer)
+
+
+def closes(bridge: BridgeThread, site: str) -> list[str]:
+    return [r["reason"] for r in read_record(bridge.run_dir)
+            if r.get("event") == "session-close" and r["site"] == site]
+
+
+def udp_handshake_answered(port: int, timeout: float) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.settimeout(timeout)
+        s.connect(("127.0.0.1", port))
+        s.send(b"a")
+        try:
+            return s.recv(16) == b"b"
+        except TimeoutError:
+            return False
+
+
+# -- UDP -----------------------------------------------------------------------------------------
+def test_a_vanished_udp_client_frees_its_site_after_the_idle_deadline(tmp_path: Path) -> None:
+    with RunningBridge(config(idle=1.0), tmp_path) as bridge:
+        port = bridge.ports["udp"]
+        link = GenericClientLink("127.0.0.1", port, 1, data_size=1, transport="udp",
+                                 timeout=5.0).connect()
+        steps(link)
+        vanish(link)  # no DIE, no EOF: UDP cannot tell
+        assert not udp_handshake_answered(port, 0.2)  # still its session: refused
+        wait_for(lambda: peer(bridge, "udp") == "", "the silent session to end", timeout=10)
+        served(port, "udp")  # a new integrator from a new address is served
+        assert "no message from the client" in closes(bridge, "udp")[0]
+        assert "session_idle_timeout" in closes(bridge, "udp")[0]
+
+
+def test_a_new_handshake_from_the_same_udp_peer_starts_a_new_session(tmp_path: Path) -> None:
+    with RunningBridge(config(), tmp_path) as bridge:
+        port = bridge.ports["udp"]
+        link = GenericClientLink("127.0.0.1", port, 1, data_size=1, transport="udp",
+                                 timeout=5.0).connect()
+        steps(link)
+        assert link.sock is not None
+        link.sock.send(b"a")  # the integrator restarts on the same address, no DIE
+        assert link.sock.recv(16) == b"b"
+        link.session = ElementClientSession(SizeID.for_generic_client(1, 1))
+        link._send(link.session.start())
+        steps(link, start=4)
+        link.close()
+        assert bridge.call(lambda: bridge.bridge.sites["udp"].session) == 2
+        assert "new UDP session (handshake) without DIE" in closes(bridge, "udp")[0]
+
+
+# -- TCP -----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("sends", ["nothing", "size ID"])
+def test_an_idle_or_half_open_tcp_connection_is_ended_by_the_idle_deadline(
+    tmp_path: Path, sends: str
+) -> None:
+    with RunningBridge(config(idle=1.0), tmp_path) as bridge:
+        port = bridge.ports["tcp"]
+        with socket.create_connection(("127.0.0.1", port), timeout=10.0) as idle:
+            if sends == "size ID":  # then silence
+                idle.sendall(ElementClientSession(SizeID.for_generic_client(1, 1)).start())
+            wait_for(lambda: peer(bridge, "tcp") != "", "the idle session to open")
+            assert refused(port)  # it holds the site meanwhile
+            assert idle.recv(1) == b""  # ended by the bridge (within the deadline's timeout)
+        wait_for(lambda: peer(bridge, "tcp") == "", "the site to be free")
+        served(port)
+        assert "no message from the client" in closes(bridge, "tcp")[0]
+
+
+def test_an_operator_pause_does_not_end_a_waiting_session(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]
+                                                           ) -> None:
+    with RunningBridge(config(idle=0.5), tmp_path) as bridge:
+        with GenericClientLink("127.0.0.1", bridge.ports["tcp"], 1, data_size=1,
+                               timeout=10.0) as link:
+            steps(link, 1)
+            assert cli_main(["ctl", "pause", "--site", "tcp", "--run-dir",
+                             str(bridge.run_dir)]) == 0
+            link.set_trial((0.2,), time=0.2)
+            answer: list[float] = []
+            waiter = threading.Thread(target=lambda: answer.append(link.force()[0]))
+            waiter.start()
+            time.sleep(1.5)  # three idle deadlines: the request waits for the operator
+            assert peer(bridge, "tcp") != "" and answer == []
+            assert cli_main(["ctl", "resume", "--site", "tcp", "--run-dir",
+                             str(bridge.run_dir)]) == 0
+            waiter.join(10)
+            assert answer == [pytest.approx(K * 0.2)]
+            link.commit()
+        capsys.readouterr()
+
+
+def test_tcp_keepalive_is_on_for_every_session(tmp_path: Path) -> None:
+    from fresco_bridge.server.tcp import TcpConnection
+
+    with RunningBridge(config(), tmp_path) as bridge, \
+            GenericClientLink("127.0.0.1", bridge.ports["tcp"], 1, data_size=1) as link:
+        steps(link, 1)
+
+        def options() -> list[tuple[int, ...]]:
+            out = []
+            for conn in gc.get_objects():
+                if isinstance(conn, TcpConnection) and conn.pump is not None \
+                        and not conn.pump.closed:
+                    sock = conn.transport.get_extra_info("socket")  # type: ignore[union-attr]
+                    out.append((sock.getsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE),
+                                sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPIDLE),
+                                sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPINTVL),
+                                sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPCNT)))
+            return out
+
+        assert bridge.call(options) == [(1, KEEPALIVE_IDLE, KEEPALIVE_INTERVAL, KEEPALIVE_COUNT)]
+
+
+@pytest.mark.parametrize("transport", ["tcp", "udp"])
+def test_ctl_abort_ends_an_idle_session(tmp_path: Path, transport: str,
+                                        capsys: pytest.CaptureFixture[str],
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 1.0)
+    with RunningBridge(config(), tmp_path) as bridge:
+        port = bridge.ports[transport]
+        link = GenericClientLink("127.0.0.1", port, 1, data_size=1, transport=transport,
+                                 timeout=5.0).connect()
+        steps(link, 1)  # then it sits there, silent (a hung integrator)
+        assert cli_main(["ctl", "abort", "--site", transport, "--run-dir",
+                         str(bridge.run_dir)]) == 0
+        wait_for(lambda: peer(bridge, transport) == "", "the aborted idle session to end",
+                 timeout=15)
+        assert cli_main(["ctl", "resume", "--site", transport, "--run-dir",
+                         str(bridge.run_dir)]) == 0
+        capsys.readouterr()
+        vanish(link)
+        served(port, transport)
+        assert "aborted by the operator" in closes(bridge, transport)[0]
+
+
+# -- backpressure --------------------------------------------------------------------------------
+def _write_buffers(bridge: BridgeThread, site: str) -> list[int]:
+    from fresco_bridge.server.tcp import TcpConnection
+
+    def sizes() -> list[int]:
+        return [c.transport.get_write_buffer_size() for c in gc.get_objects()
+                if isinstance(c, TcpConnection) and c.site.name == site
+                and c.transport is not None and not c.transport.is_closing()]
+
+    return bridge.call(sizes)
+
+
+def test_a_client_that_never_reads_is_paused_then_ended_and_others_are_served(
+    tmp_path: Path
+) -> None:
+    data_size = 4096  # each getForce request and reply: 32 KiB
+    with RunningBridge(config(idle=2.0), tmp_path) as bridge:
+        port = bridge.ports["tcp"]
+        hog = socket.create_connection(("127.0.0.1", port), timeout=10.0)
+        hog.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        session = ElementClientSession(SizeID.for_generic_client(1, data_size))
+        hog.sendall(session.start())
+        request = session.send_request(Action.GET_FORCE)
+        sent = 0
+        peak = 0
+        hog.settimeout(0.5)
+        deadline = time.monotonic() + 20.0
+        try:
+            while sent < (256 << 20) and time.monotonic() < deadline:
+                hog.sendall(request)  # never reads a reply
+                sent += len(request)
+                if sent % (1 << 20) < len(request):
+                    peak = max([peak, *_write_buffers(bridge, "tcp")])
+        except (TimeoutError, ConnectionError):
+            pass  # its own socket is full: the bridge stopped reading it
+        peak = max([peak, *_write_buffers(bridge, "tcp")])
+        assert peak <= WRITE_HIGH_WATER + 8 * data_size + 8, f"{peak} bytes queued"
+        served(bridge.ports["other"])  # another site is served meanwhile
+        wait_for(lambda: peer(bridge, "tcp") == "", "the non-reading session to end",
+                 timeout=15)
+        hog.close()
+        assert "has not read its replies" in closes(bridge, "tcp")[0]
+        served(port)
+
+
+# -- refused connections -------------------------------------------------------------------------
+def test_refused_connections_are_counted_and_logged_within_a_rate_limit(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    guarded = textwrap.dedent("""
+        [[sites]]
+        name = "guarded"
+        port = 0
+        allowed_clients = ["127.0.0.9"]
+        [sites.controller]
+        model = "elastic"
+        params = { k = 10.0 }
+        """)
+    with RunningBridge(config(extra_site=guarded), tmp_path) as bridge:
+        size_before = (bridge.run_dir / "record.jsonl").stat().st_size
+        for _ in range(300):
+            with socket.create_connection(("127.0.0.1", bridge.ports["guarded"]), timeout=5):
+                pass
+        wait_for(lambda: bridge.call(
+            lambda: bridge.bridge.sites["guarded"].status()["refused"]) == {"address": 300},
+            "every refusal to be counted")
+        refusals = [r for r in read_record(bridge.run_dir) if r.get("event") == "refused"]
+        grown = (bridge.run_dir / "record.jsonl").stat().st_size - size_before
+        served(bridge.ports["tcp"])
+    logged = [r for r in caplog.records if "refused client" in r.getMessage()]
+    assert 1 <= len(refusals) <= 3 and 1 <= len(logged) <= 3
+    assert grown < 2000, f"the record grew {grown} bytes for 300 refused connections"
+
+
+def test_rejection_log_reports_the_first_then_one_summary_per_interval() -> None:
+    now = [0.0]
+    log = RejectionLog(interval=10.0, clock=lambda: now[0])
+    reports: list[Any] = []
+    for i in range(100):
+        now[0] = i * 0.5  # 50 s of churn, two connections a second
+        reports.append(log.refused("address", f"refused {i}"))
+    shown = [r for r in reports if r is not None]
+    assert len(shown) == 5 and log.total == 100 and log.counts == {"address": 100}
+    assert shown[0].suppressed == 0 and sum(r.suppressed for r in shown) == 76  # 19 still pending
+    assert "not logged" in shown[1].message()
+
+
+def test_allowlist_matches_addresses_and_networks() -> None:
+    allow = Allowlist(["127.0.0.1", "192.168.10.0/24"])
+    assert allow.admits("127.0.0.1") and allow.admits("192.168.10.77")
+    assert not allow.admits("192.168.11.1") and not allow.admits("127.0.0.2")
+    assert Allowlist([]).admits("8.8.8.8") and str(Allowlist([])) == "any address"
+
+
+def test_link_error_type_is_what_the_tests_expect() -> None:
+    assert issubclass(LinkError, ConnectionError) and SiteState.IDLE

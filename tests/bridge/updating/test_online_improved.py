@@ -1,0 +1,110 @@
+"""``online_improved``: material semantics, bad input, learning on a known law, bounded noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
+from fresco_bridge.updating.improved import OnlineImproved
+from sim_actuator.models import make_model
+
+LAW = {"k0": 8.0, "fy": 12.0, "alpha": 0.03, "R0": 12.0, "a1": 0.03, "a3": 0.03}
+
+
+def drive(path: np.ndarray) -> np.ndarray:
+    model = make_model("menegotto-pinto", **LAW)
+    out = []
+    for d in path.tolist():
+        out.append(model.set_trial(d)[0])
+        model.commit()
+    return np.array(out)
+
+
+def cyclic(n: int, amplitude: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    envelope = np.minimum(1.0, t / 4.0)
+    phase = rng.uniform(0.0, 6.0)
+    return np.asarray(amplitude * envelope * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+
+
+@pytest.fixture()
+def updater() -> OnlineImproved:
+    d = cyclic(1500, 10.0, 1)
+    return OnlineImproved(offline=(d, drive(d)))
+
+
+def test_it_is_an_updater_with_material_semantics(updater: OnlineImproved) -> None:
+    assert isinstance(updater, Updater)
+    twin = updater.twin
+    for d in (0.5, 2.0, 1.0):
+        twin.set_trial(d)
+        twin.commit()
+    committed = twin.committed
+    first = twin.set_trial(3.0)
+    for d in (-5.0, 7.0, 3.3):
+        twin.set_trial(d)
+    assert twin.committed == committed
+    assert twin.set_trial(3.0) == first
+    twin.revert_to_last_commit()
+    assert twin.committed == committed
+    clone = twin.clone()
+    twin.set_trial(4.0)
+    twin.commit()
+    assert clone.committed == committed
+    twin.revert_to_start()
+    assert twin.committed == (0.0, 0.0)
+    assert 4.0 < twin.initial_tangent < 12.0  # learned: the law's k0 is 8
+
+
+@pytest.mark.parametrize("bad", [(math.nan, 1.0), (1.0, math.inf), (-math.inf, 0.0)])
+def test_non_finite_measurements_are_refused_and_change_nothing(
+    updater: OnlineImproved, bad: tuple[float, float]
+) -> None:
+    updater.observe(1.0, 7.0)
+    weights = updater.weights.copy()
+    with pytest.raises(UpdaterInputError, match="finite"):
+        updater.observe(*bad)
+    assert np.array_equal(updater.weights, weights)
+    updater.observe(1.5, 9.0)  # still usable
+
+
+def test_bad_offline_data_is_a_clear_error() -> None:
+    with pytest.raises(UpdaterError, match="equal 1-D"):
+        OnlineImproved(offline=(np.zeros(30), np.zeros(29)))
+    with pytest.raises(UpdaterError, match="NaN"):
+        OnlineImproved(offline=(np.full(30, np.nan), np.zeros(30)))
+    with pytest.raises(UpdaterError, match="move"):
+        OnlineImproved(offline=(np.zeros(30), np.zeros(30)))
+
+
+def test_the_twin_learns_the_law_on_another_history(updater: OnlineImproved) -> None:
+    """Tested and twin see different histories of one law; the twin's error shrinks."""
+    tested = cyclic(2000, 12.0, 2)
+    force = drive(tested)
+    twin_path = 0.6 * cyclic(2000, 12.0, 3)
+    truth = drive(twin_path)
+    errors = []
+    for d, f, dw in zip(tested.tolist(), force.tolist(), twin_path.tolist(), strict=True):
+        updater.observe(d, f)
+        errors.append(updater.twin.set_trial(dw)[0])
+        updater.twin.commit()
+    err = np.abs(np.array(errors) - truth)
+    assert float(np.max(err)) < 0.25 * float(np.max(np.abs(truth)))
+    assert updater.last_update_seconds >= 0.0
+
+
+def test_noise_and_spikes_keep_the_twin_bounded(updater: OnlineImproved) -> None:
+    rng = np.random.default_rng(7)
+    tested = cyclic(3000, 12.0, 4)
+    force = drive(tested) + rng.normal(0.0, 0.5, tested.size)
+    force[::97] += 40.0  # load-cell spikes
+    peak = 0.0
+    for d, f in zip(tested.tolist(), force.tolist(), strict=True):
+        updater.observe(d, f)
+        peak = max(peak, abs(updater.twin.set_trial(0.5 * d)[0]))
+        updater.twin.commit()
+    assert math.isfinite(peak) and peak < 30.0

@@ -1,0 +1,85 @@
+"""The JIT whole-history drives are the scalar models, sample for sample (one law, two forms)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim_actuator.effects import LoadPath
+from sim_actuator.models import ModelInputError, make_model
+from sim_actuator.models.paths import drive, drive_many, law_vector
+
+CASES = [
+    ("bilinear", {"k0": 10.0, "fy": 5.0, "alpha": 0.05}),
+    ("bouc-wen", {"k0": 10.0, "fy": 5.0, "alpha": 0.05, "n": 2.0, "beta": 0.6, "gamma": 0.4}),
+    ("bouc-wen", {"k0": 3.0, "fy": 9.0, "alpha": 0.1, "n": 1.0, "beta": 0.2, "gamma": 0.9,
+                  "A": 1.3}),
+    ("bwbn", {"k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 1.5, "beta": 0.5, "gamma": 0.5,
+              "delta_nu": 0.002, "delta_eta": 0.003, "delta_a": 0.0005, "zeta_s": 0.6,
+              "p": 0.8, "q": 0.1, "psi0": 0.2, "delta_psi": 0.004, "lam": 0.5}),
+]
+
+
+def _history(seed: int, n: int = 200, peak: float = 6.0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    steps = rng.standard_normal(n) * 0.4
+    steps[rng.random(n) < 0.1] = 0.0  # holds: repeated samples
+    d = np.cumsum(steps)
+    return np.asarray(d / np.max(np.abs(d)) * peak, dtype=np.float64)
+
+
+@pytest.mark.parametrize(("kind", "params"), CASES)
+@pytest.mark.parametrize("dz_max", [0.01, 0.2])
+def test_drive_equals_the_scalar_model(kind: str, params: dict[str, float],
+                                       dz_max: float) -> None:
+    d = _history(3)
+    extra = {} if kind == "bilinear" else {"dz_max": dz_max}
+    model = make_model(kind, **params)
+    if extra:
+        model = type(model)(**params, **extra)  # type: ignore[call-arg]
+    expected = []
+    for x in d:
+        force, _ = model.set_trial(float(x))
+        model.commit()
+        expected.append(force)
+    law, vec = law_vector(kind, params)
+    got = drive(law, vec, d, 0.0, dz_max)
+    np.testing.assert_allclose(got, expected, rtol=0.0, atol=1e-12 * params["fy"])
+
+
+@pytest.mark.parametrize(("kind", "params"), CASES[:2])
+def test_drive_behind_a_gap_equals_the_rigs_load_path(kind: str,
+                                                       params: dict[str, float]) -> None:
+    d = _history(5, 300)
+    path = LoadPath(make_model(kind, **params), dt=0.01, gap=0.3)
+    expected = [path.step(float(x)).connection_force for x in d]
+    law, vec = law_vector(kind, params)
+    np.testing.assert_allclose(drive(law, vec, d, 0.3), expected, rtol=0.0, atol=1e-9)
+
+
+def test_population_rows_are_independent_drives() -> None:
+    law, vec = law_vector(*CASES[1])
+    d = _history(7)
+    rows = np.tile(vec, (3, 1))
+    rows[:, 0] *= [0.8, 1.0, 1.3]
+    many = drive_many(law, rows, d[None, :], np.array([0.0, 0.1, 0.0]), 0.05)
+    for i in range(3):
+        np.testing.assert_array_equal(many[i], drive(law, rows[i], d, [0.0, 0.1, 0.0][i], 0.05))
+
+
+def test_a_refused_history_is_nan_from_where_the_scalar_model_refuses_it() -> None:
+    params = dict(CASES[3][1], delta_a=0.3)  # A = A0 - delta_a*e is exhausted partway
+    d = _history(9, 400, 20.0)
+    model = make_model("bwbn", **params)
+    refused = None
+    for k, x in enumerate(d):
+        try:
+            model.set_trial(float(x))
+        except ModelInputError:
+            refused = k
+            break
+        model.commit()
+    assert refused is not None and refused > 0
+    law, vec = law_vector("bwbn", params)
+    out = drive(law, vec, d)
+    assert np.all(np.isfinite(out[:refused])) and np.all(np.isnan(out[refused:]))

@@ -1,0 +1,100 @@
+"""Make real run directories for the report/runs/metrics tests: a real bridge, a real client."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.integrator.link import GenericClientLink
+from protocol import Action
+from tests.support.bridge import RunningBridge
+
+DT = 0.01
+
+LAB_TOML = """
+[bridge]
+run_name = "{name}"
+[telemetry]
+monitor_window = 64
+warn_tracking_error = 5.0
+{telemetry}
+[[sites]]
+name = "spring"
+port = 0
+[sites.controller]
+model = "bilinear"
+params = {{ k0 = 10.0, fy = 8.0, alpha = 0.05 }}
+"""
+
+
+def drive(link: GenericClientLink, steps: int, *, amplitude: float = 2.0) -> None:
+    """A growing sine (0.5 Hz) past yield: steps × (trial, getDisp, getForce, commit)."""
+    for i in range(1, steps + 1):
+        t = i * DT
+        link.set_trial((amplitude * t * math.sin(math.pi * t),), time=t)
+        link.request(Action.GET_DISP)
+        link.force()
+        link.commit()
+
+
+def record_run(
+    root: Path,
+    steps: int = 300,
+    *,
+    name: str = "test",
+    telemetry: str = "",
+    hold_at_end: bool = True,
+    during: Callable[[BridgeThread], Any] | None = None,
+) -> tuple[Path, Any]:
+    """One session of ``steps`` committed steps on a bilinear spring, then (optionally) a
+    non-finite trial that puts the site in HOLD. ``during(bridge)`` runs before the bridge
+    stops (e.g. to scrape /metrics); returns (run directory, what ``during`` returned)."""
+    toml = LAB_TOML.format(name=name, telemetry=telemetry)
+    seen = None
+    with RunningBridge(toml, root) as bridge:
+        with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as link:
+            link.matrix(Action.GET_INITIAL_STIFF)
+            drive(link, steps)
+            if hold_at_end:
+                link.set_trial((math.nan,), time=(steps + 1) * DT)
+                link.force()
+        # the session-close event lands when the bridge reads the DIE
+        deadline = time.monotonic() + 10
+        while not any(json.loads(line).get("event") == "session-close"
+                      for line in (bridge.run_dir / "record.jsonl").read_text().splitlines()
+                      if '"kind":"event"' in line):
+            assert time.monotonic() < deadline, "the bridge never closed the session"
+            time.sleep(0.01)
+        if during is not None:
+            seen = during(bridge)
+        run_dir = bridge.run_dir
+    return run_dir, seen
+
+
+def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
+    """Every complete line of record.jsonl, decoded independently of fresco_bridge.record:
+    format 2 (README "Run record") filled in here by its written rules — a missing ``seq`` is
+    the line's position, missing ``site``/``session`` are the previous line's, a missing value
+    of a trial/daq/commit/monitor line is that of the previous line of its kind, site and
+    session, a missing ``ctrl`` equals the trial."""
+    text = (run_dir / "record.jsonl").read_text()
+    out: list[dict[str, Any]] = []
+    seen: dict[tuple[str, int, str], dict[str, Any]] = {}
+    for n, line in enumerate(text.split("\n")[:-1], 1):
+        rec = json.loads(line)
+        if "seq" not in rec:
+            where = out[-1] if out else {}
+            rec = {"seq": n, "site": where.get("site"), "session": where.get("session"), **rec}
+            if rec["kind"] != "event":
+                had = "ctrl" in rec
+                rec = {**seen.get((rec["site"], rec["session"], rec["kind"]), {}), **rec}
+                if rec["kind"] == "trial" and not had:
+                    rec["ctrl"] = rec["trial"]
+        seen[(rec["site"], rec["session"], rec["kind"])] = rec
+        out.append(rec)
+    return out
