@@ -1,207 +1,95 @@
-"""OpenSeesPy 1-DOF transient through the full bridge vs a minimal blocking-socket server.
+"""Step cost: the bridge against the fastest simple server, same run, pinned and unpinned.
 
-Why: the bridge must not be the bottleneck of a hybrid test. OpenFresco 2.8's own element
-server stalls ~40-50 ms per step (client Nagle + server delayed ACK); a minimal server that
-re-arms TCP_QUICKACK after every read does ~0.14 ms/step. The bridge (asyncio, simulated
-specimen, run record on) should stay within 1.5x of that reference, measured in the same run.
+Why: the bridge must not be the bottleneck of a hybrid test (issue 8: within 1.3× of a bare
+socket server in ms/step and 2.0× in server CPU per step, record on with the default
+durability; a 64-DOF element within 1.5×; ≤ 500 record bytes per committed step; flat memory
+over 200 000 steps). Every party is its own process (``benchmarks/step_peers.py``): a real
+OpenSeesPy ``genericClient`` or a scripted client, and either ``fresco-bridge serve`` or the
+blocking reference server.
 
-Every party is its own process, as in deployment: the OpenSeesPy client (timed inside, with
-``time.perf_counter`` around the ``analyze`` loop), the bridge (``fresco-bridge serve``) and
-the reference server (``reference-server`` sub-command of this module).
+Method: each round runs every variant once, in an order that reverses every round (drifting
+load hits bridge and reference alike); ``pinned`` rounds start every process under
+``taskset -c 1`` (server and client share one CPU: the stable comparison), ``unpinned`` rounds
+let the scheduler place them. Reported per variant: ms/step (median, [min – max] over rounds),
+server CPU per step (user + system of the server process from ``/proc``), step p50/p99/p99.9
+and, for the scripted clients, per-message latency percentiles; the verdict uses the ratio of
+medians and the median of the per-round ratios. Each round also times a fixed pure-Python
+workload pinned to CPU 1 (``calibration``, the machine's fast or slow mode) and the load
+average, since this machine is shared.
 
-    python -m benchmarks.bench_opensees_bridge [--repeats 3] [--steps 2000] [--profile FILE]
+    python -m benchmarks.bench_opensees_bridge [--rounds 3] [--unpinned-rounds 5]
+        [--steps 2000] [--no-64] [--profile FILE]
+    python -m benchmarks.bench_opensees_bridge rss [--rss-steps 200000]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import json
 import os
 import signal
-import socket
 import statistics
-import struct
 import subprocess
 import sys
 import tempfile
+import threading
+import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-MODULE = "benchmarks.bench_opensees_bridge"
+PEERS = "benchmarks.step_peers"
 STEPS = 2000
-DT = 0.01
-MASS = 1.0
-K_REFERENCE = 100.0
-# 1 Hz sine base acceleration; amplitude keeps the bilinear specimen (k0 100, fy 20,
-# dy 0.2) elastic, so the bridge and the reference exchange the same messages per step.
-ACCEL_AMPLITUDE = 5.0
-ACCEL_FREQUENCY = 1.0
-TARGET_MS_PER_STEP = 0.2
-TARGET_RATIO = 1.5
-START_TIMEOUT = 60.0
-RUN_TIMEOUT = 300.0
+STEPS_64 = 300
+RSS_STEPS = 200_000
+TARGET_RATIO = 1.3
+TARGET_CPU_RATIO = 2.0
+TARGET_RATIO_64 = 1.5
+TARGET_BYTES_PER_STEP = 500
+TARGET_RSS_GROWTH = 0.05
+RUN_TIMEOUT = 900.0
+PIN = ("taskset", "-c", "1")
 
 
 class BenchmarkError(RuntimeError):
     """A benchmark process failed or did not report a result."""
 
 
-# --- reference server (runs in its own process) -------------------------------------------
-
-
-def _recv_exact(conn: socket.socket, n: int) -> bytes | None:
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = conn.recv(n - len(buf))
-        if not chunk:
-            return None
-        buf += chunk
-        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
-    return bytes(buf)
-
-
-def serve_reference_once(listener: socket.socket) -> dict[int, int]:
-    """Serve one genericClient session with a linear spring K; returns message counts by code.
-
-    Blocking socket, exact reads, TCP_QUICKACK re-armed after every recv: the minimal server
-    that avoids the Nagle + delayed-ACK stall (protocol spec §3.11).
-    """
-    conn, _ = listener.accept()
-    counts: dict[int, int] = {}
-    with conn:
-        ident = _recv_exact(conn, 44)
-        if ident is None:
-            raise BenchmarkError("reference server: client closed before sending its ID")
-        sizes = struct.unpack("<11i", ident)
-        data_size, n = sizes[10], sizes[0]
-        if n != 1:
-            raise BenchmarkError(f"reference server serves 1 DOF, client announced {n}")
-        nbytes = 8 * data_size
-        zero = struct.pack(f"<{data_size}d", *([0.0] * data_size))
-        stiff = struct.pack(f"<{data_size}d", K_REFERENCE, *([0.0] * (data_size - 1)))
-        disp = 0.0
-        while True:
-            msg = _recv_exact(conn, nbytes)
-            if msg is None:
-                break
-            code, d = struct.unpack_from("<2d", msg)
-            action = int(code)
-            counts[action] = counts.get(action, 0) + 1
-            if action == 3:
-                disp = d
-            elif action == 10:
-                conn.sendall(struct.pack(f"<{data_size}d", K_REFERENCE * disp,
-                                         *([0.0] * (data_size - 1))))
-            elif action in (12, 13):
-                conn.sendall(stiff)
-            elif action in (14, 15):
-                conn.sendall(zero)
-            elif action == 99:
-                break
-    return counts
-
-
-def _reference_server_main() -> None:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as listener:
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind(("127.0.0.1", 0))
-        listener.listen(1)
-        print(f"reference ready: {listener.getsockname()[1]}", flush=True)
-        counts = serve_reference_once(listener)
-    print("COUNTS " + json.dumps(counts), flush=True)
-
-
-# --- OpenSeesPy client (runs in its own process) -------------------------------------------
-
-
-def _opensees_client_main(port: int | None, steps: int) -> None:
-    """Build the 1-DOF model (genericClient, or a local elastic spring if no port); time it."""
-    import math
-    import time
-
-    import openseespy.opensees as ops  # type: ignore[import-untyped]
-
-    ops.wipe()
-    ops.model("basic", "-ndm", 1, "-ndf", 1)
-    ops.node(1, 0.0)
-    ops.mass(1, MASS)
-    if port is not None:
-        ops.element("genericClient", 1, "-node", 1, "-dof", 1, "-server", port, "127.0.0.1")
-    else:
-        ops.node(0, 0.0)
-        ops.fix(0, 1)
-        ops.uniaxialMaterial("Elastic", 1, K_REFERENCE)
-        ops.element("zeroLength", 1, 0, 1, "-mat", 1, "-dir", 1)
-    ops.timeSeries("Trig", 1, 0.0, 1.0e6, 1.0 / ACCEL_FREQUENCY, "-factor", ACCEL_AMPLITUDE)
-    ops.pattern("UniformExcitation", 1, 1, "-accel", 1)
-    ops.system("FullGeneral")
-    ops.numberer("Plain")
-    ops.constraints("Plain")
-    ops.test("NormDispIncr", 1e-12, 50)
-    ops.algorithm("Newton")
-    ops.integrator("Newmark", 0.5, 0.25)
-    ops.analysis("Transient")
-    step_s: list[float] = []
-    iterations = 0
-    peak = 0.0
-    clock = time.perf_counter
-    t0 = clock()
-    for _ in range(steps):
-        ts = clock()
-        if ops.analyze(1, DT) != 0:
-            raise BenchmarkError("transient analysis failed")
-        step_s.append(clock() - ts)
-        iterations += ops.testIter()
-        peak = max(peak, abs(ops.nodeDisp(1, 1)))
-    total = clock() - t0
-    ops.wipe()
-    first = step_s[0]
-    step_s.sort()
-    result = {
-        "ms_per_step": 1e3 * total / steps,
-        "first_step_ms": 1e3 * first,
-        "median_step_ms": 1e3 * statistics.median(step_s),
-        "p99_step_ms": 1e3 * step_s[min(steps - 1, math.ceil(0.99 * steps) - 1)],
-        "max_step_ms": 1e3 * step_s[-1],
-        "newton_iterations_per_step": iterations / steps,
-        "peak_disp": peak,
-    }
-    print("RESULT " + json.dumps(result), flush=True)
-
-
-# --- driver ---------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class Variant:
-    """One server configuration under test."""
+    """One server configuration and the client that drives it."""
 
     name: str
-    kind: str  # "reference", "bridge" or "local" (no socket at all)
+    server: str  # "reference", "bridge" or "none" (OpenSees alone)
+    client: str = "opensees"  # or "scripted"
+    dofs: int = 1
     model: str = "bilinear"
     record: bool = True
-    fsync: str = "background"
+    fsync: str | None = None  # None: the default durability
+    steps: int = STEPS
+    tree: str | None = None  # another checkout's fresco_bridge (before/after in one run)
 
 
+REFERENCE = Variant("reference (blocking + QUICKACK)", "reference")
+BRIDGE = Variant("bridge: record on, default durability", "bridge")
 VARIANTS = (
-    Variant("reference (blocking + QUICKACK)", "reference"),
-    Variant("bridge: bilinear, record on, fsync background", "bridge"),
-    Variant("bridge: elastic, record on, fsync background", "bridge", model="elastic"),
-    Variant("bridge: bilinear, record on, fsync inline", "bridge", fsync="inline"),
-    Variant("bridge: bilinear, record off", "bridge", record=False),
-    Variant("OpenSees alone (zeroLength, no socket)", "local"),
+    REFERENCE,
+    BRIDGE,
+    Variant("bridge: record on, fsync inline", "bridge", fsync="inline"),
+    Variant("bridge: record off", "bridge", record=False),
+    Variant("scripted 1-DOF: reference", "reference", client="scripted"),
+    Variant("scripted 1-DOF: bridge", "bridge", client="scripted"),
+    Variant("OpenSees alone (zeroLength, no socket)", "none"),
 )
-PRIMARY_BRIDGE = VARIANTS[1].name
-REFERENCE = VARIANTS[0].name
-
-
-@dataclass
-class Samples:
-    ms_per_step: list[float] = field(default_factory=list)
-    details: list[dict[str, Any]] = field(default_factory=list)
+REF_64 = Variant("scripted 64-DOF: reference", "reference", client="scripted", dofs=64,
+                 steps=STEPS_64)
+BRIDGE_64 = Variant("scripted 64-DOF: bridge (elastic)", "bridge", client="scripted", dofs=64,
+                    model="elastic", steps=STEPS_64)
+PAIRS = ((BRIDGE, REFERENCE), (VARIANTS[5], VARIANTS[4]), (BRIDGE_64, REF_64))
 
 
 def opensees_env() -> dict[str, str]:
@@ -217,9 +105,10 @@ def opensees_env() -> dict[str, str]:
 
 
 def bridge_config(variant: Variant, run_dir: Path) -> str:
-    """Lab TOML for one site serving the 1-DOF element with a simulated specimen."""
+    """Lab TOML for one site serving the element with a simulated specimen."""
     params = ("{ k = 100.0 }" if variant.model == "elastic"
               else "{ k0 = 100.0, fy = 20.0, alpha = 0.02 }")
+    fsync = "" if variant.fsync is None else f'fsync = "{variant.fsync}"\n'
     return f"""
 [bridge]
 run_name = "bench"
@@ -227,12 +116,11 @@ run_dir = {json.dumps(str(run_dir))}
 
 [record]
 enabled = {"true" if variant.record else "false"}
-fsync = "{variant.fsync}"
-
+{fsync}
 [[sites]]
 name = "spec"
 port = 0
-dofs = 1
+dofs = {variant.dofs}
 setup = "NoTransformation"
 [sites.controller]
 kind = "sim"
@@ -251,18 +139,22 @@ def _await_line(proc: subprocess.Popen[str], prefix: str) -> str:
                          f"{err[-1500:]}")
 
 
-def _start_server(variant: Variant, work: Path, profile: Path | None) -> tuple[
-        subprocess.Popen[str], int]:
-    env = opensees_env()
-    if variant.kind == "reference":
-        cmd = [sys.executable, "-m", MODULE, "reference-server"]
+def _start_server(variant: Variant, work: Path, pin: bool, profile: Path | None = None
+                  ) -> tuple[subprocess.Popen[str], int]:
+    pre = list(PIN) if pin else []
+    if variant.server == "reference":
+        cmd = [*pre, sys.executable, "-m", PEERS, "reference-server"]
         prefix = "reference ready: "
     else:
         cfg = work / "bench.toml"
         cfg.write_text(bridge_config(variant, work / "runs"))
         prof = ["-m", "cProfile", "-o", str(profile)] if profile else []
-        cmd = [sys.executable, *prof, "-m", "fresco_bridge.cli", "serve", "--config", str(cfg)]
+        cmd = [*pre, sys.executable, *prof, "-m", "fresco_bridge.cli", "serve", "--config",
+               str(cfg)]
         prefix = "fresco-bridge ready: spec="
+    env = opensees_env()
+    if variant.tree is not None:
+        env["PYTHONPATH"] = f"{variant.tree}:{env['PYTHONPATH']}"
     proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
@@ -283,35 +175,80 @@ def process_cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _run_client(port: int | None, steps: int) -> dict[str, Any]:
-    args = [sys.executable, "-m", MODULE, "client", "--steps", str(steps)]
-    if port is not None:
-        args += ["--port", str(port)]
-    proc = subprocess.run(args, cwd=REPO, env=opensees_env(), capture_output=True, text=True,
-                          timeout=RUN_TIMEOUT)
-    out = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    if proc.returncode != 0 or not out:
-        raise BenchmarkError(f"OpenSeesPy client failed (rc {proc.returncode}): "
-                             f"{proc.stdout[-1000:]} {proc.stderr[-1500:]}")
-    result: dict[str, Any] = json.loads(out[-1][len("RESULT "):])
+def process_rss_mb(pid: int) -> float:
+    """Resident set size of a process in MB (Linux /proc), 0.0 where unavailable."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def _client_cmd(variant: Variant, port: int | None, pin: bool, steps: int) -> list[str]:
+    pre = list(PIN) if pin else []
+    role = "scripted-client" if variant.client == "scripted" else "opensees-client"
+    cmd = [*pre, sys.executable, "-m", PEERS, role, "--steps", str(steps), "--dofs",
+           str(variant.dofs)]
+    return cmd + (["--port", str(port)] if port is not None else [])
+
+
+def _run_client(cmd: list[str], on_progress: Any = None) -> dict[str, Any]:
+    proc = subprocess.Popen(cmd, cwd=REPO, env=opensees_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    result: dict[str, Any] | None = None
+    timer = threading.Timer(RUN_TIMEOUT, proc.kill)
+    timer.start()
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if line.startswith("PROGRESS ") and on_progress is not None:
+                on_progress(int(line.split()[1]))
+            elif line.startswith("RESULT "):
+                result = json.loads(line[len("RESULT "):])
+        err = proc.stderr.read() if proc.stderr else ""
+        rc = proc.wait()
+    finally:
+        timer.cancel()
+    if rc != 0 or result is None:
+        raise BenchmarkError(f"client failed (rc {rc}): {err[-1500:]}")
     return result
 
 
-def run_variant(variant: Variant, steps: int, profile: Path | None = None) -> dict[str, Any]:
+def record_bytes_per_commit(run_root: Path) -> tuple[float, int] | None:
+    """Size of the run record over its committed steps (None: no record)."""
+    from fresco_bridge.record.export import read_record
+
+    records = sorted(run_root.glob("*/record.jsonl"))
+    if not records:
+        return None
+    path = records[-1]
+    commits = sum(1 for r in read_record(path) if r["kind"] == "commit")
+    return (path.stat().st_size / commits if commits else float("nan")), commits
+
+
+def run_variant(variant: Variant, pin: bool, profile: Path | None = None,
+                steps: int | None = None, on_progress: Any = None) -> dict[str, Any]:
     """One client run against a fresh server process of this variant."""
-    if variant.kind == "local":
-        return _run_client(None, steps)
+    steps = variant.steps if steps is None else steps
+    if variant.server == "none":
+        return _run_client(_client_cmd(variant, None, pin, steps))
     with tempfile.TemporaryDirectory(prefix="fb-bench-") as tmp:
-        proc, port = _start_server(variant, Path(tmp), profile)
+        proc, port = _start_server(variant, Path(tmp), pin, profile)
         try:
             cpu0 = process_cpu_seconds(proc.pid)
-            result = _run_client(port, steps)
+            progress = None if on_progress is None else (lambda n: on_progress(proc.pid, n))
+            if on_progress is not None:
+                on_progress(proc.pid, 0)
+            result = _run_client(_client_cmd(variant, port, pin, steps), progress)
             result["server_cpu_ms_per_step"] = 1e3 * (process_cpu_seconds(proc.pid) - cpu0) / steps
+            result["server_rss_mb"] = process_rss_mb(proc.pid)
         finally:
-            if variant.kind == "bridge":
+            if variant.server == "bridge":
                 proc.send_signal(signal.SIGTERM)
             try:
-                out, err = proc.communicate(timeout=30)
+                out, err = proc.communicate(timeout=60)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 out, err = proc.communicate()
@@ -322,8 +259,20 @@ def run_variant(variant: Variant, steps: int, profile: Path | None = None) -> di
         if counts:
             msgs = json.loads(counts[-1][len("COUNTS "):])
             result["messages_per_step"] = sum(msgs.values()) / steps
-            result["messages"] = msgs
+        if variant.server == "bridge" and variant.record:
+            got = record_bytes_per_commit(Path(tmp) / "runs")
+            if got is not None:
+                result["record_bytes_per_step"], result["commits"] = got
     return result
+
+
+def load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def calibration(pin: bool = True) -> float:
+    cmd = [*(PIN if pin else ()), sys.executable, "-m", PEERS, "calibrate"]
+    return float(_run_client(cmd)["calibration_ms"])
 
 
 def machine_info() -> dict[str, str]:
@@ -342,83 +291,182 @@ def machine_info() -> dict[str, str]:
         "cpu": cpu,
         "python": sys.version.split()[0],
         "blas_env": ", ".join(f"{k}={v}" for k, v in sorted(blas.items())) or "(none set)",
-        "loadavg": " ".join(os.getloadavg().__repr__().strip("()").split(", ")),
+        "loadavg": load(),
     }
 
 
-def run_benchmark(repeats: int = 3, steps: int = STEPS,
-                  variants: tuple[Variant, ...] = VARIANTS) -> dict[str, Samples]:
-    """All variants, alternated round by round so drifting machine load hits them alike."""
-    samples = {v.name: Samples() for v in variants}
-    for rnd in range(repeats):
-        for v in variants:
-            r = run_variant(v, steps)
-            samples[v.name].ms_per_step.append(r["ms_per_step"])
-            samples[v.name].details.append(r)
-            print(f"  round {rnd + 1}/{repeats}  {v.name:<48} {r['ms_per_step']:8.4f} ms/step"
-                  f"  (median step {r['median_step_ms']:.4f}, p99 {r['p99_step_ms']:.4f},"
-                  f" max {r['max_step_ms']:.2f} ms; {r['newton_iterations_per_step']:.2f}"
-                  f" iter/step; server CPU {r.get('server_cpu_ms_per_step', 0.0):.3f}"
-                  f" ms/step)", flush=True)
-            if "messages" in r:
-                print(f"    messages/step {r['messages_per_step']:.2f} by code {r['messages']}")
+@dataclass
+class Samples:
+    runs: list[dict[str, Any]] = field(default_factory=list)
+
+    def median(self, key: str) -> float:
+        return statistics.median(r.get(key, float("nan")) for r in self.runs)
+
+
+@dataclass
+class Rounds:
+    """Every run of one mode (pinned or unpinned), by variant, in round order."""
+
+    pinned: bool
+    by_variant: dict[str, Samples] = field(default_factory=dict)
+    context: list[str] = field(default_factory=list)  # per round: load, calibration
+
+
+def run_rounds(variants: Sequence[Variant], rounds: int, pin: bool) -> Rounds:
+    """Every variant once per round; the order reverses each round."""
+    out = Rounds(pin, {v.name: Samples() for v in variants})
+    mode = "pinned (taskset -c 1)" if pin else "unpinned"
+    for rnd in range(rounds):
+        order = list(variants) if rnd % 2 == 0 else list(reversed(variants))
+        cal = calibration()
+        ctx = f"round {rnd + 1}: load {load()}, calibration {cal:.1f} ms"
+        out.context.append(ctx)
+        print(f"[{mode}] {ctx}", flush=True)
+        for v in order:
+            r = run_variant(v, pin)
+            r["calibration_ms"] = cal
+            out.by_variant[v.name].runs.append(r)
+            s = r["step_ms"]
+            extra = ""
+            if "message_us" in r:
+                extra = "; µs/msg p50/p99/p99.9 " + ", ".join(
+                    f"{c}: {m['p50']:.0f}/{m['p99']:.0f}/{m['p999']:.0f}"
+                    for c, m in r["message_us"].items() if c in ("10", "13", "14"))
+            if "record_bytes_per_step" in r:
+                extra += f"; record {r['record_bytes_per_step']:.0f} B/step"
+            print(f"  {v.name:<44} {r['ms_per_step']:8.4f} ms/step  step p50/p99/p99.9/max "
+                  f"{s['p50']:.3f}/{s['p99']:.3f}/{s['p999']:.3f}/{s['max']:.2f} ms; server CPU "
+                  f"{r.get('server_cpu_ms_per_step', 0.0):.3f} ms/step{extra}", flush=True)
             if "server_exit" in r:
                 print(f"    warning: server process exited {r['server_exit']}", flush=True)
-    return samples
+    return out
 
 
-def summarize(samples: dict[str, Samples]) -> str:
-    """Median [min-max] table, the bridge/reference ratio and the verdict against the target."""
-    lines = ["| variant | ms/step median | [min – max] | server CPU ms/step (median) |"
-             " iter/step |", "|---|---|---|---|---|"]
-    med = {}
-    for name, s in samples.items():
-        med[name] = statistics.median(s.ms_per_step)
-        it = statistics.median(d["newton_iterations_per_step"] for d in s.details)
-        cpu = statistics.median(d.get("server_cpu_ms_per_step", 0.0) for d in s.details)
-        lines.append(f"| {name} | {med[name]:.4f} | [{min(s.ms_per_step):.4f} – "
-                     f"{max(s.ms_per_step):.4f}] | {cpu:.3f} | {it:.2f} |")
-    if PRIMARY_BRIDGE in med and REFERENCE in med:
-        ratio = med[PRIMARY_BRIDGE] / med[REFERENCE]
-        ok_abs = med[PRIMARY_BRIDGE] <= TARGET_MS_PER_STEP
-        ok_ratio = ratio <= TARGET_RATIO
-        lines += [
-            "",
-            f"ratio bridge/reference (medians): {ratio:.2f}",
-            f"target ≤ {TARGET_MS_PER_STEP} ms/step: {'met' if ok_abs else 'NOT met'}; "
-            f"target ratio ≤ {TARGET_RATIO}: {'met' if ok_ratio else 'NOT met'}",
-        ]
+def _paired(rounds: Rounds, a: str, b: str, key: str) -> list[float]:
+    ra, rb = rounds.by_variant[a].runs, rounds.by_variant[b].runs
+    return [x[key] / y[key] for x, y in zip(ra, rb, strict=True) if y.get(key)]
+
+
+def summarize(rounds: Rounds) -> str:
+    """Tables and verdicts of one mode."""
+    mode = "pinned (taskset -c 1)" if rounds.pinned else "unpinned"
+    n = len(next(iter(rounds.by_variant.values())).runs)
+    lines = [f"### {mode}, {n} rounds", "", *(f"- {c}" for c in rounds.context), "",
+             "| variant | ms/step median | [min – max] | server CPU ms/step | step p50 / p99 / "
+             "p99.9 / max ms | record B/step |", "|---|---|---|---|---|---|"]
+    for name, s in rounds.by_variant.items():
+        ms = [r["ms_per_step"] for r in s.runs]
+        st = {k: statistics.median(r["step_ms"][k] for r in s.runs)
+              for k in ("p50", "p99", "p999", "max")}
+        rec = s.median("record_bytes_per_step")
+        lines.append(
+            f"| {name} | {statistics.median(ms):.4f} | [{min(ms):.4f} – {max(ms):.4f}] | "
+            f"{s.median('server_cpu_ms_per_step'):.3f} | {st['p50']:.3f} / {st['p99']:.3f} / "
+            f"{st['p999']:.3f} / {st['max']:.2f} | {'' if rec != rec else f'{rec:.0f}'} |")
+    msg_rows = [(name, s) for name, s in rounds.by_variant.items() if "message_us" in s.runs[0]]
+    if msg_rows:
+        lines += ["", "| variant | message | p50 µs | p99 µs | p99.9 µs | max µs |",
+                  "|---|---|---|---|---|---|"]
+        for name, s in msg_rows:
+            for code in s.runs[0]["message_us"]:
+                q = {k: statistics.median(r["message_us"][code][k] for r in s.runs)
+                     for k in ("p50", "p99", "p999", "max")}
+                lines.append(f"| {name} | {code} | {q['p50']:.1f} | {q['p99']:.1f} | "
+                             f"{q['p999']:.1f} | {q['max']:.0f} |")
+    lines.append("")
+    for bridge, ref in PAIRS:
+        if bridge.name not in rounds.by_variant or ref.name not in rounds.by_variant:
+            continue
+        target = TARGET_RATIO_64 if bridge.dofs > 1 else TARGET_RATIO
+        b, r = rounds.by_variant[bridge.name], rounds.by_variant[ref.name]
+        ratio = b.median("ms_per_step") / r.median("ms_per_step")
+        paired = statistics.median(_paired(rounds, bridge.name, ref.name, "ms_per_step"))
+        cpu = b.median("server_cpu_ms_per_step") / r.median("server_cpu_ms_per_step")
+        lines.append(
+            f"- {bridge.name} / {ref.name}: ms/step ratio of medians **{ratio:.2f}** (median of "
+            f"per-round ratios {paired:.2f}; target ≤ {target}: "
+            f"{'met' if max(ratio, paired) <= target else 'NOT met'}); server CPU ratio "
+            f"**{cpu:.2f}** (target ≤ {TARGET_CPU_RATIO}: "
+            f"{'met' if cpu <= TARGET_CPU_RATIO else 'NOT met'})")
+    rec = rounds.by_variant.get(BRIDGE.name)
+    if rec is not None:
+        b = rec.median("record_bytes_per_step")
+        ok = "met" if b <= TARGET_BYTES_PER_STEP else "NOT met"
+        lines.append(f"- record: {b:.0f} bytes per committed 1-DOF step (target ≤ "
+                     f"{TARGET_BYTES_PER_STEP}: {ok})")
     return "\n".join(lines)
 
 
+def run_rss(steps: int, pin: bool) -> str:
+    """The bridge's RSS along a long run (scripted 1-DOF client, record on)."""
+    variant = Variant("scripted 1-DOF: bridge", "bridge", client="scripted", steps=steps)
+    samples: list[tuple[int, float]] = []
+
+    def sample(pid: int, n: int) -> None:
+        samples.append((n, process_rss_mb(pid)))
+        if n:
+            print(f"  {n:7d} steps: RSS {samples[-1][1]:.1f} MB", flush=True)
+
+    start = time.perf_counter()
+    r = run_variant(variant, pin, on_progress=sample)
+    wall = time.perf_counter() - start
+    warm = next((mb for n, mb in samples if n >= steps // 20), samples[0][1])
+    end = samples[-1][1]
+    growth = (end - warm) / warm
+    ok = "met" if growth <= TARGET_RSS_GROWTH else "NOT met"
+    return (f"RSS over {steps} steps ({'pinned' if pin else 'unpinned'}, load {load()}): "
+            f"{samples[0][1]:.1f} MB at start, {warm:.1f} MB after {steps // 20} steps, "
+            f"{end:.1f} MB at the end (growth {100 * growth:+.2f} %, target ≤ "
+            f"{100 * TARGET_RSS_GROWTH:.0f} %: {ok}); "
+            f"{r['ms_per_step']:.4f} ms/step, server CPU {r['server_cpu_ms_per_step']:.3f} "
+            f"ms/step, record {r.get('record_bytes_per_step', float('nan')):.0f} B/step, "
+            f"{wall:.0f} s")
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Run the benchmark (default) or one of its worker processes (sub-commands)."""
-    parser = argparse.ArgumentParser(prog=MODULE, description=__doc__,
+    parser = argparse.ArgumentParser(prog="benchmarks.bench_opensees_bridge", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("role", nargs="?", default="bench",
-                        choices=("bench", "reference-server", "client"))
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("mode", nargs="?", default="bench", choices=("bench", "rss"))
+    parser.add_argument("--rounds", type=int, default=3, help="pinned rounds (0: none)")
+    parser.add_argument("--unpinned-rounds", type=int, default=5, help="(0: none)")
     parser.add_argument("--steps", type=int, default=STEPS)
-    parser.add_argument("--port", type=int, default=None, help="client: server port")
+    parser.add_argument("--no-64", action="store_true", help="skip the 64-DOF variants")
+    parser.add_argument("--steps-64", type=int, default=STEPS_64)
+    parser.add_argument("--compare-tree", type=Path, default=None,
+                        help="add the primary bridge variant served from this checkout")
+    parser.add_argument("--only", default=None,
+                        help="comma-separated substrings: run only the matching variants")
+    parser.add_argument("--rss-steps", type=int, default=RSS_STEPS)
     parser.add_argument("--profile", type=Path, default=None,
-                        help="bench: also run the primary bridge variant once under cProfile")
+                        help="also run the primary bridge variant once under cProfile")
     args = parser.parse_args(argv)
-    if args.role == "reference-server":
-        _reference_server_main()
-        return
-    if args.role == "client":
-        _opensees_client_main(args.port, args.steps)
-        return
     info = machine_info()
-    print(f"OpenSeesPy 1-DOF transient, {args.steps} steps, {args.repeats} rounds; "
-          + "; ".join(f"{k}: {v}" for k, v in info.items()), flush=True)
-    samples = run_benchmark(args.repeats, args.steps)
-    print(summarize(samples), flush=True)
+    print("step cost; " + "; ".join(f"{k}: {v}" for k, v in info.items()), flush=True)
+    if args.mode == "rss":
+        print(run_rss(args.rss_steps, pin=True), flush=True)
+        return
+    variants = [dataclasses.replace(v, steps=args.steps) for v in VARIANTS]
+    if args.compare_tree is not None:
+        tree = args.compare_tree.resolve()
+        variants.insert(2, dataclasses.replace(BRIDGE, name=f"bridge @ {tree.name}",
+                                               tree=str(tree)))
+    if not args.no_64:
+        variants += [dataclasses.replace(v, steps=args.steps_64) for v in (REF_64, BRIDGE_64)]
+    if args.only:
+        keys = args.only.split(",")
+        variants = [v for v in variants if any(k in v.name for k in keys)]
+    reports = []
+    if args.rounds:
+        reports.append(summarize(run_rounds(variants, args.rounds, pin=True)))
+        print(reports[-1], flush=True)
+    if args.unpinned_rounds:
+        reports.append(summarize(run_rounds(variants, args.unpinned_rounds, pin=False)))
+        print(reports[-1], flush=True)
+    print(f"\nload at the end: {load()}", flush=True)
     if args.profile is not None:
-        primary = next(v for v in VARIANTS if v.name == PRIMARY_BRIDGE)
-        r = run_variant(primary, args.steps, profile=args.profile.resolve())
-        print(f"profiled run: {r['ms_per_step']:.4f} ms/step (under cProfile); "
-              f"profile written to {args.profile}", flush=True)
+        r = run_variant(BRIDGE, pin=True, profile=args.profile.resolve())
+        print(f"profiled run: {r['ms_per_step']:.4f} ms/step (under cProfile); profile "
+              f"written to {args.profile}", flush=True)
 
 
 if __name__ == "__main__":

@@ -41,14 +41,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from benchmarks.bench_opensees_bridge import machine_info
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.demo import demo_config_text
 from fresco_bridge.indicators import OnlineMonitor
-from fresco_bridge.integrator import DEMO_DT, demo_integrator, kanai_tajimi
+from fresco_bridge.integrator import (
+    DEMO_DT,
+    demo_frame_integrator,
+    demo_site_coupling,
+    kanai_tajimi,
+    run_coupled,
+)
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.telemetry import MqttTelemetry, NullTelemetry, StepSample, Telemetry
 
@@ -112,18 +116,12 @@ def run_variant(v: Variant, duration: float, root: Path) -> dict[str, Any]:
                     raise RuntimeError("telemetry never connected to the broker")
                 time.sleep(0.02)
         link = GenericClientLink("127.0.0.1", bridge.ports["damper"], 2, timeout=10.0)
-
-        def damper_force(step: int, t: float, drift: np.ndarray) -> list[float]:
-            link.set_trial((0.0, float(drift[0])), time=t)
-            return [link.force()[1]]
-
-        integ = demo_integrator(damper_force, motion)
+        coupling = demo_site_coupling(link)
+        integ = demo_frame_integrator(coupling, motion)
         with link:
             b0, k0 = bridge.call(time.thread_time), broker_cpu()
             t0, c0 = time.perf_counter(), time.process_time()
-            while not integ.done:
-                integ.step()
-                link.commit()
+            run_coupled(integ, coupling)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             bridge_cpu, broker = bridge.call(time.thread_time) - b0, broker_cpu() - k0
     stats = tel.stats if tel is not None else None  # final: the bridge has drained and stopped

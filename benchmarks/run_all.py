@@ -6,6 +6,8 @@ from collections.abc import Callable
 
 from benchmarks import (
     bench_modbus_adapter,
+    bench_online_ann,
+    bench_online_improved,
     bench_opensees_bridge,
     bench_safety,
     bench_telemetry,
@@ -16,6 +18,8 @@ BENCHMARKS: dict[str, Callable[[list[str] | None], None]] = {
     "modbus_adapter": bench_modbus_adapter.main,
     "safety": bench_safety.main,
     "telemetry": bench_telemetry.main,
+    "online_improved": bench_online_improved.main,
+    "online_ann": bench_online_ann.main,
 }
 
 

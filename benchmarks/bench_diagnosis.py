@@ -1,0 +1,118 @@
+"""Diagnosis speed: one law drive per route, and whole diagnoses of 3000 and 30 000 samples.
+
+Routes for one 3000-step Bouc-Wen history (the unit of work of every fit): the scalar model
+(``set_trial``/``commit`` in Python) and the JIT drive (``sim_actuator.models.paths``), at the
+models' default resolution and at the diagnosis' (``DZ_MAX``); alternated, >= 3 rounds,
+min/median. Then ``diagnose`` (every candidate, pairs when triggered) on a 3000-step rig record
+and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), plus one cold
+CLI run in a fresh process (imports, JIT cache load) and the JIT compile cost with an empty
+cache. Run pinned: ``taskset -c 1 python -m benchmarks.bench_diagnosis``.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fresco_bridge.diagnosis.model import DZ_MAX
+from fresco_bridge.diagnosis.synth import synthetic_record
+from fresco_bridge.diagnosis.verdict import diagnose
+from sim_actuator.models import make_model
+from sim_actuator.models.paths import drive, law_vector
+
+ROUNDS = 3
+PARAMS = {"k0": 10.0, "fy": 25.0, "alpha": 0.05, "n": 2.0, "beta": 0.6, "gamma": 0.4}
+
+
+def _scalar(d: np.ndarray, dz_max: float) -> None:
+    model = make_model("bouc-wen", **PARAMS)
+    model = type(model)(**PARAMS, dz_max=dz_max)  # type: ignore[call-arg]
+    for x in d:
+        model.set_trial(float(x))
+        model.commit()
+
+
+def _stats(samples: list[float]) -> str:
+    return f"min {min(samples):.4g} s, median {statistics.median(samples):.4g} s"
+
+
+def routes() -> None:
+    record = synthetic_record("none", 1, steps=3000).record
+    d = record.cmd
+    law, vec = law_vector("bouc-wen", PARAMS)
+    drive(law, vec, d, 0.0, DZ_MAX)
+    times: dict[str, list[float]] = {}
+    for _ in range(ROUNDS):
+        for name, fn in (
+            ("scalar Python, dz_max 0.01", lambda: _scalar(d, 0.01)),
+            (f"scalar Python, dz_max {DZ_MAX}", lambda: _scalar(d, DZ_MAX)),
+            ("JIT drive, dz_max 0.01", lambda: drive(law, vec, d, 0.0, 0.01)),
+            (f"JIT drive, dz_max {DZ_MAX}", lambda: drive(law, vec, d, 0.0, DZ_MAX)),
+        ):
+            started = time.perf_counter()
+            fn()
+            times.setdefault(name, []).append(time.perf_counter() - started)
+    print("one 3000-step Bouc-Wen history (path of a bench record):")
+    for name, samples in times.items():
+        print(f"  {name:<28} {_stats(samples)}")
+    scalar, jit = f"scalar Python, dz_max {DZ_MAX}", f"JIT drive, dz_max {DZ_MAX}"
+    ratio = min(times[scalar]) / min(times[jit])
+    print(f"  JIT / scalar speed-up at dz_max {DZ_MAX}: {ratio:.0f}x")
+
+
+def diagnoses() -> None:
+    cases = [("3000 steps (friction)", synthetic_record("friction", 5, steps=3000).record),
+             ("30 000 samples (backlash, dt 1 ms)",
+              synthetic_record("backlash", 6, steps=30_000, dt=0.001).record)]
+    for name, record in cases:
+        samples = []
+        verdict = ""
+        for _ in range(ROUNDS):
+            started = time.perf_counter()
+            result = diagnose(record)
+            samples.append(time.perf_counter() - started)
+            verdict = result["verdict"]["effect"]
+        print(f"diagnose {name}: {_stats(samples)} (verdict {verdict}, "
+              f"{len(result['pairs'])} pairs fitted)")
+
+
+def cold() -> None:
+    record = synthetic_record("friction", 5, steps=3000).record
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "r.csv"
+        assert record.meas_disp is not None
+        rows = zip(record.time, record.cmd, record.meas_disp, record.force, strict=True)
+        csv.write_text("time,cmd_disp,meas_disp,meas_force\n"
+                       + "".join(",".join(repr(float(x)) for x in r) + "\n" for r in rows))
+        exe = [sys.executable, "-m", "fresco_bridge.cli", "diagnose", str(csv), "--no-progress"]
+        started = time.perf_counter()
+        subprocess.run(exe, check=True, capture_output=True)
+        print(f"cold CLI run, 3000 steps (fresh process, JIT cache warm): "
+              f"{time.perf_counter() - started:.2f} s")
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "empty-cache"))
+        code = ("import time, numpy as np; t=time.perf_counter();"
+                "from sim_actuator.models.paths import drive, drive_many, law_vector;"
+                "d=np.linspace(0,1,10);"
+                "[drive(*law_vector(k, p), d) for k, p in (('bilinear', dict(k0=1.,fy=1.,"
+                "alpha=.1)), ('bouc-wen', dict(k0=1.,fy=1.,alpha=.1,n=2.,beta=.5,gamma=.5)))];"
+                "l,v=law_vector('bilinear', dict(k0=1.,fy=1.,alpha=.1));"
+                "drive_many(l, v[None,:], d[None,:], np.zeros(1));"
+                "print(time.perf_counter()-t)")
+        out = subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                             capture_output=True, text=True).stdout
+        print(f"JIT compile of the drives with an empty cache (once per install): "
+              f"{float(out):.2f} s")
+
+
+if __name__ == "__main__":
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()}")
+    routes()
+    diagnoses()
+    cold()

@@ -1,0 +1,74 @@
+"""Per-step cost of ``online_improved`` (observe + the twin's trial/commit) against the cost of
+one step of the simulated tested damper (BWBN, the baseline), same process, same histories.
+
+The histories are those of a study run (demo frame, synthetic record, generalisation layout,
+the reference twin). Rounds alternate the two variants; per round the median and p99 of the
+per-step wall time are taken; the table gives min / median over rounds.
+``taskset -c 1 python -m benchmarks.bench_online_improved``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+from fresco_bridge.integrator import kanai_tajimi
+from fresco_bridge.study.simulate import FixedModel, simulate_case, specimen_model
+from fresco_bridge.updating.improved import OnlineImproved
+
+
+def _improved(tested: np.ndarray, force: np.ndarray, twin: np.ndarray) -> list[float]:
+    updater = OnlineImproved(offline=(tested[:1000], force[:1000]))
+    model = updater.twin
+    times = []
+    for d, f, dw in zip(tested.tolist(), force.tolist(), twin.tolist(), strict=True):
+        start = time.perf_counter()
+        updater.observe(d, f)
+        model.set_trial(dw)
+        model.commit()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def _specimen(tested: np.ndarray) -> list[float]:
+    model = specimen_model("bwbn")
+    times = []
+    for d in tested.tolist():
+        start = time.perf_counter()
+        model.set_trial(d)
+        model.commit()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args(argv)
+    motion = kanai_tajimi(3.0, duration=20.0, dt=0.01, seed=1)
+    run = simulate_case("generalisation", "bwbn", FixedModel(specimen_model("bwbn")), motion)
+    tested, force, twin = run.tested_drift, run.tested_force, run.twin_drift
+    rows: dict[str, list[tuple[float, float]]] = {"online_improved": [], "bwbn step": []}
+    for _ in range(args.rounds):
+        for name in rows:
+            times = _improved(tested, force, twin) if name == "online_improved" else (
+                _specimen(tested))  # fmt: skip
+            ms = np.asarray(times, dtype=np.float64) * 1e3
+            rows[name].append((float(np.median(ms)), float(np.percentile(ms, 99))))
+    print(f"{tested.size} steps, {args.rounds} rounds (min / median over rounds), ms per step")
+    print("| variant | median | p99 |\n|---|---|---|")
+    for name, values in rows.items():
+        med = [v[0] for v in values]
+        p99 = [v[1] for v in values]
+        print(f"| {name} | {min(med):.4f} / {statistics.median(med):.4f} | "
+              f"{min(p99):.4f} / {statistics.median(p99):.4f} |")
+    ratio = [a[0] / b[0] for a, b in zip(rows["online_improved"], rows["bwbn step"], strict=True)]
+    print(f"ratio of medians online_improved / bwbn step: min {min(ratio):.2f}, "
+          f"median {statistics.median(ratio):.2f}")
+
+
+if __name__ == "__main__":
+    main()

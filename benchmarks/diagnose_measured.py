@@ -1,0 +1,109 @@
+"""Run ``fresco-bridge diagnose``, untuned, on every measured test in ``../shared/data/measured``.
+
+The tool itself never reads ``../shared``: this script converts each data set to the tool's CSV
+(``time,cmd_disp,meas_force``) and calls the command as a user would. None of these data sets
+has a command channel, so the *measured* displacement is the command (the interface layer is
+invisible) and the diagnosis speaks for the specimen and sensor layers only. Quasi-static tests
+without a time column (RC column, braces) get a sample index as time (dt = 1 s), so rate
+effects cannot be judged there.
+
+    python -m benchmarks.diagnose_measured [-o out/measured] [--only NAME]
+
+Writes one CSV, one JSON and one report directory per test, and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import gzip
+import io
+import json
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from fresco_bridge.cli import main as cli_main
+
+MEASURED = Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
+
+
+def _write(path: Path, t: np.ndarray, d: np.ndarray, f: np.ndarray) -> Path:
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", "cmd_disp", "meas_force"])
+        for row in zip(t, d, f, strict=True):
+            w.writerow([repr(float(x)) for x in row])
+    return path
+
+
+def tests(out: Path) -> Iterator[tuple[str, Path, str, str]]:
+    """(name, csv, --units, note) for every measured test."""
+    brfd = MEASURED / "rotary_friction_damper_BRFD"
+    for gz in sorted(brfd.glob("*.json.gz")):
+        data = np.array(json.loads(gzip.decompress(gz.read_bytes()))["data"], dtype=float)
+        name = "BRFD " + gz.name.removesuffix(".json.gz")
+        # dataset-3: t, disp [in], friction force [kip]; dataset-4: t, MTS disp [in], force
+        path = _write(out / f"{gz.name.removesuffix('.json.gz')}.csv",
+                      data[:, 0], data[:, 1], data[:, 2])
+        yield name, path, "disp=in,force=kip", "friction damper with backlash (README)"
+    mr = MEASURED / "mr_damper_dyke_nees2012_1158"
+    for gz in sorted(mr.glob("*.csv.gz")):
+        rows = list(csv.reader(io.StringIO(gzip.decompress(gz.read_bytes()).decode())))
+        header = rows[0]
+        cols = {h: i for i, h in enumerate(header)}
+        body = np.array([[float(r[cols["t"]]), float(r[cols["D"]]), float(r[cols["F"]])]
+                         for r in rows[1:] if r and r[0]])
+        path = _write(out / f"{gz.name.removesuffix('.csv.gz')}.csv", *body.T)
+        yield (f"MR damper {gz.name.removesuffix('_converted.csv.gz')}", path,
+               "disp=cm,force=N", "MR damper, random voltage 0-2.25 V")
+    rc = np.loadtxt(MEASURED / "rc_column_gill1979_peer_spd" / "experimental_data.csv",
+                    delimiter=",", skiprows=1)
+    yield ("RC column Gill 1979", _write(out / "rc_column.csv", np.arange(rc.shape[0], dtype=float),
+                                          rc[:, 0], rc[:, 1]),
+           "disp=m", "force is the normalised lateral load (read as kN)")
+    for js in sorted((MEASURED / "steel_brace_cyclic_simcenter").glob("*.json")):
+        test = json.loads(js.read_text())["test"]
+        d, f = np.array(test["axialDef"], float), np.array(test["axialForce"], float)
+        yield (f"brace {js.stem}", _write(out / f"{js.stem}.csv", np.arange(d.size, dtype=float),
+                                          d, f), "disp=in,force=kip", "quasi-static, no time")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("-o", "--out", type=Path, default=Path("out/measured"))
+    parser.add_argument("--only", default=None, help="substring of the test names to run")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name, path, units, note in tests(args.out):
+        if args.only and args.only not in name:
+            continue
+        out_json = path.with_suffix(".json")
+        started = time.perf_counter()
+        rc = cli_main(["diagnose", str(path), "--units", units, "--json", str(out_json),
+                       "--report", str(path.with_suffix("")), "--no-progress"])
+        wall = time.perf_counter() - started
+        if rc != 0:
+            rows.append((name, "error", "", "", "", f"{wall:.1f}"))
+            continue
+        doc = json.loads(out_json.read_text())
+        v = doc["verdict"]
+        winner = next((e for e in doc["effects"] + doc["pairs"] if e["name"] == v["effect"]), None)
+        params = "" if winner is None else ", ".join(
+            f"{k} {p['value']:.4g}±{(p['std'] or 0):.2g} {p['unit']}"
+            for k, p in winner["params"].items())
+        rows.append((name, f"{doc['record']['samples']}", v["effect"],
+                     f"{v['confidence']:.2f}",
+                     f"{v['gap_before_pct']:.2f} → {v['gap_after_pct']:.2f} %", params,
+                     f"{wall:.1f}", note))
+    print("| test | samples | verdict | confidence | withheld gap | parameters | s | note |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print("| " + " | ".join(r) + " |")
+
+
+if __name__ == "__main__":
+    main()
