@@ -4,7 +4,9 @@ Record i of a bench with seed S carries effect ``CLASSES[i % len(CLASSES)]`` (``
 per cycle, so false alarms are measured on enough records) and is generated from the seed
 ``S * 100003 + i``: any record can be regenerated alone. The diagnosis sees only time,
 command, measured displacement and force — never the effect, its magnitude or the specimen.
-Records run through ``fresco_bridge.sweeps.run_sweep`` (serial, local pool, or Dask).
+Records run through ``fresco_bridge.sweeps.run_sweep`` (serial, local pool, or Dask). With
+``realism`` the records come from ``realism.realistic_record`` (effects in the rig's physical
+forms, not the candidates' shapes) instead of ``synth.synthetic_record``; same seeds.
 """
 
 from __future__ import annotations
@@ -46,16 +48,26 @@ def effect_magnitude(effect: str, values: Mapping[str, float]) -> float | None:
 MAGNITUDE_TOLERANCE = 0.20
 
 
-def bench_items(n: int, seed: int, steps: int) -> list[tuple[int, str, int, int]]:
-    """(index, effect, record seed, steps) of every record of the bench."""
-    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps) for i in range(n)]
+BenchItem = tuple[int, str, int, int, bool]
+"""(index, effect, record seed, steps, realism) of one record."""
 
 
-def diagnose_one(item: tuple[int, str, int, int]) -> dict[str, Any]:
+def bench_items(n: int, seed: int, steps: int, realism: bool = False) -> list[BenchItem]:
+    """(index, effect, record seed, steps, realism) of every record of the bench."""
+    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism)
+            for i in range(n)]
+
+
+def diagnose_one(item: BenchItem) -> dict[str, Any]:
     """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
-    index, effect, record_seed, steps = item
+    index, effect, record_seed, steps, realism = item
     started = time.perf_counter()
-    synthetic = synthetic_record(effect, record_seed, steps=steps)
+    if realism:
+        from .realism import realistic_record
+
+        synthetic = realistic_record(effect, record_seed, steps=steps)
+    else:
+        synthetic = synthetic_record(effect, record_seed, steps=steps)
     generated = time.perf_counter()
     result = diagnose(synthetic.record)
     verdict = result["verdict"]
@@ -71,7 +83,7 @@ def diagnose_one(item: tuple[int, str, int, int]) -> dict[str, Any]:
     return {
         "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
         "confidence": verdict["confidence"], "truth": synthetic.truth, "estimates": estimates,
-        "relative_errors": errors, "specimen": synthetic.specimen,
+        "relative_errors": errors, "specimen": synthetic.specimen, "law": synthetic.law,
         "gap_before_pct": result["baseline"]["gap_withheld"]["total_pct"],
         "shrink_pct": None if true_candidate is None else true_candidate["shrink_pct"],
         "verdict_shrink_pct": verdict["shrink_pct"],
@@ -115,13 +127,18 @@ def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "diagnose_seconds": {"median": float(np.median([r["diagnose_seconds"] for r in rows])),
                              "max": float(np.max([r["diagnose_seconds"] for r in rows]))}
         if rows else {},
-        "failures": [{k: r[k] for k in ("index", "seed", "effect", "predicted", "confidence",
-                                        "gap_before_pct", "truth")}
+        "by_law": {law: {"records": len(sub), "top1_pct": 100.0 * sum(
+            r["predicted"] == r["effect"] for r in sub) / len(sub)}
+            for law in sorted({r.get("law", "bouc-wen") for r in rows})
+            for sub in [[r for r in rows if r.get("law", "bouc-wen") == law]]},
+        "failures": [{k: r.get(k) for k in ("index", "seed", "effect", "predicted",
+                                            "confidence", "gap_before_pct", "truth", "law")}
                      for r in rows if r["predicted"] != r["effect"]],
     }
 
 
-def format_bench(summary: dict[str, Any], seed: int, wall: float) -> str:
+def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
+                 realism: bool = False) -> str:
     """The bench's printout: headline numbers, confusion matrix, magnitudes, failures."""
     labels = summary["labels"]
     columns = [*labels, *summary["extra_predictions"]]
@@ -130,7 +147,8 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float) -> str:
              for name in columns}
     width = max(len(x) for x in labels) + 1
     lines = [
-        f"diagnose-bench: {summary['records']} records, seed {seed}, {wall:.1f} s wall",
+        f"diagnose-bench{' --realism' if realism else ''}: {summary['records']} records, "
+        f"seed {seed}, {wall:.1f} s wall",
         f"top-1 {summary['top1_pct']:.1f} % (effects {summary['effects_top1_pct']:.1f} %); "
         f"none false alarms {summary['none_false_alarm_pct']:.1f} %; effects missed as none "
         f"{summary['missed_as_none_pct']:.1f} %",
@@ -142,6 +160,10 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float) -> str:
     for t in labels:
         row = summary["confusion"][t]
         lines.append(f"{t:<{width}}" + " ".join(f"{row.get(c, 0):>10}" for c in columns))
+    if len(summary["by_law"]) > 1:
+        lines.append("top-1 by specimen law: " + ", ".join(
+            f"{law} {v['top1_pct']:.1f} % of {v['records']}"
+            for law, v in summary["by_law"].items()))
     lines.append("magnitude error (median / max, % of the true value):")
     for effect, median in summary["magnitude_error_median_pct"].items():
         lines.append(f"  {effect:<20} {MAGNITUDE_OF[effect]:<16} {median:7.2f} / "
@@ -154,7 +176,7 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float) -> str:
         d = summary["diagnose_seconds"]
         lines.append(f"diagnosis time per record: median {d['median']:.1f} s, max {d['max']:.1f} s")
     for f in summary["failures"]:
-        lines.append(f"  failure: record {f['index']} (seed {f['seed']}) {f['effect']} -> "
-                     f"{f['predicted']} (confidence {f['confidence']:.2f}, gap "
-                     f"{f['gap_before_pct']:.2f} %)")
+        lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}) "
+                     f"{f['effect']} -> {f['predicted']} (confidence {f['confidence']:.2f}, "
+                     f"gap {f['gap_before_pct']:.2f} %)")
     return "\n".join(lines)

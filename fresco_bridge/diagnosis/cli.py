@@ -60,6 +60,10 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                    help="local worker processes (default: one per core; 1 = serial)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://127.0.0.1:8786")
+    b.add_argument("--realism", action="store_true",
+                   help="harder records: effects in the rig's physical forms (servo lag, "
+                        "compliant frame, other pinching/degradation laws), a Menegotto-Pinto "
+                        "specimen in a third of the records, varied noise")
     b.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write every record's result and the summary as JSON")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -150,16 +154,17 @@ def _bench(args: argparse.Namespace) -> int:
         raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
     if args.steps < 200:
         raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
-    items = bench_items(args.n, args.seed, args.steps)
+    items = bench_items(args.n, args.seed, args.steps, args.realism)
     bar = ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress)
     started = time.perf_counter()
     rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
                      progress=bar)
     wall = time.perf_counter() - started
     result = summarise_bench(rows)
-    print(format_bench(result, args.seed, wall))
+    print(format_bench(result, args.seed, wall, realism=args.realism))
     if args.json is not None:
         doc: dict[str, Any] = {"seed": args.seed, "n": args.n, "steps": args.steps,
+                               "realism": args.realism,
                                "wall_seconds": wall, "summary": result, "records": rows}
         args.json.write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
         print(f"json {args.json}")

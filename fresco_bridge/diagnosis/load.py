@@ -19,12 +19,14 @@ import numpy.typing as npt
 
 __all__ = [
     "MIN_SAMPLES",
+    "REVERSAL_SHARE",
     "UNITS",
     "DiagnosisInputError",
     "Record",
     "load_record",
     "parse_units",
     "record_from_arrays",
+    "turning_points",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -38,6 +40,42 @@ UNITS: dict[str, dict[str, float]] = {
     "time": {"s": 1.0, "ms": 1e-3},
 }
 """Accepted ``--units`` per quantity, as factors to the tool's units mm, kN and s."""
+
+
+REVERSAL_SHARE = 0.005
+"""A reversal of the command kept by thinning moves it by more than this share of its peak."""
+
+
+def turning_points(x: FloatArray, h: float) -> npt.NDArray[np.int64]:
+    """Indices of the reversals of ``x`` by more than ``h`` (a peak-valley filter: smaller
+    excursions between them are ignored); ``h = 0`` gives every strict reversal."""
+    turns: list[int] = []
+    values = x.tolist()
+    lo = hi = ext = 0
+    direction = 0
+    for i in range(1, len(values)):
+        v = values[i]
+        if direction == 0:
+            if v > values[hi]:
+                hi = i
+            if v < values[lo]:
+                lo = i
+            if values[hi] - values[lo] > h:
+                direction = 1 if hi > lo else -1
+                ext = hi if hi > lo else lo
+                turns.append(lo if hi > lo else hi)
+        elif direction > 0:
+            if v >= values[ext]:
+                ext = i
+            elif values[ext] - v > h:
+                turns.append(ext)
+                direction, ext = -1, i
+        elif v <= values[ext]:
+            ext = i
+        elif v - values[ext] > h:
+            turns.append(ext)
+            direction, ext = 1, i
+    return np.array(turns, dtype=np.int64)
 
 
 class DiagnosisInputError(ValueError):
@@ -60,19 +98,32 @@ class Record:
         return int(self.time.size)
 
     def thinned(self, max_samples: int) -> Record:
-        """At most about ``max_samples`` samples: every k-th one plus every reversal of the
-        command and the last sample, so a rate-independent law sees the same path."""
+        """At most ``max_samples`` samples for the fits: every k-th one, every reversal of the
+        command by more than :data:`REVERSAL_SHARE` of its peak, and the last sample, so a
+        rate-independent law sees the same path (smaller wiggles, such as LVDT noise on a
+        broadband record, are ironed out: they move the law by less than the noise floor).
+        When the reversals alone exceed the budget (broadband records: 0-50 Hz random motion
+        reverses every few ms), the fits get a contiguous window from the start of the
+        record instead (the law starts at rest there, as in the test): its first
+        ``max_samples`` kept samples."""
         if self.size <= max_samples:
             return self
-        step = -(-self.size // max_samples)
-        dc = np.diff(self.cmd)
-        turns = np.flatnonzero(dc[1:] * dc[:-1] < 0.0) + 1
+        turns = turning_points(self.cmd, REVERSAL_SHARE * float(np.max(np.abs(self.cmd))))
+        # the reversals take what they need; every k-th sample fills the rest (at least half)
+        step = -(-self.size // max(max_samples - turns.size, max_samples // 2))
         keep = np.union1d(np.union1d(np.arange(0, self.size, step), turns), [self.size - 1])
+        note = (f"fits used {keep.size} of the {self.size} calibration samples "
+                f"(one in {step} and every reversal)")
+        if keep.size > max_samples:
+            keep = keep[:max_samples]
+            note = (f"fits used a window of the calibration part: {keep.size} samples (one in "
+                    f"{step} and every reversal) from t = {float(self.time[0]):g} to "
+                    f"{float(self.time[keep[-1]]):g} s of {float(self.time[-1]):g} s "
+                    f"({turns.size} reversals exceed the budget of {max_samples} samples)")
         return replace(
             self, time=self.time[keep], cmd=self.cmd[keep], force=self.force[keep],
             meas_disp=None if self.meas_disp is None else self.meas_disp[keep],
-            notes=[*self.notes, f"fits used {keep.size} of the {self.size} calibration samples "
-                                f"(one in {step} and every reversal)"],
+            notes=[*self.notes, note],
         )
 
     def part(self, stop: int) -> Record:

@@ -23,7 +23,7 @@ from sim_actuator.config import build_rig, parse_rig_config
 from .load import Record, record_from_arrays
 from .model import PINCHING_FIXED
 
-__all__ = ["MAGNITUDES", "SyntheticRecord", "command_history", "synthetic_record"]
+__all__ = ["MAGNITUDES", "SyntheticRecord", "command_history", "run_rig", "synthetic_record"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -56,6 +56,8 @@ class SyntheticRecord:
     truth: dict[str, float]
     """True effect parameters in the diagnosis' names and units."""
     specimen: dict[str, float] = field(default_factory=dict)
+    law: str = "bouc-wen"
+    """The specimen's hysteresis law (a ``sim_actuator.models`` kind)."""
 
 
 def command_history(rng: np.random.Generator, steps: int, dt: float, peak: float) -> FloatArray:
@@ -137,19 +139,28 @@ def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
         load_cell["noise_std"] = truth["force_noise_std"]
     elif effect != "none":
         raise ValueError(f"unknown effect {effect!r}")
-    config = parse_rig_config({
-        "name": f"bench-{effect}-{seed}", "seed": seed % (2**32), "substep_rate": 1000.0,
-        "settle_time": 0.0, "default_ramp_time": dt, "max_ramp_time": 1.0,
+    record = run_rig({
+        "name": f"bench-{effect}-{seed}", "seed": seed % (2**32),
         "specimen": {"kind": kind, "params": specimen},
         "actuator": actuator, "effects": effects,
         "sensors": {"lvdt": lvdt, "load_cell": load_cell},
-    }, source=f"bench record {seed}")
-    rig = build_rig(config)
+    }, cmd, dt, f"bench record seed {seed} ({effect})")
+    return SyntheticRecord(record, effect, truth, specimen, kind)
+
+
+def run_rig(rig: dict[str, Any], cmd: FloatArray, dt: float, source: str) -> Record:
+    """Drive a rig (``sim_actuator`` config keys; clock keys added here) one move per step,
+    ramped over the step at 1 kHz substeps and measured at its end (``settle_time = 0``)."""
+    config = parse_rig_config({
+        **rig, "substep_rate": 1000.0, "settle_time": 0.0, "default_ramp_time": dt,
+        "max_ramp_time": 1.0,
+    }, source=source)
+    built = build_rig(config)
+    steps = cmd.size
     disp = np.empty(steps)
     force = np.empty(steps)
     for i, target in enumerate(cmd):
-        m = rig.execute(float(target), dt)
+        m = built.execute(float(target), dt)
         disp[i], force[i] = m.displacement, m.force
-    record = record_from_arrays(np.arange(steps, dtype=np.float64) * dt, cmd, force, disp,
-                                source=f"bench record seed {seed} ({effect})")
-    return SyntheticRecord(record, effect, truth, specimen)
+    return record_from_arrays(np.arange(steps, dtype=np.float64) * dt, cmd, force, disp,
+                              source=source)

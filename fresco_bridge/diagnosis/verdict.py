@@ -95,6 +95,7 @@ class Options:
     calibration_fraction: float = CALIBRATION_FRACTION
     effects: Sequence[str] = EFFECT_NAMES
     pairs: bool = True
+    max_fit_samples: int = MAX_FIT_SAMPLES
 
 
 @dataclass
@@ -199,7 +200,7 @@ def diagnose(record: Record, options: Options | None = None,
             f"{record.source}: record too short to split: {n} samples give {stop} to calibrate "
             f"and {n - stop} to withhold (need >= 60 and >= 40)")
     calibration = record.part(stop)
-    cal = Context.of(calibration.thinned(MAX_FIT_SAMPLES))
+    cal = Context.of(calibration.thinned(opts.max_fit_samples))
     full = Context.of(record)
     withheld = slice(stop, n)
     effects = [e for e in opts.effects]

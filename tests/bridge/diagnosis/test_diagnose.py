@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from fresco_bridge.diagnosis.bench import MAGNITUDE_OF, effect_magnitude
+from fresco_bridge.diagnosis.load import REVERSAL_SHARE, record_from_arrays, turning_points
 from fresco_bridge.diagnosis.model import EFFECT_NAMES
 from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
@@ -76,9 +77,31 @@ def test_two_effects_at_once_are_tried_as_a_pair() -> None:
 def test_a_long_calibration_part_is_thinned_keeping_every_reversal() -> None:
     record = synthetic_record("none", SEED + 50, steps=900).record
     thin = record.thinned(200)
-    assert 200 <= thin.size < 900
+    assert 100 <= thin.size <= 200
     c = record.cmd
-    turns = np.flatnonzero(np.diff(c)[1:] * np.diff(c)[:-1] < 0.0) + 1
+    turns = turning_points(c, REVERSAL_SHARE * float(np.max(np.abs(c))))
+    assert turns.size > 10
     assert set(c[turns]) <= set(thin.cmd)  # every reversal point is kept
     assert thin.time[-1] == record.time[-1] and np.all(np.diff(thin.time) > 0.0)
     assert record.thinned(900) is record
+
+
+def test_reversals_below_the_threshold_are_ironed_out() -> None:
+    x = np.array([0.0, 1.0, 2.0, 1.999, 3.0, 2.0, 1.0, 1.001, 0.0, 1.0])
+    assert turning_points(x, 0.01).tolist() == [0, 4, 8]
+    assert turning_points(x, 0.0).tolist() == [0, 2, 3, 4, 6, 7, 8]
+
+
+def test_a_broadband_record_is_fitted_on_a_window_from_its_start() -> None:
+    rng = np.random.default_rng(3)
+    n = 5000
+    t = np.arange(n) * 1e-3
+    cmd = np.cumsum(rng.standard_normal(n))  # a reversal every other sample
+    rec = record_from_arrays(t, cmd, 2.0 * cmd, None, source="broadband")
+    thin = rec.thinned(1000)
+    assert thin.size == 1000
+    end = int(np.searchsorted(t, thin.time[-1]))
+    assert thin.time[0] == 0.0 and end < n // 2  # a window from the start, nothing later
+    turns = turning_points(cmd, REVERSAL_SHARE * float(np.max(np.abs(cmd))))
+    assert set(t[turns[turns <= end]]) <= set(thin.time)  # the window's path is whole
+    assert "window of the calibration part" in thin.notes[-1]
