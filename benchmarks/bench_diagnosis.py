@@ -12,6 +12,7 @@ cache. Run pinned: ``taskset -c 1 python -m benchmarks.bench_diagnosis``.
 from __future__ import annotations
 
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -91,11 +92,24 @@ def cold() -> None:
         rows = zip(record.time, record.cmd, record.meas_disp, record.force, strict=True)
         csv.write_text("time,cmd_disp,meas_disp,meas_force\n"
                        + "".join(",".join(repr(float(x)) for x in r) + "\n" for r in rows))
-        exe = [sys.executable, "-m", "fresco_bridge.cli", "diagnose", str(csv), "--no-progress"]
-        started = time.perf_counter()
-        subprocess.run(exe, check=True, capture_output=True)
-        print(f"cold CLI run, 3000 steps (fresh process, JIT cache warm): "
-              f"{time.perf_counter() - started:.2f} s")
+        # the console entry as it was (every command's module imported) and as it is
+        variants = {"cli.main (before)": "fresco_bridge.cli",
+                    "entry.main (now)": "fresco_bridge.entry"}
+        walls: dict[str, list[float]] = {k: [] for k in variants}
+        cpus: dict[str, list[float]] = {k: [] for k in variants}
+        for _ in range(ROUNDS):
+            for name, module in variants.items():
+                exe = [sys.executable, "-m", module, "diagnose", str(csv), "--no-progress"]
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                started = time.perf_counter()
+                subprocess.run(exe, check=True, capture_output=True)
+                walls[name].append(time.perf_counter() - started)
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpus[name].append(after.ru_utime - before.ru_utime
+                                  + after.ru_stime - before.ru_stime)
+        for name in variants:
+            print(f"cold CLI run via {name}, 3000 steps (fresh process, JIT cache warm): wall "
+                  f"{_stats(walls[name])}; CPU {_stats(cpus[name])}")
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "empty-cache"))
         code = ("import time, numpy as np; t=time.perf_counter();"
                 "from sim_actuator.models.paths import drive, drive_many, law_vector;"
