@@ -36,7 +36,14 @@ from typing import Any
 
 import numpy as np
 
-from .synth import SyntheticRecord, _signed, _uniform, command_history, run_rig
+from .synth import (
+    SyntheticRecord,
+    _signed,
+    _uniform,
+    command_history,
+    rig_record,
+    sensor_effect,
+)
 
 __all__ = ["REALISM", "realistic_record"]
 
@@ -133,21 +140,9 @@ def realistic_record(effect: str, seed: int, *, steps: int = 3000,
         truth.update(delta_nu=nu, delta_eta=2.0 * mean - nu)
         specimen.update(truth, delta_a=_uniform(rng, 0.0, 0.5) * mean, p=0.0, q=0.0,
                         psi0=1.0, delta_psi=0.0, lam=1.0)
-    elif effect == "sensor_bias":
-        truth.update(force_bias=_signed(rng, 0.02, 0.08) * fy,
-                     disp_bias=_signed(rng, 0.01, 0.04) * peak)
-        lvdt["bias"], load_cell["bias"] = truth["disp_bias"], truth["force_bias"]
-    elif effect == "sensor_noise":
-        truth.update(force_noise_std=_uniform(rng, 0.015, 0.05) * fy,
-                     disp_noise_std=_uniform(rng, 0.005, 0.02) * peak)
-        lvdt["noise_std"] = truth["disp_noise_std"]
-        load_cell["noise_std"] = truth["force_noise_std"]
+    elif effect in ("sensor_bias", "sensor_noise"):
+        truth.update(sensor_effect(effect, rng, fy, peak, lvdt, load_cell))
     elif effect != "none":
         raise ValueError(f"unknown effect {effect!r}")
-    record = run_rig({
-        "name": f"realism-{effect}-{seed}", "seed": seed % (2**32),
-        "specimen": {"kind": kind, "params": specimen},
-        "actuator": actuator, "effects": effects,
-        "sensors": {"lvdt": lvdt, "load_cell": load_cell},
-    }, cmd, dt, f"realism record seed {seed} ({effect})")
-    return SyntheticRecord(record, effect, truth, specimen, kind)
+    return rig_record("realism", effect, seed, kind, specimen, actuator, effects,
+                      {"lvdt": lvdt, "load_cell": load_cell}, truth, cmd, dt)

@@ -23,7 +23,15 @@ from sim_actuator.config import build_rig, parse_rig_config
 from .load import Record, record_from_arrays
 from .model import PINCHING_FIXED
 
-__all__ = ["MAGNITUDES", "SyntheticRecord", "command_history", "run_rig", "synthetic_record"]
+__all__ = [
+    "MAGNITUDES",
+    "SyntheticRecord",
+    "command_history",
+    "rig_record",
+    "run_rig",
+    "sensor_effect",
+    "synthetic_record",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -128,23 +136,39 @@ def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
         delta = _uniform(rng, 0.2, 0.6) / path_u
         truth.update(delta_nu=delta, delta_eta=delta)
         specimen.update(truth, p=0.0, q=0.0, psi0=1.0, delta_psi=0.0, lam=1.0)
-    elif effect == "sensor_bias":
-        truth.update(force_bias=_signed(rng, 0.02, 0.08) * fy,
-                     disp_bias=_signed(rng, 0.01, 0.04) * peak)
-        lvdt["bias"], load_cell["bias"] = truth["disp_bias"], truth["force_bias"]
-    elif effect == "sensor_noise":
-        truth.update(force_noise_std=_uniform(rng, 0.015, 0.05) * fy,
-                     disp_noise_std=_uniform(rng, 0.005, 0.02) * peak)
-        lvdt["noise_std"] = truth["disp_noise_std"]
-        load_cell["noise_std"] = truth["force_noise_std"]
+    elif effect in ("sensor_bias", "sensor_noise"):
+        truth.update(sensor_effect(effect, rng, fy, peak, lvdt, load_cell))
     elif effect != "none":
         raise ValueError(f"unknown effect {effect!r}")
+    return rig_record("bench", effect, seed, kind, specimen, actuator, effects,
+                      {"lvdt": lvdt, "load_cell": load_cell}, truth, cmd, dt)
+
+
+def sensor_effect(effect: str, rng: np.random.Generator, fy: float, peak: float,
+                  lvdt: dict[str, Any], load_cell: dict[str, Any]) -> dict[str, float]:
+    """Put ``sensor_bias`` or ``sensor_noise`` on the two channels; its truth."""
+    if effect == "sensor_bias":
+        truth = {"force_bias": _signed(rng, 0.02, 0.08) * fy,
+                 "disp_bias": _signed(rng, 0.01, 0.04) * peak}
+        lvdt["bias"], load_cell["bias"] = truth["disp_bias"], truth["force_bias"]
+    else:
+        truth = {"force_noise_std": _uniform(rng, 0.015, 0.05) * fy,
+                 "disp_noise_std": _uniform(rng, 0.005, 0.02) * peak}
+        lvdt["noise_std"] = truth["disp_noise_std"]
+        load_cell["noise_std"] = truth["force_noise_std"]
+    return truth
+
+
+def rig_record(bench: str, effect: str, seed: int, kind: str, specimen: dict[str, float],
+               actuator: dict[str, Any], effects: dict[str, Any],
+               sensors: dict[str, dict[str, Any]], truth: dict[str, float], cmd: FloatArray,
+               dt: float) -> SyntheticRecord:
+    """The generated record with what the generator put in it."""
     record = run_rig({
-        "name": f"bench-{effect}-{seed}", "seed": seed % (2**32),
+        "name": f"{bench}-{effect}-{seed}", "seed": seed % (2**32),
         "specimen": {"kind": kind, "params": specimen},
-        "actuator": actuator, "effects": effects,
-        "sensors": {"lvdt": lvdt, "load_cell": load_cell},
-    }, cmd, dt, f"bench record seed {seed} ({effect})")
+        "actuator": actuator, "effects": effects, "sensors": sensors,
+    }, cmd, dt, f"{bench} record seed {seed} ({effect})")
     return SyntheticRecord(record, effect, truth, specimen, kind)
 
 
