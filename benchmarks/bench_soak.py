@@ -76,6 +76,7 @@ class SoakResult:
     errors: list[str] = field(default_factory=list)
     samples: list[tuple[float, int, int]] = field(default_factory=list)  # (t, rss, fds)
     latencies: list[tuple[float, float]] = field(default_factory=list)  # (t, seconds)
+    loads: list[tuple[float, float]] = field(default_factory=list)  # (t, 1-min load average)
 
     def after_warmup(self) -> list[tuple[float, int, int]]:
         return [s for s in self.samples if s[0] >= self.warmup]
@@ -93,16 +94,24 @@ class SoakResult:
         return w[0][2], min(s[2] for s in w), max(s[2] for s in w)
 
     def windows(self, width: float = 60.0) -> list[dict[str, float]]:
-        """Latency p50/p99/max (ms) per window after warm-up."""
+        """Latency p50/p99/max (ms), bridge fds (max) and machine load (mean of the 1-minute
+        load average) per window after warm-up."""
         out = []
         start = self.warmup
         while start < self.duration - 1e-9:
             xs = sorted(v for t, v in self.latencies if start <= t < start + width)
             if len(xs) >= 10:
-                out.append({"from_s": start, "n": len(xs),
-                            "p50_ms": 1e3 * xs[len(xs) // 2],
-                            "p99_ms": 1e3 * xs[min(len(xs) - 1, int(0.99 * len(xs)))],
-                            "max_ms": 1e3 * xs[-1]})
+                win = {"from_s": start, "n": len(xs),
+                       "p50_ms": 1e3 * xs[len(xs) // 2],
+                       "p99_ms": 1e3 * xs[min(len(xs) - 1, int(0.99 * len(xs)))],
+                       "max_ms": 1e3 * xs[-1]}
+                fds = [f for t, _, f in self.samples if start <= t < start + width]
+                loads = [v for t, v in self.loads if start <= t < start + width]
+                if fds:
+                    win["fds_max"] = max(fds)
+                if loads:
+                    win["load_1min"] = statistics.fmean(loads)
+                out.append(win)
             start += width
         return out
 
@@ -166,7 +175,9 @@ async def _drive(ports: list[int], pid: int, result: SoakResult, sample: float) 
 
     async def sampler() -> None:  # the last sample is taken before the clients leave
         while time.monotonic() < stop - 0.5:
-            result.samples.append((time.monotonic() - t0, proc_rss(pid), proc_fds(pid)))
+            now = time.monotonic() - t0
+            result.samples.append((now, proc_rss(pid), proc_fds(pid)))
+            result.loads.append((now, os.getloadavg()[0]))
             await asyncio.sleep(min(sample, max(0.0, stop - 0.5 - time.monotonic())))
 
     tasks = [asyncio.create_task(_client(p, result, stop, t0, i)) for i, p in enumerate(ports)]
@@ -209,13 +220,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sites", type=int, default=32)
     ap.add_argument("--rate", type=float, default=20.0, help="steps/s per client")
     ap.add_argument("--warmup", type=float, default=60.0, help="s")
+    ap.add_argument("--json", type=Path, default=None, help="also write the summary here")
     args = ap.parse_args(argv)
+    load_start = os.getloadavg()
     result, run_dir = soak(60.0 * args.minutes, sites=args.sites, rate=args.rate,
                            warmup=args.warmup)
     summary = result.summary()
     summary["record_bytes"] = (run_dir / "record.jsonl").stat().st_size
-    summary["load_average"] = os.getloadavg()
-    print(json.dumps(summary, indent=2))
+    summary["load_average_start"] = load_start
+    summary["load_average_end"] = os.getloadavg()
+    text = json.dumps(summary, indent=2)
+    print(text)
+    if args.json is not None:
+        args.json.write_text(text + "\n", encoding="utf-8")
     p99 = [w["p99_ms"] for w in summary["latency_windows"]]
     if p99:
         print(f"p99 per window (ms): {p99}; median of windows "

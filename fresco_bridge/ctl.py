@@ -27,6 +27,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .record.recovery import socket_answers
 from .safety import TransitionRefused
 from .sites import Site
 from .telemetry import OperatorCommand
@@ -135,7 +136,7 @@ class ControlServer:
         if path.parent.name == _private_dir_name():
             _check_private(path.parent)
         if path.exists() or path.is_symlink():
-            if _answers(path):
+            if socket_answers(path):
                 raise ControlError(f"control socket {path} is served by another running bridge")
             path.unlink()  # a stale socket from a bridge that did not shut down cleanly
         self._server = await asyncio.start_unix_server(self._client, path=str(path),
@@ -213,16 +214,6 @@ async def _reply(writer: asyncio.StreamWriter, body: dict[str, Any]) -> None:
         await writer.drain()
 
 
-def _answers(path: Path) -> bool:
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
-        s.settimeout(1.0)
-        try:
-            s.connect(str(path))
-        except OSError:
-            return False
-        return True
-
-
 # -- the client ----------------------------------------------------------------------------------
 def find_socket(socket_path: Path | None, run_dir: Path | None, runs_root: Path) -> Path:
     """The socket to talk to: explicit, in a run directory, or the newest live one under
@@ -237,7 +228,7 @@ def find_socket(socket_path: Path | None, run_dir: Path | None, runs_root: Path)
         for d in sorted((d for d in runs_root.glob("*") if d.is_dir()), key=_mtime,
                         reverse=True):
             for path in (d / SOCKET_NAME, _pointed(d / POINTER_NAME)):
-                if path is not None and path.exists() and _answers(path):
+                if path is not None and path.exists() and socket_answers(path):
                     return path
     where = f"run directory {run_dir}" if run_dir is not None else f"{runs_root}/*"
     raise ControlError(f"no control socket in {where} (is the bridge running? pass --socket "

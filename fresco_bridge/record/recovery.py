@@ -163,7 +163,7 @@ def _remove_stale_socket(run_dir: Path) -> list[Path]:
     with contextlib.suppress(OSError):
         candidates.append(Path((run_dir / "control.path").read_text(encoding="utf-8").strip()))
     for path in candidates:
-        if not (path.exists() or path.is_symlink()) or _answers(path):
+        if not (path.exists() or path.is_symlink()) or socket_answers(path):
             continue
         with contextlib.suppress(OSError):
             path.unlink()
@@ -173,7 +173,8 @@ def _remove_stale_socket(run_dir: Path) -> list[Path]:
     return removed
 
 
-def _answers(path: Path) -> bool:
+def socket_answers(path: Path) -> bool:
+    """Whether a process listens on the Unix socket ``path`` (a stale one refuses)."""
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(1.0)
         try:

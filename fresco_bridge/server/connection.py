@@ -66,6 +66,9 @@ class SiteListener:
 
 
 class _Handler(Protocol):
+    introduced: bool
+    """The client's size ID (or site setup) fitted: its session is open."""
+
     def next_request(self) -> tuple[object, Coroutine[Any, Any, None] | None] | None: ...
 
 
@@ -74,18 +77,18 @@ class SessionPump:
 
     def __init__(
         self,
-        site: Site,
+        listener: SiteListener,
         peer: str,
         send: Callable[[bytes], None],
         close: Callable[[], None],
         pause: Callable[[bool], None],
         *,
-        max_data_size: int,
         transport: Literal["tcp", "udp"],
-        idle_timeout: float | None = None,
     ) -> None:
-        self.site = site
+        self.listener = listener
+        self.site = site = listener.site
         self.peer = peer
+        site.claim(peer)  # SiteError (busy, aborted): the transport refuses the connection
         self._close = close
         self._pause = pause
         self._pending: asyncio.Task[None] | None = None
@@ -94,18 +97,16 @@ class SessionPump:
         self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
-        self._idle_timeout = idle_timeout
-        self._idle_handle: asyncio.TimerHandle | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        if idle_timeout is not None:
-            self._loop = asyncio.get_running_loop()
-            self._activity = self._loop.time()
-            self._idle_handle = self._loop.call_later(idle_timeout, self._idle_check)
+        self._idle_timeout = idle_timeout = listener.idle_timeout
+        self._loop = asyncio.get_running_loop()
+        self._activity = self._loop.time()
+        self._idle_handle: asyncio.TimerHandle | None = self._loop.call_later(
+            idle_timeout, self._idle_check)
         site.attach_session_end(self.end_by_bridge)
         self.session: ElementServerSession | ActorSession
         self.handler: _Handler
         if site.cfg.protocol == "element":
-            element = ElementServerSession(max_data_size=max_data_size)
+            element = ElementServerSession(max_data_size=listener.max_data_size)
             self.session, self.handler = element, ElementHandler(site, element, send, peer)
         else:
             actor = ActorSession(transport=transport)
@@ -114,8 +115,7 @@ class SessionPump:
     def feed(self, data: bytes) -> None:
         if self.closed:
             return
-        if self._loop is not None:
-            self._activity = self._loop.time()
+        self._activity = self._loop.time()
         self.session.receive_data(data)
         if self._pending is None:
             if not self._write_blocked:
@@ -131,7 +131,6 @@ class SessionPump:
         """The session-idle deadline: the clock runs only while the bridge owes the client
         nothing (a request waiting on the controller or an operator is not silence), or while
         the client leaves its replies unread."""
-        assert self._loop is not None and self._idle_timeout is not None
         self._idle_handle = None
         if self.closed:
             return
@@ -162,8 +161,7 @@ class SessionPump:
             if not self._held_paused:
                 self._pause(True)
             return
-        if self._loop is not None:
-            self._activity = self._loop.time()
+        self._activity = self._loop.time()
         if not self._held_paused:
             self._pause(False)
         if self._pending is None:
@@ -226,8 +224,7 @@ class SessionPump:
         if self._timing is not None and self.site.metrics is not None:
             self.site.metrics.message(self._timing[0], perf_counter() - self._timing[1])
         self._timing = None
-        if self._loop is not None:
-            self._activity = self._loop.time()
+        self._activity = self._loop.time()
         if self._held_paused:
             self._held_paused = False
             if not self._write_blocked:
@@ -243,6 +240,11 @@ class SessionPump:
             self._idle_handle.cancel()
             self._idle_handle = None
         self.site.close_session(reason, error=error)
+        if not self.handler.introduced:
+            # never introduced itself (no size ID that fits): a refused connection, counted
+            # and reported within the rate limit, so hostile churn grows neither log nor record
+            self.listener.refuse("handshake", self.peer, f"ended before a valid size ID: "
+                                 f"{reason}")
         self._close()
 
     @property

@@ -51,6 +51,7 @@ class ElementHandler:
         self.session = session
         self.send = send
         self.peer = peer
+        self.introduced = False
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
         matrix several times per step): no controller call, no coroutine."""
@@ -79,6 +80,8 @@ class ElementHandler:
                 await site.commit()
             case SizeReceived(size_id=sid):
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
+                site.open_session(self.peer)
+                self.introduced = True
                 log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
                          self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
             case DieReceived():
@@ -119,6 +122,7 @@ class ActorHandler:
         self.send = send
         self.peer = peer
         self.size_out: SignalSizes | None = None
+        self.introduced = False
 
     def next_request(self) -> tuple[ActorEvent, Coroutine[Any, Any, None]] | None:
         """The next event and the coroutine handling it; None when more data is needed."""
@@ -146,6 +150,9 @@ class ActorHandler:
                 self.send(session.send_open_reply(site.cfg.actor_tag, version))
             case SetupReceived(size_trial=size_trial, size_out=size_out):
                 site.check_sizes(size_trial, size_out, f"shadow site {self.peer}")
+                if not self.introduced:
+                    site.open_session(self.peer)
+                    self.introduced = True
                 self.size_out = size_out
             case DieReceived():
                 self.send(session.send_die_reply(site.cfg.actor_tag))

@@ -99,17 +99,13 @@ class TcpConnection(asyncio.Protocol):
 
     def _open(self, transport: asyncio.Transport, peer: str) -> None:
         try:
-            self.site.open_session(peer)
+            self.pump = SessionPump(self.listener, peer, self._reply, transport.close,
+                                    self._pause, transport="tcp")
         except SiteError as exc:
             self.listener.refuse("busy" if self.site.busy else "state", peer, str(exc))
             transport.abort()
             return
         transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
-        self.pump = SessionPump(
-            self.site, peer, self._reply, transport.close, self._pause,
-            max_data_size=self.listener.max_data_size, transport="tcp",
-            idle_timeout=self.listener.idle_timeout,
-        )
         early, self._early = self._early, []
         for data in early:
             self.pump.feed(data)

@@ -70,17 +70,13 @@ class UdpSiteEndpoint(asyncio.DatagramProtocol):
             live = False
         if not live:
             try:
-                self.site.open_session(peer)
+                self.pump = SessionPump(listener, peer, self._send, self._session_over,
+                                        lambda on: None, transport="udp")
             except SiteError as exc:
                 listener.refuse("busy" if self.site.busy else "state", peer, str(exc))
                 return
             self.peer_addr = addr
             self.framing = UdpServerFraming()
-            self.pump = SessionPump(
-                self.site, peer, self._send, self._session_over, lambda on: None,
-                max_data_size=listener.max_data_size, transport="udp",
-                idle_timeout=listener.idle_timeout,
-            )
         assert self.framing is not None and self.pump is not None
         stream, reply = self.framing.datagram_received(data)
         if reply is not None and self.transport is not None:

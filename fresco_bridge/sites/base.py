@@ -43,15 +43,23 @@ class Site(Protocol):
 
     @property
     def busy(self) -> bool:
-        """A client session is open (one client per site)."""
+        """A client holds the site: its session is open, or it connected and has not
+        introduced itself yet (one client per site)."""
         ...
 
-    # -- sessions (the transports) -------------------------------------------------------------
+    # -- sessions (the transports, the protocol handlers) --------------------------------------
+    def claim(self, peer: str) -> None:
+        """``peer`` connected: hold the site for it, or raise :class:`SiteError` (busy, or a
+        state that accepts no session). Nothing is recorded until ``open_session``."""
+        ...
+
     def open_session(self, peer: str) -> int:
-        """Accept ``peer``'s session (its number), or raise :class:`SiteError`."""
+        """``peer`` introduced itself (sizes that fit): its session opens (its number)."""
         ...
 
-    def close_session(self, reason: str, *, error: bool = False) -> None: ...
+    def close_session(self, reason: str, *, error: bool = False) -> bool:
+        """End the session (True), or release a claim that never became one (False)."""
+        ...
 
     def attach_session_end(self, end: Callable[[str], None]) -> None:
         """How the site itself ends the open session (operator abort, deadline)."""

@@ -88,7 +88,8 @@ class ExperimentalSite:
         self.state = SiteState.IDLE
         self.reason = ""
         self.session = 0
-        self.peer = ""
+        self.peer = ""  # the client holding the site (its session's, or a claim's)
+        self.in_session = False
         self.damping = column_major(cfg.damping, cfg.dofs)
         self.mass = column_major(cfg.mass, cfg.dofs)
         self.holds = 0
@@ -135,14 +136,27 @@ class ExperimentalSite:
     def busy(self) -> bool:
         return self.peer != ""
 
-    def open_session(self, peer: str) -> int:
+    def claim(self, peer: str) -> None:
+        """``peer`` connected: the site is its until it introduces itself (``open_session``,
+        sizes that fit) or leaves. Nothing is logged or recorded: a connection that never
+        introduces itself is a refused one (counted by the transport), not a session."""
         if self.busy:
             raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
+        self._check_accepting(peer)
+        self.peer = peer
+
+    def _check_accepting(self, peer: str) -> None:
         try:
             next_state(self.state, Trigger.SESSION_OPEN, False)
         except TransitionRefused as exc:
             raise SiteError(f"site {self.name} is in {self.state} ({self.reason}); not accepting "
                             f"client {peer}: {exc}") from None
+
+    def open_session(self, peer: str) -> int:
+        """Open ``peer``'s session (claiming the site first unless ``peer`` holds the claim)."""
+        if self.in_session or self.peer not in ("", peer):
+            raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
+        self._check_accepting(peer)
         self.session += 1
         self._reset_signals()
         if self._resume_at is not None:  # the first session after a crash: numbering goes on
@@ -155,12 +169,14 @@ class ExperimentalSite:
             self._reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)
         self._transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
-        self.peer = peer
+        self.peer, self.in_session = peer, True
         return self.session
 
-    def close_session(self, reason: str, *, error: bool = False) -> None:
-        if not self.peer:
-            return
+    def close_session(self, reason: str, *, error: bool = False) -> bool:
+        """End the session (True), or release a claim that never became one (False)."""
+        if not self.in_session:
+            self.peer, self._end_session = "", None
+            return False
         (log.warning if error else log.info)(
             "site %s: session %d closed after %d step(s): %s", self.name, self.session,
             self.step, reason,
@@ -170,8 +186,8 @@ class ExperimentalSite:
                         f"integrator session ended with an uncommitted command at step "
                         f"{self.step + 1} ({reason})")
         self._transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
-        self.peer = ""
-        self._end_session = None
+        self.peer, self.in_session, self._end_session = "", False, None
+        return True
 
     def resume_from(self, session: int, step: int, time: float) -> None:
         """A resumed run: the next session is ``session + 1`` and starts after committed
@@ -213,7 +229,7 @@ class ExperimentalSite:
     def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
         """Move along ``safety.states.TRANSITIONS``; record and publish it with its reason."""
         old = self.state
-        new = next_state(old, trigger, self.peer != "")
+        new = next_state(old, trigger, self.in_session)
         self.state = new
         if new is not old:
             self.reason = reason if new in (PAUSED, HOLD, FAULT) else ""
@@ -338,7 +354,7 @@ class ExperimentalSite:
         """True when this session can only be told to stop: HOLD (nothing is forwarded any more,
         so no true measurement can follow; a recoverable controller loss is waited out inside
         the request before any reply), FAULT (operator abort), or a failed recovery."""
-        if self.stop_reason is None and self.peer:
+        if self.stop_reason is None and self.in_session:
             if self.state is HOLD:
                 self.tell_integrator_to_stop(f"HOLD ({self.reason})")
             elif self.state is FAULT:

@@ -8,8 +8,10 @@ refused address. Each time another (good) client is then served correctly.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import socket
+import struct
 import textwrap
 import threading
 import time
@@ -91,6 +93,12 @@ def closes(bridge: BridgeThread, site: str) -> list[str]:
             if r.get("event") == "session-close" and r["site"] == site]
 
 
+def refusals(bridge: BridgeThread, site: str) -> dict[str, int]:
+    counts = bridge.call(lambda: bridge.bridge.sites[site].status()["refused"])
+    assert isinstance(counts, dict)
+    return counts
+
+
 def udp_handshake_answered(port: int, timeout: float) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.settimeout(timeout)
@@ -149,7 +157,11 @@ def test_an_idle_or_half_open_tcp_connection_is_ended_by_the_idle_deadline(
             assert idle.recv(1) == b""  # ended by the bridge (within the deadline's timeout)
         wait_for(lambda: peer(bridge, "tcp") == "", "the site to be free")
         served(port)
-        assert "no message from the client" in closes(bridge, "tcp")[0]
+        if sends == "nothing":  # never introduced itself: a refused connection, not a session
+            assert refusals(bridge, "tcp") == {"busy": 1, "handshake": 1}
+            assert len(closes(bridge, "tcp")) == 1  # the good client's session only
+        else:
+            assert "no message from the client" in closes(bridge, "tcp")[0]
 
 
 def test_an_operator_pause_does_not_end_a_waiting_session(tmp_path: Path,
@@ -293,6 +305,40 @@ def test_refused_connections_are_counted_and_logged_within_a_rate_limit(
     assert grown < 2000, f"the record grew {grown} bytes for 300 refused connections"
 
 
+@pytest.mark.parametrize("transport", ["tcp", "udp"])
+def test_churn_of_malformed_sessions_from_an_allowed_address_is_counted_not_logged_each(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, transport: str
+) -> None:
+    """An allowed client that connects and sends a size ID that does not parse, 300 times:
+    each is a refused connection (counted), not a session (no record lines, no log lines
+    each; before: ~425 record bytes and two log lines per connection)."""
+    bad_size_id = struct.pack("<11i", *([-5] * 11))
+    with RunningBridge(config(), tmp_path) as bridge:
+        port = bridge.ports[transport]
+        size_before = (bridge.run_dir / "record.jsonl").stat().st_size
+        caplog.clear()
+        for _ in range(300):
+            if transport == "tcp":
+                with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+                    s.sendall(bad_size_id)
+                    with contextlib.suppress(OSError):
+                        s.recv(16)  # the bridge closes it
+            else:  # every datagram from a new address (port), as a restarted integrator's
+                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                    s.sendto(bad_size_id, ("127.0.0.1", port))
+                wait_for(lambda: peer(bridge, transport) == "", "the bad session to end")
+        wait_for(lambda: sum(refusals(bridge, transport).values()) == 300,
+                 "every bad connection to be counted")
+        assert refusals(bridge, transport) == {"handshake": 300}
+        grown = (bridge.run_dir / "record.jsonl").stat().st_size - size_before
+        served(port, transport)
+    logged = [r for r in caplog.records if r.name.startswith("fresco_bridge")
+              and "size ID" in r.getMessage()]
+    assert 1 <= len(logged) <= 3, [r.getMessage() for r in logged]
+    assert "ended before a valid size ID" in logged[0].getMessage()
+    assert grown < 2000, f"the record grew {grown} bytes for 300 malformed connections"
+
+
 def test_rejection_log_reports_the_first_then_one_summary_per_interval() -> None:
     now = [0.0]
     log = RejectionLog(interval=10.0, clock=lambda: now[0])
@@ -304,6 +350,18 @@ def test_rejection_log_reports_the_first_then_one_summary_per_interval() -> None
     assert len(shown) == 5 and log.total == 100 and log.counts == {"address": 100}
     assert shown[0].suppressed == 0 and sum(r.suppressed for r in shown) == 76  # 19 still pending
     assert "not logged" in shown[1].message()
+
+
+def test_an_open_allowlist_is_announced_loudly_at_start(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    text = config().replace('allowed_clients = ["127.0.0.1"]',
+                            "allowed_clients = []\nallow_any_client = true")
+    with RunningBridge(text, tmp_path) as bridge:
+        served(bridge.ports["tcp"])
+    loud = [r for r in caplog.records if "ADMITS CLIENTS FROM ANY ADDRESS" in r.getMessage()]
+    assert sorted(r.getMessage().split()[1] for r in loud) == ["other", "tcp", "udp"]
+    assert all(r.levelname == "WARNING" for r in loud)
 
 
 def test_allowlist_matches_addresses_and_networks() -> None:
