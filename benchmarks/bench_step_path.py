@@ -82,7 +82,8 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
               profile: Path | None) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
-    from fresco_bridge.server.connection import SessionPump
+    from fresco_bridge.server.access import Allowlist
+    from fresco_bridge.server.connection import SessionPump, SiteListener
 
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:
@@ -91,6 +92,7 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
         await bridge.start()
         try:
             site = bridge.sites["spec"]
+            listener = SiteListener(site, Allowlist(["127.0.0.1"]), 65536, 60.0)
             for rep in range(repeats + (profile is not None)):
                 head, body = session_bytes(dofs, steps)
                 replies = 0
@@ -99,9 +101,8 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
                     nonlocal replies
                     replies += 1
 
-                site.open_session(f"bench:{rep}")
-                pump = SessionPump(site, f"bench:{rep}", send, lambda: None, lambda _on: None,
-                                   max_data_size=65536, transport="tcp")
+                pump = SessionPump(listener, f"bench:{rep}", send, lambda: None,
+                                   lambda _on: None, transport="tcp")
                 pump.feed(head)
                 prof = cProfile.Profile() if rep == repeats else None
                 c0 = time.process_time()
@@ -117,6 +118,7 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
                     per_step.append(1e6 * (time.process_time() - c0) / steps)
                 assert not pump.closed, "session ended early"
                 assert site.step == steps, (site.step, steps)
+                assert replies == 1 + 10 * steps, replies
                 pump.feed(b"")
         finally:
             await bridge.close()
