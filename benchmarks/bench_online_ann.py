@@ -35,15 +35,16 @@ import numpy as np
 from fresco_bridge import indicators
 from fresco_bridge.integrator.demo import demo_ground_motion
 from fresco_bridge.study.constants import PAPER_BILINEAR
-from fresco_bridge.study.simulate import FixedModel, simulate_case, specimen_model
+from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating import make_updater
 from fresco_bridge.updating.ann import PRETRAIN_LM, AnnModel, pretrain
 from fresco_bridge.updating.base import Updater
+from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "faithful (50 it)": {"faithful": True},
-    "default (5 it)": {},
+    "faithful (50 it)": {},
+    "5 it": {"max_iterations": 5},
     "10 it": {"max_iterations": 10},
     "3 it": {"max_iterations": 3},
 }
@@ -73,7 +74,8 @@ def prepare(specimens: list[str], records: list[int], steps: int, pretrain_itera
     models: dict[str, AnnModel] = {}
     pairs: list[Pair] = []
     for spec in specimens:
-        conv = simulate_case("paper", spec, FixedModel(Bilinear(**PAPER_BILINEAR)),
+        conv = simulate_case("paper", spec,
+                             FixedModelUpdater("conventional_paper", Bilinear(**PAPER_BILINEAR)),
                              demo_ground_motion(1))
         t = time.perf_counter()
         models[spec] = pretrain(conv.tested_drift, conv.tested_force, seed=1,
@@ -83,7 +85,8 @@ def prepare(specimens: list[str], records: list[int], steps: int, pretrain_itera
               f"{time.perf_counter() - t:.1f} s", flush=True)
         for rec in records:
             for layout in layouts:
-                ref = simulate_case(layout, spec, FixedModel(specimen_model(spec)),
+                ref = simulate_case(layout, spec,
+                                    FixedModelUpdater("reference", specimen_model(spec)),
                                     demo_ground_motion(rec), steps=steps)
                 pairs.append(Pair(f"{spec}/record{rec}", layout, ref.tested_drift,
                                   ref.tested_force, ref.twin_drift, ref.twin_true_force))
@@ -155,7 +158,7 @@ def timing(model: AnnModel, pair: Pair, rounds: int,
     short = Pair(pair.label, pair.layout, pair.src_d[:steps], pair.src_f[:steps],
                  pair.twin_d[:steps], pair.twin_f[:steps])
     for rnd in range(rounds):
-        for name in ("faithful (50 it)", "default (5 it)"):
+        for name in ("faithful (50 it)", "5 it"):
             _, wall, cpu = run(make_updater("online_ann", model=model, seed=1,
                                             **VARIANTS[name]), short, lag=False)
             rec = out.setdefault(name, {"wall_median": [], "wall_p99": [], "cpu_median": [],

@@ -16,8 +16,9 @@ import time
 import numpy as np
 
 from fresco_bridge.integrator import kanai_tajimi
-from fresco_bridge.study.simulate import FixedModel, simulate_case, specimen_model
+from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating.improved import OnlineImproved
+from fresco_bridge.updating.updaters import FixedModelUpdater
 
 
 def _improved(tested: np.ndarray, force: np.ndarray, twin: np.ndarray) -> list[float]:
@@ -49,7 +50,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args(argv)
     motion = kanai_tajimi(3.0, duration=20.0, dt=0.01, seed=1)
-    run = simulate_case("generalisation", "bwbn", FixedModel(specimen_model("bwbn")), motion)
+    run = simulate_case("generalisation", "bwbn",
+                        FixedModelUpdater("reference", specimen_model("bwbn")), motion)
     tested, force, twin = run.tested_drift, run.tested_force, run.twin_drift
     rows: dict[str, list[tuple[float, float]]] = {"online_improved": [], "bwbn step": []}
     for _ in range(args.rounds):

@@ -67,6 +67,11 @@ def add_study_parser(sub: Any) -> None:
                    help=f"comma-separated subset of {','.join(CASES)} (default: all available)")
     p.add_argument("--steps", type=_positive_int, default=None,
                    help="stop after this many steps (default: the whole record)")
+    p.add_argument("--ann-iterations", type=_positive_int, default=None, metavar="N",
+                   help="cap online_ann's LM at N iterations per step (default: the paper's 50; "
+                        "fewer is cheaper and less faithful, recorded in study.json)")
+    p.add_argument("--pretrain-iterations", type=_positive_int, default=1000, metavar="N",
+                   help="LM iterations of the ANN's offline pre-training (default 1000)")
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="local worker processes (default: one per core; 1 = in this process)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -130,7 +135,8 @@ def _run(args: argparse.Namespace) -> int:
         raise StudyError(f"--cases: unknown case(s) {', '.join(unknown)}; known: "
                          f"{', '.join(CASES)}")  # fmt: skip
     runs = [
-        RunSpec(label, motion, specimen, noise, seed, args.steps)
+        RunSpec(label, motion, specimen, noise, seed, args.steps, args.ann_iterations,
+                args.pretrain_iterations)
         for label, motion, seed in _motions(args, seeds)
         for specimen in (args.specimen or ["bwbn"])
         for noise in (args.noise or [0.0])

@@ -17,9 +17,8 @@ against the same layout's ``reference`` case, which shares the run's noise.
 from __future__ import annotations
 
 import copy
-import importlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -28,9 +27,11 @@ from fresco_bridge import indicators
 from fresco_bridge.integrator import GroundMotion
 from fresco_bridge.study.calibrate import calibrate_bilinear
 from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES, PAPER_BILINEAR
-from fresco_bridge.study.simulate import CaseHistory, FixedModel, simulate_case, specimen_model
+from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_model
 from fresco_bridge.sweeps import run_sweep
 from fresco_bridge.updating.base import Updater
+from fresco_bridge.updating.registry import UPDATERS, make_updater
+from fresco_bridge.updating.updaters import PAPER_ONLINE_LM, FixedModelUpdater
 from sim_actuator.models import make_model
 
 __all__ = [
@@ -63,6 +64,10 @@ class RunSpec:
     noise_pct: float
     seed: int
     steps: int | None = None
+    ann_iterations: int | None = None
+    """LM iteration cap of ``online_ann`` (None: the paper's 50); a cost knob for quick sweeps."""
+    pretrain_iterations: int = 1000
+    """LM iterations of the offline pre-training (MATLAB ``trainlm``'s default epochs)."""
 
     @property
     def label(self) -> str:
@@ -83,66 +88,56 @@ class Prepared:
     """The network pre-trained on the offline database (offline_ann, online_ann), if needed."""
 
 
-def _updater_registry() -> Callable[..., Updater] | None:
-    """``make_updater`` of the updater registry, or None in a build without it."""
-    try:
-        registry = importlib.import_module("fresco_bridge.updating.registry")
-    except ImportError:
-        return None
-    factory: Callable[..., Updater] = registry.make_updater
-    return factory
-
-
 def available_cases() -> tuple[str, ...]:
-    """The cases this build can run (the learning ones need their updater registered)."""
-    if _updater_registry() is None:
-        return (*FIXED_CASES, "online_improved")
-    registered = importlib.import_module("fresco_bridge.updating.registry").UPDATERS
-    return tuple(c for c in CASES if c in FIXED_CASES or c in registered)
+    """Every case: the fixed ones and one per learning updater of the registry."""
+    return tuple(c for c in CASES if c in FIXED_CASES or c in UPDATERS)
 
 
 def make_case_updater(case: str, prepared: Prepared) -> Updater:
     """The updater (and so the twin) of one case."""
     if case == "reference":
-        return FixedModel(specimen_model(prepared.run.specimen), "reference")
+        return FixedModelUpdater("reference", specimen_model(prepared.run.specimen))
     if case == "conventional_paper":
-        return FixedModel(make_model("bilinear", **PAPER_BILINEAR), "conventional_paper")
+        return FixedModelUpdater(case, make_model("bilinear", **PAPER_BILINEAR))
     if case == "conventional_calibrated":
-        return FixedModel(make_model("bilinear", **prepared.calibrated), "conventional_calibrated")
-    offline = (prepared.offline_disp, prepared.offline_force)
-    factory = _updater_registry()
-    if case == "online_improved" and factory is None:
-        from fresco_bridge.updating.improved import OnlineImproved
-
-        return OnlineImproved(offline=offline)
-    if case not in available_cases() or factory is None:
+        return FixedModelUpdater(case, make_model("bilinear", **prepared.calibrated))
+    if case not in available_cases():
         raise StudyError(f"case {case!r} is not available; available: "
                          f"{', '.join(available_cases())}")  # fmt: skip
     if case == "online_improved":
-        return factory(case, offline=offline)
+        return make_updater(case, offline=(prepared.offline_disp, prepared.offline_force))
     if case == "online_ukf":
-        return factory(case)  # the paper's start values and covariances
-    # Each case gets its own copy: online_ann trains its network in place.
-    return factory(case, model=copy.deepcopy(prepared.ann), seed=prepared.run.seed)
+        return make_updater(case)  # the paper's start values and covariances
+    # offline_ann, online_ann (the paper's method, faithful: the registry's defaults). Each
+    # case gets its own copy: online_ann trains its network in place.
+    options: dict[str, Any] = {}
+    if case == "online_ann" and prepared.run.ann_iterations is not None:
+        options["max_iterations"] = prepared.run.ann_iterations
+    return make_updater(case, model=copy.deepcopy(prepared.ann), seed=prepared.run.seed,
+                        **options)
 
 
 def _prepare(job: tuple[RunSpec, tuple[str, ...]]) -> Prepared:
     """Phase 1 of a run (a sweep task): noise scale, offline database, calibrated Bilinear and,
     when an ANN case is asked for, the network pre-trained on the offline database."""
     run, cases = job
-    clean = simulate_case("paper", run.specimen, FixedModel(specimen_model(run.specimen)),
+    clean = simulate_case("paper", run.specimen,
+                          FixedModelUpdater("reference", specimen_model(run.specimen)),
                           run.motion, steps=run.steps)  # fmt: skip
     noise_std = run.noise_pct / 100.0 * float(np.max(np.abs(clean.tested_force)))
     conventional = simulate_case(
-        "paper", run.specimen, FixedModel(make_model("bilinear", **PAPER_BILINEAR)), run.motion,
-        noise_std=noise_std, noise_seed=run.seed, steps=run.steps,
+        "paper", run.specimen,
+        FixedModelUpdater("conventional_paper", make_model("bilinear", **PAPER_BILINEAR)),
+        run.motion, noise_std=noise_std, noise_seed=run.seed, steps=run.steps,
     )  # fmt: skip
     disp = conventional.tested_drift[:OFFLINE_SAMPLES].copy()
     force = conventional.tested_force[:OFFLINE_SAMPLES].copy()
     ann = None
     if {"offline_ann", "online_ann"} & set(cases):
-        pretrain = importlib.import_module("fresco_bridge.updating.ann").pretrain
-        ann = pretrain(disp, force, seed=run.seed, source=f"conventional run {run.label}")
+        from fresco_bridge.updating.ann import PRETRAIN_LM, pretrain
+
+        ann = pretrain(disp, force, seed=run.seed, source=f"conventional run {run.label}",
+                       options=replace(PRETRAIN_LM, max_iterations=run.pretrain_iterations))
     return Prepared(run, noise_std, disp, force, calibrate_bilinear(disp, force), ann)
 
 
@@ -219,7 +214,9 @@ def run_study(
             "seed": p.run.seed,
             "steps": int(per_layout["paper"]["reference"].tested_drift.size),
             "offline": {"samples": int(p.offline_disp.size), "calibrated_bilinear": p.calibrated,
-                        "paper_bilinear": dict(PAPER_BILINEAR)},
+                        "paper_bilinear": dict(PAPER_BILINEAR),
+                        "pretrain_iterations": p.run.pretrain_iterations},
+            "online_ann_max_iterations": p.run.ann_iterations or PAPER_ONLINE_LM.max_iterations,
             "layouts": {
                 layout: {
                     "scored_against": "tested damper's measured force" if layout == "paper"

@@ -38,7 +38,7 @@ from fresco_bridge.study.constants import MENEGOTTO_PINTO_DAMPER, SPECIMEN_PRESE
 from fresco_bridge.updating.base import Updater
 from sim_actuator.models import HysteresisModel, make_model
 
-__all__ = ["CaseHistory", "FixedModel", "simulate_case", "specimen_model", "specimen_params"]
+__all__ = ["CaseHistory", "simulate_case", "specimen_model", "specimen_params"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -59,25 +59,6 @@ def specimen_model(specimen: str) -> HysteresisModel:
     """A virgin instance of the specimen's true law."""
     kind, params = specimen_params(specimen)
     return make_model(kind, **params)
-
-
-class FixedModel:
-    """An updater that never learns: the twin is a fixed hysteresis model (conventional cases)."""
-
-    def __init__(self, model: HysteresisModel, name: str = "none") -> None:
-        self.name = name
-        self._model = model
-
-    def observe(self, d: float, force: float) -> None:
-        return None
-
-    @property
-    def twin(self) -> HysteresisModel:
-        return self._model
-
-    @property
-    def last_update_seconds(self) -> float:
-        return 0.0
 
 
 @dataclass(frozen=True, eq=False)
