@@ -72,24 +72,28 @@ class Variant:
     fsync: str | None = None  # None: the default durability
     steps: int = STEPS
     tree: str | None = None  # another checkout's fresco_bridge (before/after in one run)
+    event_loop: str | None = None  # None: the default ([bridge] event_loop)
 
 
 REFERENCE = Variant("reference (blocking + QUICKACK)", "reference")
 BRIDGE = Variant("bridge: record on, default durability", "bridge")
+SCRIPTED_REF = Variant("scripted 1-DOF: reference", "reference", client="scripted")
+SCRIPTED_BRIDGE = Variant("scripted 1-DOF: bridge", "bridge", client="scripted")
 VARIANTS = (
     REFERENCE,
     BRIDGE,
     Variant("bridge: record on, fsync inline", "bridge", fsync="inline"),
     Variant("bridge: record off", "bridge", record=False),
-    Variant("scripted 1-DOF: reference", "reference", client="scripted"),
-    Variant("scripted 1-DOF: bridge", "bridge", client="scripted"),
+    Variant("bridge: record on, asyncio loop", "bridge", event_loop="asyncio"),
+    SCRIPTED_REF,
+    SCRIPTED_BRIDGE,
     Variant("OpenSees alone (zeroLength, no socket)", "none"),
 )
 REF_64 = Variant("scripted 64-DOF: reference", "reference", client="scripted", dofs=64,
                  steps=STEPS_64)
 BRIDGE_64 = Variant("scripted 64-DOF: bridge (elastic)", "bridge", client="scripted", dofs=64,
                     model="elastic", steps=STEPS_64)
-PAIRS = ((BRIDGE, REFERENCE), (VARIANTS[5], VARIANTS[4]), (BRIDGE_64, REF_64))
+PAIRS = ((BRIDGE, REFERENCE), (SCRIPTED_BRIDGE, SCRIPTED_REF), (BRIDGE_64, REF_64))
 
 
 def opensees_env() -> dict[str, str]:
@@ -109,11 +113,12 @@ def bridge_config(variant: Variant, run_dir: Path) -> str:
     params = ("{ k = 100.0 }" if variant.model == "elastic"
               else "{ k0 = 100.0, fy = 20.0, alpha = 0.02 }")
     fsync = "" if variant.fsync is None else f'fsync = "{variant.fsync}"\n'
+    loop = "" if variant.event_loop is None else f'event_loop = "{variant.event_loop}"\n'
     return f"""
 [bridge]
 run_name = "bench"
 run_dir = {json.dumps(str(run_dir))}
-
+{loop}
 [record]
 enabled = {"true" if variant.record else "false"}
 {fsync}

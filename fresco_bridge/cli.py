@@ -55,6 +55,18 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
     return 0
 
 
+def _serve_on_its_loop(config_path: Path | None, resume: Path | None) -> int:
+    """``serve`` on the event loop its config names (``[bridge] event_loop``)."""
+    from .loops import run
+
+    path = config_path if config_path is not None else (resume or Path()) / "config.toml"
+    try:
+        kind = load_config(path)[0].bridge.event_loop
+    except (ConfigError, OSError):
+        kind = "asyncio"  # _serve reports what is wrong with the config
+    return run(_serve(config_path, resume), kind)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="fresco-bridge",
@@ -98,10 +110,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.resume is not None:
                 cfg, _ = load_config(args.config)
                 resume = check_resumable(resolve_run(args.resume, cfg.bridge.run_dir))
-            return asyncio.run(_serve(args.config, resume))
+            return _serve_on_its_loop(args.config, resume)
         if args.command == "runs" and args.runs_command == "resume":
             run = check_resumable(resolve_run(args.run, args.runs))
-            return asyncio.run(_serve(args.config, run))
+            return _serve_on_its_loop(args.config, run)
         if args.command == "check":
             cfg, _ = load_config(args.config)
             print(f"{args.config}: OK ({len(cfg.sites)} site(s): "

@@ -169,6 +169,10 @@ class BridgeConfig(_Strict):
     0: no recovery (HOLD answers NaN until the session ends, so the integrator stops)."""
     run_dir: ConfigPath = Path("runs")
     run_name: Name = "run"
+    event_loop: Literal["auto", "uvloop", "asyncio"] = "auto"
+    """The event loop ``serve`` runs on: ``uvloop`` (libuv; about a sixth less CPU per step,
+    BENCHMARKS.md issue 8), ``asyncio`` (the standard library's), ``auto``: uvloop when it is
+    installed."""
     control_socket: ConfigPath | None = None
     """Operator control socket (``fresco-bridge ctl``); default ``control.sock`` in the run
     directory (no socket when recording is off unless this is set)."""

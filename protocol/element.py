@@ -98,6 +98,9 @@ _DAQ_BLOCK_OF_ACTION: Final = {
 }
 _REPLY_EVENTS: Final = {a: ReplyRequested(a) for a in _REPLY_ACTIONS}
 _COMMIT_EVENT: Final = CommitReceived()
+_PACKED_CACHE: Final = 4
+"""Matrices (tuples: damping, mass, an unchanged tangent) whose packed bytes are kept: a 64-DOF
+matrix is 4096 doubles, packed once instead of at every request."""
 _DIE_EVENT: Final = DieReceived()
 
 
@@ -131,6 +134,7 @@ class ElementServerSession:
         "_keep_leftovers",
         "_max_data_size",
         "_owed",
+        "_packed",
         "_reply",
         "_size_id",
         "_state",
@@ -153,6 +157,7 @@ class ElementServerSession:
         self._daq_layout: BlockLayout | None = None
         self._reply = bytearray()
         self._zeros = b""
+        self._packed: dict[int, tuple[tuple[float, ...], bytes]] = {}
         self._owed: Action | None = None
         self._closed: ConnectionClosed | None = None
         self._error = ""
@@ -342,7 +347,16 @@ class ElementServerSession:
                 f"send_matrix(): the {n}x{n} matrix needs {count} slots but dataSize is "
                 f"{self._size_id.data_size}"
             )
-        doubles_struct(count).pack_into(self._reply, 0, *column_major)
+        if type(column_major) is tuple:  # immutable: its packed bytes can be reused
+            cached = self._packed.get(id(column_major))
+            if cached is None or cached[0] is not column_major:
+                if len(self._packed) >= _PACKED_CACHE:
+                    self._packed.clear()
+                cached = (column_major, doubles_struct(count).pack(*column_major))
+                self._packed[id(column_major)] = cached
+            self._reply[: 8 * count] = cached[1]
+        else:
+            doubles_struct(count).pack_into(self._reply, 0, *column_major)
         return self._finish_reply()
 
     def send_values(self, values: Sequence[float]) -> bytes:

@@ -52,6 +52,8 @@ class SimController(Controller):
         self._disp = tuple(0.0 for _ in models)
         self._force = tuple(m.committed[1] for m in models)
         self._tangent = tuple(m.initial_tangent for m in models)
+        self._diag_of: tuple[float, ...] = ()
+        self._diag: tuple[float, ...] = ()
 
     @classmethod
     def from_params(cls, n_actuators: int, kind: str, params: dict[str, float]) -> SimController:
@@ -75,7 +77,10 @@ class SimController(Controller):
             m.commit()
 
     async def tangent_stiffness(self) -> tuple[float, ...]:
-        return _diagonal(self._tangent)
+        tangent = self._tangent
+        if tangent != self._diag_of:  # the same matrix object while the tangent is unchanged
+            self._diag_of, self._diag = tangent, _diagonal(tangent)
+        return self._diag
 
     async def initial_stiffness(self) -> tuple[float, ...]:
         return _diagonal(tuple(m.initial_tangent for m in self._models))

@@ -5,7 +5,7 @@ Pure logic (no I/O): the site calls ``Limiter.check_ctrl`` on every command and
 """
 
 from .config import ControlPointLimitsConfig
-from .limits import ControlPointLimits, Limiter, LimitHit, Policy, Verdict, split
+from .limits import ControlPointLimits, Limiter, LimitHit, Policy, Verdict, all_finite, split
 from .states import TRANSITIONS, SiteState, TransitionRefused, Trigger, next_state
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
     "TransitionRefused",
     "Trigger",
     "Verdict",
+    "all_finite",
     "next_state",
     "split",
 ]

@@ -31,6 +31,13 @@ INF = math.inf
 _SEVERITY: dict[Policy, int] = {"clamp": 0, "pause": 1, "reject": 2}
 
 
+def all_finite(values: tuple[float, ...]) -> bool:
+    """True when no value is NaN or infinite. The happy path is one C-level sum (a NaN or an
+    infinity makes the sum non-finite); only a non-finite sum, which finite values can also
+    reach by overflow, is checked value by value."""
+    return math.isfinite(sum(values)) or all(math.isfinite(v) for v in values)
+
+
 @dataclass(frozen=True, slots=True)
 class ControlPointLimits:
     """Limits of one control point (``actuator`` is 0-based here, 1-based in config/messages)."""

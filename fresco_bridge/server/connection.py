@@ -69,7 +69,7 @@ class _Handler(Protocol):
     introduced: bool
     """The client's size ID (or site setup) fitted: its session is open."""
 
-    def next_request(self) -> tuple[object, Coroutine[Any, Any, None]] | None: ...
+    def next_request(self) -> tuple[object, Coroutine[Any, Any, None] | None] | None: ...
 
 
 class SessionPump:
@@ -174,6 +174,7 @@ class SessionPump:
     def _run(self) -> None:
         next_request, metrics = self.handler.next_request, self.site.metrics
         while not self.closed and not self._write_blocked:
+            t0 = perf_counter() if metrics is not None else 0.0
             try:
                 request = next_request()
             except ProtocolError as exc:
@@ -182,7 +183,10 @@ class SessionPump:
             if request is None:  # NEED_DATA or PAUSED
                 return
             ev, handling = request
-            t0 = perf_counter() if metrics is not None else 0.0
+            if handling is None:  # answered at once (a constant reply)
+                if metrics is not None:
+                    metrics.message(ev, perf_counter() - t0)
+                continue
             try:
                 r = start_eager(handling)
             except SessionEnded as exc:

@@ -52,13 +52,21 @@ class ElementHandler:
         self.send = send
         self.peer = peer
         self.introduced = False
+        self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
+        """Requests answered from the site's configuration (GenericClient asks for the damping
+        matrix several times per step): no controller call, no coroutine."""
 
-    def next_request(self) -> tuple[ElementServerEvent, Coroutine[Any, Any, None]] | None:
-        """The next event and the coroutine handling it; None when more data is needed (or
-        the session is paused until its reply is sent)."""
+    def next_request(self) -> tuple[ElementServerEvent, Coroutine[Any, Any, None] | None] | None:
+        """The next event and the coroutine handling it (None: already answered); None when
+        more data is needed (or the session is paused until its reply is sent)."""
         ev = self.session.next_event()
         if isinstance(ev, Sentinel):
             return None
+        if type(ev) is ReplyRequested:
+            matrix = self._constant.get(ev.action)
+            if matrix is not None:
+                self.send(self.session.send_matrix(matrix))
+                return ev, None
         return ev, self.handle(ev)
 
     async def handle(self, ev: ElementServerEvent) -> None:

@@ -18,7 +18,7 @@ import asyncio
 import logging
 import socket
 import ssl
-from typing import Any
+from typing import Any, cast
 
 from ..sites import SiteError
 from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
@@ -54,8 +54,8 @@ class TcpConnection(asyncio.Protocol):
         self._replies = 0  # writes to the client so far
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # a stream transport; uvloop's do not subclass asyncio.Transport, so no isinstance
+        self.transport = transport = cast(asyncio.Transport, transport)
         host, port = transport.get_extra_info("peername")[:2]
         peer = f"{host}:{port}"
         if not self.listener.allowlist.admits(host):

@@ -28,7 +28,15 @@ from ..config import SiteConfig
 from ..controls.base import Controller, Daq
 from ..record import RunRecord
 from ..record.site import SiteRecorder
-from ..safety import Limiter, LimitHit, SiteState, TransitionRefused, Trigger, next_state
+from ..safety import (
+    Limiter,
+    LimitHit,
+    SiteState,
+    TransitionRefused,
+    Trigger,
+    all_finite,
+    next_state,
+)
 from ..setups import LinearSetup, make_setup
 from ..steps import CommittedStep
 from ..telemetry.schema import SiteStatus
@@ -425,7 +433,7 @@ class ExperimentalSite:
         if self.state is FAULT:
             return
         values = trial.disp + trial.vel + trial.accel + trial.time
-        if not all(math.isfinite(v) for v in values):
+        if not all_finite(values):
             if self.state is not HOLD:
                 bad = [v for v in values if not math.isfinite(v)]
                 self.enter_hold(f"non-finite trial value(s) {bad} (disp {list(trial.disp)}); "
@@ -541,7 +549,7 @@ class ExperimentalSite:
         daq = await self.guard.guarded("get_daq", self.controller.get_daq)
         if daq is None:
             return self.daq
-        if not all(math.isfinite(v) for v in daq.disp + daq.force):
+        if not (all_finite(daq.disp) and all_finite(daq.force)):
             self.enter_hold(f"controller returned non-finite measurements {daq}")
             return self.daq
         if self._daq_limiter is not None:

@@ -372,6 +372,29 @@ def test_reply_leftovers_can_be_zeroed() -> None:
         assert struct.unpack_from("<4d", server.send_daq(Signals(force=(5.0, 6.0)))) == expected
 
 
+def test_a_reused_matrix_reply_equals_a_fresh_one_with_the_same_leftovers() -> None:
+    """A tuple matrix is packed once and reused; the reply is byte for byte what packing it
+    again gives, leftovers included, and a list (mutable) is packed every time."""
+    size_id = SizeID.for_generic_client(2, 8)
+    damping = (1.0, 2.0, 3.0, 4.0)
+    stiff = [9.0, 8.0, 7.0, 6.0]
+    sequence = [(14, damping), (10, None), (13, stiff), (14, damping), (10, None), (14, damping)]
+    cached, fresh = server_with(size_id), server_with(size_id)
+    force = 10.0
+    for code, matrix in sequence:
+        cached.receive_data(vector(code, 8))
+        fresh.receive_data(vector(code, 8))
+        cached.next_event()
+        fresh.next_event()
+        if matrix is None:
+            force += 1.0
+            daq = Signals(force=(force, -force))
+            assert cached.send_daq(daq) == fresh.send_daq(daq)
+        else:
+            assert cached.send_matrix(matrix) == fresh.send_matrix(list(matrix))
+        stiff[0] += 1.0  # a list changed in place is never answered from a stale copy
+
+
 # -- bad input ----------------------------------------------------------------------
 
 
