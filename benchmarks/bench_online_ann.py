@@ -44,9 +44,10 @@ from sim_actuator.models import Bilinear
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "faithful (50 it)": {},
-    "5 it": {"max_iterations": 5},
+    "rtol 1e-2": {"rtol": 0.01},
+    "rtol 3e-2": {"rtol": 0.03},
     "10 it": {"max_iterations": 10},
-    "3 it": {"max_iterations": 3},
+    "5 it": {"max_iterations": 5},
 }
 
 
@@ -151,14 +152,14 @@ def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
     return rows
 
 
-def timing(model: AnnModel, pair: Pair, rounds: int,
-           steps: int) -> dict[str, dict[str, list[float]]]:
+def timing(model: AnnModel, pair: Pair, rounds: int, steps: int,
+           variants: list[str]) -> dict[str, dict[str, list[float]]]:
     """Variants alternated round by round on the same steps: per-round median and p99."""
     out: dict[str, dict[str, list[float]]] = {}
     short = Pair(pair.label, pair.layout, pair.src_d[:steps], pair.src_f[:steps],
                  pair.twin_d[:steps], pair.twin_f[:steps])
     for rnd in range(rounds):
-        for name in ("faithful (50 it)", "5 it"):
+        for name in variants:
             _, wall, cpu = run(make_updater("online_ann", model=model, seed=1,
                                             **VARIANTS[name]), short, lag=False)
             rec = out.setdefault(name, {"wall_median": [], "wall_p99": [], "cpu_median": [],
@@ -185,6 +186,8 @@ def _best(fn: Callable[[], object], repeat: int = 30) -> float:
 def pieces(rounds: int) -> dict[str, list[float]]:
     """CPU ms of one LM iteration's pieces at the paper's sizes (700 x 301, 516 rows kept)."""
     import scipy.linalg
+    from scipy.linalg.blas import dsyrk, ssyrk
+    from scipy.linalg.lapack import dpotrf, dpotrs
 
     from fresco_bridge.updating.lm import one_blas_thread
     from fresco_bridge.updating.mlp import Mlp
@@ -198,6 +201,8 @@ def pieces(rounds: int) -> dict[str, list[float]]:
     wj = jac * w[:, None]
     js = (jac * np.sqrt(w)[:, None])[-516:].copy()
     hess = js.T @ js + 1e-5 * np.eye(301)
+    js32 = js.astype(np.float32)
+    hess_f = np.asfortranarray(hess)
     out: dict[str, list[float]] = {}
     torch_mm: Callable[[], object] | None = None
     try:
@@ -223,7 +228,12 @@ def pieces(rounds: int) -> dict[str, list[float]]:
                 ("jacobian 700 x 301", lambda: net.jacobian(theta, x)),
                 ("forward 700", lambda: net.forward(theta, x)),
                 ("J^T W J gemm, 700 rows (naive)", lambda: wj.T @ jac),
-                ("J^T W J syrk, 516 rows (ours)", lambda: js.T @ js),
+                ("J^T W J syrk, 516 rows (numpy A.T @ A)", lambda: js.T @ js),
+                ("J^T W J dsyrk in place, lower only (ours)",
+                 lambda: dsyrk(1.0, js.T, lower=1)),
+                ("J^T W J ssyrk float32 (not used)", lambda: ssyrk(1.0, js32.T, lower=1)),
+                ("dpotrf + dpotrs 301, LAPACK direct (ours)",
+                 lambda: dpotrs(dpotrf(hess_f, lower=1, clean=0)[0], js[0], lower=1)),
                 ("cholesky + solve 301", lambda: scipy.linalg.cho_solve(
                     scipy.linalg.cho_factor(hess), js[0], check_finite=False)),
                 ("numpy GN step (syrk + chol + solve)", lambda: scipy.linalg.cho_solve(
@@ -247,6 +257,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--layouts", default="paper,generalisation")
     p.add_argument("--variants", default=",".join(VARIANTS),
                    help=f"comma-separated subset of: {', '.join(VARIANTS)}")
+    p.add_argument("--timing-variants", default="faithful (50 it),rtol 1e-2,5 it",
+                   help="comma-separated variants alternated in the timing section")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-timing", action="store_true")
     p.add_argument("--json", type=Path, default=None)
@@ -264,7 +276,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"  {name:<42} min {min(vals):.3f}  median {float(np.median(vals)):.3f}")
         print("timing (alternating rounds):", flush=True)
         result["timing"] = timing(models[pairs[0].label.split("/")[0]], pairs[0], args.rounds,
-                                  args.timing_steps)
+                                  args.timing_steps, args.timing_variants.split(","))
     if not args.skip_accuracy:
         print("accuracy:", flush=True)
         result["accuracy"] = accuracy(models, pairs, args.variants.split(","))

@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import scipy.linalg  # type: ignore[import-untyped]
+from scipy.linalg.blas import dsyrk  # type: ignore[import-untyped]
+from scipy.linalg.lapack import dpotrf, dpotrs  # type: ignore[import-untyped]
 from threadpoolctl import ThreadpoolController  # type: ignore[import-untyped]
 
 from .base import UpdaterError
@@ -81,6 +82,8 @@ class LmResult:
     stop: str
     """``max_iterations``, ``gradient``, ``mu_max``, ``rtol`` or ``cost_zero``."""
     costs: list[float] = field(default_factory=list)
+    factorisations: int = 0
+    """Cholesky factorisations (one per damping tried: accepted steps plus rejected trials)."""
 
 
 _CONTROLLER: ThreadpoolController | None = None
@@ -137,40 +140,44 @@ def _levenberg_marquardt(
     weights = _weights(w, n)
     sqrt_w = np.sqrt(weights)
     theta = theta0.copy()
-    # J^T W J as (sqrt(W) J)^T (sqrt(W) J): numpy hands A.T @ A to BLAS syrk (half the flops
-    # of the general product), the one cost that grows as n * P^2.
-    jac = np.empty((n, net.n_params))
+    n_params = net.n_params
+    # J^T W J as (sqrt(W) J)^T (sqrt(W) J) by BLAS syrk (half the flops of a general product):
+    # the rows of J come out of the Jacobian already scaled by sqrt(w), and a C-ordered J is
+    # the Fortran-ordered J^T, so syrk reads it in place. Only the lower triangle is formed;
+    # LAPACK's Cholesky (potrf/potrs) reads only that, from a copy, so mu retries reuse it.
+    jac = np.empty((n, n_params))
+    hess = np.zeros((n_params, n_params), order="F")
+    work = np.empty((n_params, n_params), order="F")
+    diag = np.arange(n_params)
     acts = net.activations(theta, x)
     r = acts[-1][:, 0] - y
     cost = float(weights @ (r * r))
     result = LmResult(theta, cost, cost, 0, 0, "max_iterations", [cost])
     mu = options.mu
-    step_prev = np.zeros(net.n_params)
-    diag = np.arange(net.n_params)
+    step_prev = np.zeros(n_params)
     while result.iterations < options.max_iterations:
         if cost == 0.0:
             result.stop = "cost_zero"
             break
-        net.jacobian(theta, x, out=jac, acts=acts)
+        net.jacobian(theta, x, out=jac, acts=acts, row_scale=sqrt_w)
         result.jacobians += 1
-        jac *= sqrt_w[:, None]
         grad = jac.T @ (r * sqrt_w)
         if float(np.linalg.norm(grad)) < options.min_gradient:
             result.stop = "gradient"
             break
-        hess = jac.T @ jac
-        hess_diag = hess[diag, diag].copy()
+        hess = dsyrk(1.0, jac.T, lower=1, c=hess, overwrite_c=1)
         accepted = False
         while mu <= options.mu_max:
-            hess[diag, diag] = hess_diag + mu
-            try:
-                factor = scipy.linalg.cho_factor(hess, check_finite=False, overwrite_a=False)
-            except np.linalg.LinAlgError:
+            work[...] = hess
+            work[diag, diag] += mu
+            factor, info = dpotrf(work, lower=1, clean=0, overwrite_a=1)
+            result.factorisations += 1
+            if info != 0:  # not positive definite at this mu
                 mu *= options.mu_increase
                 step_prev[:] = 0.0
                 continue
-            step = -scipy.linalg.cho_solve(factor, grad, check_finite=False)
-            step += options.momentum * step_prev
+            step, _ = dpotrs(factor, grad, lower=1)
+            step = -step + options.momentum * step_prev
             candidate = theta + step
             cand_acts = net.activations(candidate, x)
             r_new = cand_acts[-1][:, 0] - y

@@ -107,10 +107,13 @@ class Mlp:
         return acts
 
     def jacobian(self, theta: FloatArray, x: FloatArray, out: FloatArray | None = None,
-                 acts: list[FloatArray] | None = None) -> tuple[FloatArray, FloatArray]:
+                 acts: list[FloatArray] | None = None,
+                 row_scale: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
         """(outputs (n,), J (n x n_params)) with J[i, k] = d out_i / d theta_k.
 
         ``acts`` (from :meth:`activations` at the same theta and x) saves the forward pass.
+        ``row_scale`` (n,) multiplies row i of J by ``row_scale[i]`` (LM's sqrt of the weights)
+        at no extra cost: every block of J is linear in the output's seed delta.
         """
         params = self.unpack(theta)
         if acts is None:
@@ -119,7 +122,12 @@ class Mlp:
         jac = np.empty((n, self.n_params)) if out is None else out
         if jac.shape != (n, self.n_params) or not jac.flags.c_contiguous:
             raise UpdaterError(f"{self!r}: out must be a C-ordered ({n}, {self.n_params}) array")
-        delta = np.ones((n, 1))
+        if row_scale is None:
+            delta = np.ones((n, 1))
+        elif row_scale.shape == (n,):
+            delta = row_scale[:, None].copy()
+        else:
+            raise UpdaterError(f"{self!r}: row_scale must have shape ({n},), got {row_scale.shape}")
         for layer in range(len(params) - 1, -1, -1):
             s = self._slots[layer]
             a_prev = acts[layer]

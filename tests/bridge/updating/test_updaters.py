@@ -183,3 +183,20 @@ def _feed_same(u: Updater, d: np.ndarray, f: np.ndarray) -> list[float]:
         out.append(u.twin.set_trial(float(di))[0])
         u.twin.commit()
     return out
+
+
+def test_online_ann_default_is_the_papers_method(small_ann: AnnModel) -> None:
+    """No options: 500 offline + 200 window samples (mu 0.1), LM damping 1e-5, momentum 0.1,
+    up to 50 iterations stopped only by trainlm's own rules (no relative-decrease stop)."""
+    from fresco_bridge.updating.updaters import PAPER_ONLINE_LM
+
+    u = make_updater("online_ann", model=small_ann)
+    assert u.lm == PAPER_ONLINE_LM  # type: ignore[attr-defined]
+    assert (PAPER_ONLINE_LM.max_iterations, PAPER_ONLINE_LM.mu, PAPER_ONLINE_LM.momentum,
+            PAPER_ONLINE_LM.rtol) == (50, 1e-5, 0.1, 0.0)  # fmt: skip
+    assert u.offline_samples == min(500, len(small_ann.offline_d))  # type: ignore[attr-defined]
+    for di, fi in zip(D[:3], F[:3], strict=True):
+        u.observe(float(di), float(fi))
+    fit = u.last_fit  # type: ignore[attr-defined]
+    assert fit.iterations == 50 or fit.stop in ("gradient", "mu_max", "cost_zero")
+    assert fit.stop != "rtol"

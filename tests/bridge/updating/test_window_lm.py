@@ -134,3 +134,22 @@ def test_lm_options_are_checked() -> None:
         net, _, x, y, start = _realisable_problem()
         levenberg_marquardt(net, start, x, y, -np.ones(len(y)))
     assert dataclasses.replace(LmOptions(), rtol=0.1).rtol == 0.1
+
+
+def test_jacobian_row_scale_is_the_scaled_jacobian() -> None:
+    net = Mlp(PAPER_LAYERS)
+    rng = np.random.default_rng(8)
+    theta = net.init_params(rng)
+    x = rng.random((7, 6))
+    scale = rng.random(7) + 0.1
+    _, jac = net.jacobian(theta, x)
+    _, scaled = net.jacobian(theta, x, row_scale=scale)
+    np.testing.assert_allclose(scaled, jac * scale[:, None], rtol=1e-12, atol=1e-15)
+    with pytest.raises(UpdaterError, match="row_scale"):
+        net.jacobian(theta, x, row_scale=scale[:3])
+
+
+def test_lm_counts_its_factorisations() -> None:
+    net, _, x, y, start = _realisable_problem()
+    res = levenberg_marquardt(net, start, x, y, options=LmOptions(max_iterations=10))
+    assert res.factorisations >= res.iterations == res.jacobians
