@@ -3,7 +3,7 @@
 The restart reports the interrupted run (log, ``runs list`` state, ``run.json``), removes its
 stale control socket; ``export`` reports the torn last line; ``runs resume`` continues the
 same record from the last committed step, and nothing is sent to the controller before the
-first client asks.
+first client asks; killed again, ``serve --resume`` continues it once more.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import pytest
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import read_record
 from fresco_bridge.record.export import committed_steps
+from tests.support.spied_bridge import wait_for
 
 K = 10.0
 READY = re.compile(r"fresco-bridge ready: site=(\d+)")
@@ -124,9 +125,17 @@ def test_kill_9_is_reported_and_the_run_resumes_from_the_last_committed_step(
                     "--runs", str(tmp_path / "runs"))
     time.sleep(0.3)
     _steps(resumed.port, 6, 3)
-    resumed.stop()
+    # commit (5) and DIE have no reply: kill only once the bridge closed the session
+    wait_for(lambda: any(r.get("event") == "session-close" and r.get("session") == 2
+                         for r in read_record(run)), "session 2 to be closed", timeout=30)
+    resumed.stop(signal.SIGKILL)  # killed again, between sessions
+
+    # the other documented way: serve --resume, from the last committed step again
+    again = Serve(tmp_path, "serve", "--config", str(cfg), "--resume", run.name)
+    _steps(again.port, 9, 2)
+    again.stop()
     meta = json.loads((run / "run.json").read_text())
-    assert meta["state"] == "closed" and len(meta["resumed"]) == 1
+    assert meta["state"] == "closed" and len(meta["resumed"]) == 2
     records = list(read_record(run))
     kinds = [(r["kind"], r.get("event")) for r in records]
     i_resumed = kinds.index(("event", "resumed"))
@@ -134,7 +143,7 @@ def test_kill_9_is_reported_and_the_run_resumes_from_the_last_committed_step(
     assert "step 5" in records[i_resumed]["reason"]
     steps = committed_steps(run)
     assert [(s.session, s.step) for s in steps] == [(1, 1), (1, 2), (1, 3), (1, 4), (1, 5),
-                                                    (2, 6), (2, 7), (2, 8)]
+                                                    (2, 6), (2, 7), (2, 8), (3, 9), (3, 10)]
     seqs = [r["seq"] for r in records]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
     assert (run / "record.jsonl.torn").read_bytes().startswith(b'{"seq":99999')

@@ -70,6 +70,10 @@ def record_run(
                       if '"kind":"event"' in line):
             assert time.monotonic() < deadline, "the bridge never closed the session"
             time.sleep(0.01)
+        # the listeners after the recorder (metrics, taps) get the event in the same loop
+        # callback: a round trip through the loop waits for them (a loaded machine can switch
+        # threads between the record's write and the metrics' count)
+        bridge.call(lambda: None)
         if during is not None:
             seen = during(bridge)
         run_dir = bridge.run_dir
