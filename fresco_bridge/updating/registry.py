@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy.typing as npt
 
+from fresco_bridge.study.constants import PAPER_BILINEAR
 from sim_actuator.models import HysteresisModel, ModelParameterError, make_model
 
 from .base import Updater, UpdaterError
@@ -33,8 +34,6 @@ __all__ = [
     "updater_options",
 ]
 
-PAPER_BILINEAR = {"k0": 68.0, "fy": 35.0, "alpha": 0.008}
-"""The paper's assumed Bilinear (Table 1: 68000 N/mm, 35000 N, 0.008) in kN and mm."""
 
 
 @dataclass(frozen=True, slots=True)
