@@ -15,12 +15,19 @@ from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from fresco_bridge.daemon import BridgeThread
 from tests.support.bridge import RunningBridge
 from tests.support.broker import SYSTEM_PORT, OwnBroker, broker_up
 from tests.support.net import free_ports
 from tests.support.paths import OPENFRESCO_CAPTURES, SHARED
+
+# No timed assertions in tests: hypothesis' per-example deadline (200 ms) failed a pure
+# encoder test when a loaded machine stalled one example for 936 ms. Every wait that matters
+# has its own deadline in the test itself.
+settings.register_profile("fresco-bridge", deadline=None)
+settings.load_profile("fresco-bridge")
 
 
 @pytest.fixture(scope="session")
