@@ -12,19 +12,22 @@ forms, not the candidates' shapes) instead of ``synth.synthetic_record``; same s
 from __future__ import annotations
 
 import math
+import os
+import pickle
 import time
 from collections import Counter
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .model import EFFECT_NAMES
-from .synth import synthetic_record
+from .synth import SyntheticRecord, synthetic_record
 from .verdict import diagnose
 
 __all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "diagnose_one", "effect_magnitude",
-           "format_bench", "summarise_bench"]
+           "format_bench", "generate", "summarise_bench"]
 
 CLASSES = (*EFFECT_NAMES, "none", "none")
 MAGNITUDE_OF = {
@@ -48,26 +51,51 @@ def effect_magnitude(effect: str, values: Mapping[str, float]) -> float | None:
 MAGNITUDE_TOLERANCE = 0.20
 
 
-BenchItem = tuple[int, str, int, int, bool]
-"""(index, effect, record seed, steps, realism) of one record."""
+BenchItem = tuple[int, str, int, int, bool, str | None]
+"""(index, effect, record seed, steps, realism, record cache directory or None) of a record."""
 
 
-def bench_items(n: int, seed: int, steps: int, realism: bool = False) -> list[BenchItem]:
-    """(index, effect, record seed, steps, realism) of every record of the bench."""
-    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism)
+def bench_items(n: int, seed: int, steps: int, realism: bool = False,
+                cache: str | None = None) -> list[BenchItem]:
+    """(index, effect, record seed, steps, realism, cache) of every record of the bench."""
+    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism, cache)
             for i in range(n)]
 
 
-def diagnose_one(item: BenchItem) -> dict[str, Any]:
-    """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
-    index, effect, record_seed, steps, realism = item
-    started = time.perf_counter()
+def generate(item: BenchItem) -> SyntheticRecord:
+    """Record ``item`` as the generator makes it; with a cache directory, read from there when
+    it was generated before (a compliant-frame realism record takes minutes on the rig's
+    substep solver, its diagnosis seconds), written there otherwise. The cache is keyed by
+    bench, seed, effect and steps and is only ever written by this function (pickle: trusted,
+    local)."""
+    _index, effect, record_seed, steps, realism, cache = item
+    path = None
+    if cache is not None:
+        path = Path(cache) / (f"{'realism' if realism else 'plain'}-{record_seed}-{effect}-"
+                              f"{steps}.pickle")
+        if path.exists():
+            loaded = pickle.loads(path.read_bytes())
+            if isinstance(loaded, SyntheticRecord):
+                return loaded
     if realism:
         from .realism import realistic_record
 
         synthetic = realistic_record(effect, record_seed, steps=steps)
     else:
         synthetic = synthetic_record(effect, record_seed, steps=steps)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(pickle.dumps(synthetic))
+        tmp.replace(path)
+    return synthetic
+
+
+def diagnose_one(item: BenchItem) -> dict[str, Any]:
+    """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
+    index, effect, record_seed, _steps, _realism, _cache = item
+    started = time.perf_counter()
+    synthetic = generate(item)
     generated = time.perf_counter()
     result = diagnose(synthetic.record)
     verdict = result["verdict"]

@@ -66,6 +66,9 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                         "specimen in a third of the records, varied noise")
     b.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write every record's result and the summary as JSON")
+    b.add_argument("--records", type=Path, default=None, metavar="DIR",
+                   help="keep the generated records in DIR and reuse them on the next run "
+                        "(a realism record can take minutes to generate)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -154,7 +157,8 @@ def _bench(args: argparse.Namespace) -> int:
         raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
     if args.steps < 200:
         raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
-    items = bench_items(args.n, args.seed, args.steps, args.realism)
+    items = bench_items(args.n, args.seed, args.steps, args.realism,
+                        None if args.records is None else str(args.records))
     bar = ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress)
     started = time.perf_counter()
     rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
