@@ -117,7 +117,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     x = m if m is not None else c
     ax.plot(x[::k], f[::k], lw=0.9, color="0.2", label="measured")
     ax.plot(c[::k], sim[::k], lw=0.9, ls="--", color="tab:blue", label="sim (baseline)")
-    if best is not None and name not in ("none", "unexplained"):
+    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
         bd = s["best_disp"] if s["best_disp"] is not None else c
         ax.plot(bd[::k], best[::k], lw=0.9, ls=":", color="tab:red", label=f"sim + {name}")
     ax.set_xlabel("displacement (mm)")
@@ -132,7 +132,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     ax = fig.add_subplot()
     phase = phase_angle(c)
     ax.scatter(phase[::k], (f - sim)[::k], s=3, alpha=0.5, label="measured − sim (baseline)")
-    if best is not None and name not in ("none", "unexplained"):
+    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
         ax.scatter(phase[::k], (f - best)[::k], s=3, alpha=0.5, color="tab:red",
                    label=f"measured − sim + {name}")
     ax.set_xlabel("loop phase of the command (deg; 0 = positive peak, ±180 = negative peak)")
@@ -154,7 +154,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     for label, r, color in (("force: measured − sim", f - sim, "tab:blue"),
                             (f"force: measured − sim + {name}",
                              None if best is None else f - best, "tab:red")):
-        if r is None or (name in ("none", "unexplained") and color == "tab:red"):
+        if r is None or (name in ("none", "unexplained", "baseline_misfit") and color == "tab:red"):
             continue
         spectrum = np.abs(np.fft.rfft((r - r.mean()) * np.hanning(r.size)))[1:]
         ax.semilogy(freqs, spectrum, lw=0.8, color=color, label=label)
