@@ -37,17 +37,26 @@ MAGNITUDE_OF = {
 }
 """The parameter whose relative error is the effect's "magnitude" error. For degradation it is
 the mean of delta_nu and delta_eta: on these records strength and stiffness degradation trade
-off against each other (their sum is well determined, each alone is not; both are reported)."""
+off against each other (their sum is well determined, each alone is not; both are reported),
+per unit *physical* hysteretic energy (kN*mm), i.e. times k0 / fy**2 of the law it belongs to.
+Bouc-Wen's fy and beta + gamma are redundant (only (beta + gamma) / fy**n enters the force), so
+a fit may land anywhere on that ridge, and a rate per unit energy normalised by the fitted
+fy * dy moves with it; the rate per kN*mm does not."""
 
 
-def effect_magnitude(effect: str, values: Mapping[str, float]) -> float | None:
-    """The effect's magnitude from its parameter values (None when absent)."""
+def effect_magnitude(effect: str, values: Mapping[str, float],
+                     law: Mapping[str, float] | None = None) -> float | None:
+    """The effect's magnitude from its parameter values (None when absent); ``law`` (k0, fy)
+    puts an energy rate in physical units."""
     name = MAGNITUDE_OF.get(effect)
     if name == "delta_mean":
         if "delta_nu" not in values or "delta_eta" not in values:
             return None
-        return 0.5 * (values["delta_nu"] + values["delta_eta"])
+        mean = 0.5 * (values["delta_nu"] + values["delta_eta"])
+        return mean if law is None else mean * law["k0"] / law["fy"] ** 2
     return None if name is None or name not in values else values[name]
+
+
 MAGNITUDE_TOLERANCE = 0.20
 
 
@@ -104,12 +113,14 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
         name: p["value"] for name, p in true_candidate["params"].items()}
     errors = {name: abs(estimates[name] - value) / abs(value)
               for name, value in synthetic.truth.items() if name in estimates and value}
-    true_size = effect_magnitude(effect, synthetic.truth)
-    found = effect_magnitude(effect, estimates)
+    true_size = effect_magnitude(effect, synthetic.truth, synthetic.specimen)
+    found = effect_magnitude(effect, estimates,
+                             None if true_candidate is None else true_candidate["law"])
     if true_size and found is not None:
         errors["magnitude"] = abs(found - true_size) / abs(true_size)
     return {
         "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
+        "baseline": result["baseline"]["kind"],
         "confidence": verdict["confidence"], "truth": synthetic.truth, "estimates": estimates,
         "relative_errors": errors, "specimen": synthetic.specimen, "law": synthetic.law,
         "gap_before_pct": result["baseline"]["gap_withheld"]["total_pct"],

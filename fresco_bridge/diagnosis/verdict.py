@@ -137,6 +137,8 @@ class _Scored:
             "params": {p.name: {"value": self.values.get(p.name), "std": self.std.get(p.name),
                                 "unit": p.unit, "meaning": p.meaning} for p in self.params},
             "n_params": len(self.params),
+            "law": None if self.fit is None else baseline_report(self.fit.spec.law_kind,
+                                                                 self.fit.values),
             "gap_before": self.before, "gap_after": self.after,
             "shrink_pct": _finite(self.shrink), "score": _finite(self.score),
             "fit": None if self.fit is None else {
