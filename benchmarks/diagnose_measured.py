@@ -77,7 +77,7 @@ def main() -> None:
     parser.add_argument("--only", default=None, help="substring of the test names to run")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for name, path, units, note in tests(args.out):
         if args.only and args.only not in name:
             continue
