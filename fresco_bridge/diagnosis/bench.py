@@ -118,6 +118,11 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
                              None if true_candidate is None else true_candidate["law"])
     if true_size and found is not None:
         errors["magnitude"] = abs(found - true_size) / abs(true_size)
+        plain_truth, plain_found = (effect_magnitude(effect, synthetic.truth),
+                                    effect_magnitude(effect, estimates))
+        if plain_truth and plain_found is not None and plain_truth != true_size:
+            # the earlier definition (per unit energy normalised by each law's own fy * dy)
+            errors["magnitude_normalised"] = abs(plain_found - plain_truth) / abs(plain_truth)
     return {
         "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
         "baseline": result["baseline"]["kind"],
@@ -171,7 +176,8 @@ def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
             for law in sorted({r.get("law", "bouc-wen") for r in rows})
             for sub in [[r for r in rows if r.get("law", "bouc-wen") == law]]},
         "failures": [{k: r.get(k) for k in ("index", "seed", "effect", "predicted",
-                                            "confidence", "gap_before_pct", "truth", "law")}
+                                            "confidence", "gap_before_pct", "truth", "law",
+                                            "baseline")}
                      for r in rows if r["predicted"] != r["effect"]],
     }
 
@@ -215,7 +221,8 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
         d = summary["diagnose_seconds"]
         lines.append(f"diagnosis time per record: median {d['median']:.1f} s, max {d['max']:.1f} s")
     for f in summary["failures"]:
-        lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}) "
+        lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}, baseline "
+                     f"{f.get('baseline')}) "
                      f"{f['effect']} -> {f['predicted']} (confidence {f['confidence']:.2f}, "
                      f"gap {f['gap_before_pct']:.2f} %)")
     return "\n".join(lines)

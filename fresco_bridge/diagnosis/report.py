@@ -38,6 +38,9 @@ def summary(result: dict[str, Any]) -> str:
         f"calibration {cal[0]}-{cal[1]}, withheld {wh[0]}-{wh[1]}",
         f"baseline  {base['kind']}: " + ", ".join(
             f"{k} {_f(v)}" for k, v in base["params"].items()),
+        *([] if base.get("selection") is None else
+          [f"          chosen by {base['requested']} (BIC, calibration part): "
+           f"{base['selection']['reason']}"]),
         f"gap       withheld: force {_pct(gap['force_pct'])}, displacement "
         f"{_pct(gap['disp_pct'])}, total {_pct(gap['total_pct'])} (floor "
         f"{noise['floor_pct']:g} %, white noise alone {_pct(noise['noise_only_gap_pct'])})",
