@@ -224,7 +224,14 @@ class BranchRls:
         ridge: float = 1e-3,
         gate: float = 4.0,
         memory_terms: bool = False,
+        force_scale: float | None = None,
+        stiffness: float | None = None,
+        shrink: bool = False,
     ) -> None:
+        """``force_scale``/``stiffness`` (k_init of the memory terms) default to the offline
+        data's; a residual expert passes those of the whole force instead. ``shrink``: the
+        ridge pulls the weights towards zero (a residual that is not supported by recent data
+        fades) instead of towards their current value."""
         disp = np.asarray(offline[0], dtype=np.float64)
         force = np.asarray(offline[1], dtype=np.float64)
         if disp.ndim != 1 or disp.shape != force.shape or disp.size < 20:
@@ -237,9 +244,12 @@ class BranchRls:
                                f"gate > 0 (got {forgetting}, {ridge}, {gate})")  # fmt: skip
         self.forgetting = forgetting
         self.gate = gate
+        if memory_terms and stiffness is None:
+            stiffness = initial_stiffness(disp, force)
         self.basis = ReversalBasis(
-            float(np.max(np.abs(disp))), float(np.max(np.abs(force))),
-            stiffness=initial_stiffness(disp, force) if memory_terms else None,
+            float(np.max(np.abs(disp))),
+            float(np.max(np.abs(force))) if force_scale is None else force_scale,
+            stiffness=stiffness if memory_terms else None,
         )  # fmt: skip
         n = self.basis.size
         rows, targets = self._offline_rows(disp, force)
@@ -253,6 +263,7 @@ class BranchRls:
         self._ridge = ridge * scale * np.eye(n)
         self._info = info * (horizon / max(len(targets), 1)) + self._ridge
         self._rhs = self._info @ self.weights
+        self._shrink = shrink
         residual = rows @ self.weights - targets
         self._noise_var = max(float(np.mean(residual**2)), 1e-6 * self.basis.force_scale**2)
         self._source = BranchMemory()
@@ -298,8 +309,9 @@ class BranchRls:
                                                                   (self.gate * sigma) ** 2)
             lam = self.forgetting
             self._info = lam * self._info + weight * np.outer(phi, phi) + (1.0 - lam) * self._ridge
-            self._rhs = (lam * self._rhs + weight * target * phi
-                         + (1.0 - lam) * (self._ridge @ self.weights))  # fmt: skip
+            self._rhs = lam * self._rhs + weight * target * phi
+            if not self._shrink:
+                self._rhs += (1.0 - lam) * (self._ridge @ self.weights)
             self.weights = np.asarray(np.linalg.solve(self._info, self._rhs), dtype=np.float64)
         self._source = memory.advanced(d, force)
         self._last_update = time.perf_counter() - start

@@ -1,21 +1,31 @@
-"""``online_improved``: experts weighted by how well each predicts the tested element.
+"""``online_improved``: experts weighted by how well each reproduces the tested element.
 
 Why a mixture: no single structure measured wins on both study specimens (BENCHMARKS.md, issue 9
 candidates). A reversal-coordinate basis (``branch``) is best where the law is far from any
 smooth state-variable form; a fitted Bouc-Wen law plus a residual basis (``physics``)
 generalises a degrading element's history to the twin through its own state. Which one is
-better is visible online, without the twin's truth: each expert predicts the *tested* element's
-force one step ahead before it learns from it, and the mixture weights expert k by
-``1 / S_k**2``, with ``S_k`` the exponentially weighted mean squared innovation (factor
-``mixing`` per step, each squared innovation clipped at ``gate**2 * S_k`` so one load-cell
-spike cannot flip the choice). The twin's force is the weighted sum of the experts' twins, each
-on its own branch memory of the twin's history.
+better is visible online without the twin's truth, on the tested element itself, two ways:
+
+* *free run*: a shadow copy of each expert's twin is driven by the tested element's
+  displacement and never sees its force (exactly the twin's situation: its own predicted
+  forces are its memory), and is compared with the measured force;
+* *one step*: each expert's prediction of the tested force from the tested element's measured
+  memory, before it learns from the step.
+
+``score="both"`` (default) adds the two squared errors; ``S_k`` is their exponentially weighted
+mean (factor ``mixing`` per step, each step's value clipped at ``gate**2 * S_k`` so one
+load-cell spike cannot flip the choice), and expert k weighs ``1 / S_k**2`` (normalised). Why
+both: the one-step error alone is flattered by the measured reversal force (a Bouc-Wen
+residual expert that scored best by it was the worst twin on a replay pair), the free-run
+error alone lets an expert's old drift linger (worse on Menegotto-Pinto); BENCHMARKS.md has the
+numbers. The twin's force is the weighted sum of the experts' twins, each on its own memory of
+the twin's history.
 
 Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md),
-``reversal+memory`` (plus the previous branch and envelope terms), ``bouc-wen+memory`` (the
-fitted law plus the memory basis on its residual). Each learns by its own exponentially
-weighted, ridge-regularised least squares with Huber gating (``forgetting``, ``ridge``,
-``gate``). Cost per step: the experts' updates, tenths of a millisecond.
+``reversal+memory`` (plus the previous-branch and envelope terms), ``bouc-wen+memory`` (the
+fitted law plus the memory basis on its residual, shrunk towards zero). Each learns by its own
+exponentially weighted, ridge-regularised least squares with Huber gating (``forgetting``,
+``ridge``, ``gate``). Cost per step: the experts' updates and shadows, tenths of a millisecond.
 """
 
 from __future__ import annotations
@@ -31,12 +41,15 @@ from fresco_bridge.updating.base import UpdaterError, UpdaterInputError
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, ReversalBasis
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
-__all__ = ["EXPERTS", "BranchMemory", "OnlineImproved", "ReversalBasis"]
+__all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis"]
 
 FloatArray = npt.NDArray[np.float64]
 
 EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory")
 """The experts ``online_improved`` can combine (all of them by default)."""
+
+SCORES = ("both", "free-run", "one-step")
+"""How an expert is scored on the tested element (module docstring)."""
 
 
 class _Expert(Protocol):
@@ -116,6 +129,7 @@ class OnlineImproved:
         ridge: float = 1e-3,
         gate: float = 4.0,
         mixing: float = 0.99,
+        score: str = "both",
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
             tuple(experts))  # fmt: skip
@@ -123,6 +137,9 @@ class OnlineImproved:
         if not names or unknown or len(set(names)) != len(names):
             raise UpdaterError(f"online_improved: experts must be distinct names from "
                                f"{', '.join(EXPERTS)} (got {', '.join(names) or 'none'})")
+        if score not in SCORES:
+            raise UpdaterError(f"online_improved: score must be one of {', '.join(SCORES)} "
+                               f"(got {score!r})")
         if not 0.5 <= mixing < 1.0:
             raise UpdaterError(f"online_improved: need 0.5 <= mixing < 1 (got {mixing})")
         rls: dict[str, Any] = {"forgetting": forgetting, "ridge": ridge, "gate": gate}
@@ -140,7 +157,9 @@ class OnlineImproved:
         self.gate = gate
         force_scale = float(np.max(np.abs(np.asarray(offline[1], dtype=np.float64))))
         self.scores: FloatArray = np.full(len(built), 1e-4 * force_scale**2)
-        """Exponentially weighted mean squared one-step innovation of each expert."""
+        """Exponentially weighted mean squared error of each expert on the tested element."""
+        self.score = score
+        self._shadows = [e.twin.clone() for e in built]
         self._twin = _MixtureTwin(self, [e.twin for e in built])
         self._last_update = 0.0
 
@@ -159,9 +178,16 @@ class OnlineImproved:
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
         for k, expert in enumerate(self.experts):
-            innovation = force - expert.predict(d)
+            squared = 0.0
+            if self.score != "one-step":
+                free = force - self._shadows[k].set_trial(d)[0]
+                self._shadows[k].commit()
+                squared += free * free
+            if self.score != "free-run":
+                one = force - expert.predict(d)
+                squared += one * one
             score = float(self.scores[k])
-            self.scores[k] = lam * score + (1.0 - lam) * min(innovation**2, cap * score)
+            self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
             expert.observe(d, force)
         self._last_update = time.perf_counter() - start
 

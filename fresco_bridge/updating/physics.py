@@ -13,7 +13,8 @@ The fit: least squares (scipy ``least_squares``, trust region, bounded) of the B
 along the offline displacement history, every second sample, from a start taken from the data
 (k_init of the first loading, the peak force, n = 2, beta = gamma = 0.5). The law's parameters
 stay fixed online; only the residual basis learns (the fit costs seconds, an online step does
-not).
+not), and its ridge pulls it towards zero, so the expert falls back on the law where recent
+data do not support a residual.
 """
 
 from __future__ import annotations
@@ -124,12 +125,21 @@ class PhysicsResidual:
     name = "online_improved"
 
     def __init__(self, *, offline: tuple[npt.ArrayLike, npt.ArrayLike],
-                 law: dict[str, float] | None = None, **rls: Any) -> None:
+                 law: dict[str, float] | None = None, shrink: bool = True,
+                 **rls: Any) -> None:
+        """``law``: Bouc-Wen parameters (fitted to ``offline`` when None); ``shrink``: the
+        residual's ridge pulls towards zero (BENCHMARKS.md: the residual learned on the tested
+        element otherwise transfers to the twin where the law alone was right)."""
         disp = np.asarray(offline[0], dtype=np.float64)
         force = np.asarray(offline[1], dtype=np.float64)
         self.law = fit_bouc_wen(disp, force) if law is None else dict(law)
         residual = force - bouc_wen_forces(self.law, disp)
-        self.residual = BranchRls(offline=(disp, residual), memory_terms=True, **rls)
+        # scales and k_init from the whole force (the residual may even be zero); the memory's
+        # forces are the residual's, so its plastic-part term is close to the branch length
+        self.residual = BranchRls(offline=(disp, residual), memory_terms=True,
+                                  force_scale=float(np.max(np.abs(force))),
+                                  stiffness=initial_stiffness(disp, force), shrink=shrink,
+                                  **rls)  # fmt: skip
         self._source = BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX)
         self._twin = _PhysicsTwin(BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
                                   self.residual.twin)  # fmt: skip
