@@ -103,7 +103,10 @@ def test_the_twin_learns_the_law_on_another_history(updater: OnlineImproved) -> 
         errors.append(updater.twin.set_trial(dw)[0])
         updater.twin.commit()
     err = np.abs(np.array(errors) - truth)
-    assert float(np.max(err)) < 0.25 * float(np.max(np.abs(truth)))
+    peak = float(np.max(np.abs(truth)))
+    first, second = float(np.max(err[:1000])), float(np.max(err[1000:]))
+    assert first < 0.3 * peak  # the twin's first loading, before much is learned
+    assert second < 0.15 * peak and second < 0.5 * first
     assert updater.last_update_seconds >= 0.0
 
 
