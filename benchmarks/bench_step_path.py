@@ -6,8 +6,14 @@ taps, monitors) from the same TOML, then feeds a session's bytes straight into t
 pump, in process, with the scripted genericClient's message sequence (``step_peers.STEP_CODES``).
 No socket, no event-loop round trip: what is left is exactly the code a ``data_received`` runs.
 
-    python -m benchmarks.bench_step_path [--dofs 1] [--steps 20000] [--record/--no-record]
-        [--limits] [--profile FILE] [--sort tottime]
+    python -m benchmarks.bench_step_path [--dofs 1] [--steps 20000] [--no-record]
+        [--limits] [--whole-steps] [--set SECTION.KEY=VALUE ...] [--profile FILE]
+        [--sort tottime]
+
+Each message is fed on its own, as a socket delivers a genericClient's requests (it waits for
+every reply); ``--whole-steps`` feeds a step's 14 messages as one chunk instead. ``--set``
+overrides a TOML key for attribution (e.g. ``--set telemetry.monitors=false``,
+``--set record.fsync='"off"'``).
 
 Reported: µs of process CPU per step (``time.process_time``, best of ``--repeats``), and with
 ``--profile`` the cProfile table (top 30 by ``--sort``).
@@ -30,19 +36,28 @@ from protocol import SizeID
 from .step_peers import DT, STEP_CODES
 
 
-def config_text(run_dir: Path, dofs: int, record: bool, limits: bool) -> str:
+def config_text(run_dir: Path, dofs: int, record: bool, limits: bool,
+                overrides: dict[str, dict[str, str]] | None = None) -> str:
     model = ('model = "elastic"\nparams = { k = 100.0 }' if dofs > 1
              else 'model = "bilinear"\nparams = { k0 = 100.0, fy = 20.0, alpha = 0.02 }')
     lim = "".join(f"\n[[sites.limits]]\nactuator = {a}\ndisp_min = -50.0\ndisp_max = 50.0\n"
                   "disp_increment = 10.0\nforce_min = -1e6\nforce_max = 1e6\n"
                   for a in range(1, dofs + 1)) if limits else ""
+    extra = overrides or {}
+
+    def section(name: str) -> str:
+        return "".join(f"{k} = {v}\n" for k, v in extra.get(name, {}).items())
+
     return f"""
 [bridge]
 run_name = "path"
 run_dir = "{run_dir}"
-
+{section("bridge")}
 [record]
 enabled = {"true" if record else "false"}
+{section("record")}
+[telemetry]
+{section("telemetry")}
 
 [[sites]]
 name = "spec"
@@ -55,8 +70,10 @@ kind = "sim"
 {lim}"""
 
 
-def session_bytes(dofs: int, steps: int) -> tuple[bytes, list[bytes]]:
-    """The ID message and the bytes of each step, as the scripted client sends them."""
+def session_bytes(dofs: int, steps: int, per_message: bool = False
+                  ) -> tuple[bytes, list[bytes]]:
+    """The ID message and the bytes of each step, as the scripted client sends them (one
+    chunk per step, or with ``per_message`` one chunk per message)."""
     sid = SizeID.for_generic_client(dofs)
     ds = sid.data_size
     vec = struct.Struct(f"<{ds}d")
@@ -74,12 +91,17 @@ def session_bytes(dofs: int, steps: int) -> tuple[bytes, list[bytes]]:
         d = 0.1 * math.sin(2.0 * math.pi * t)
         trials = iter((trial(d_prev, t), trial(d, t), trial(d, t)))
         d_prev = d
-        out.append(b"".join(next(trials) if c == 3 else req[c] for c in STEP_CODES))
+        step = [next(trials) if c == 3 else req[c] for c in STEP_CODES]
+        if per_message:
+            out.extend(step)
+        else:
+            out.append(b"".join(step))
     return ident + trial(0.0, 0.0) + req[15], out
 
 
 async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
-              profile: Path | None) -> list[float]:
+              profile: Path | None, *, per_message: bool = True,
+              overrides: dict[str, dict[str, str]] | None = None) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
     from fresco_bridge.server.access import Allowlist
@@ -87,14 +109,14 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
 
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:
-        text = config_text(Path(tmp) / "runs", dofs, record, limits)
+        text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides)
         bridge = Bridge(parse_config(text), text)
         await bridge.start()
         try:
             site = bridge.sites["spec"]
             listener = SiteListener(site, Allowlist(["127.0.0.1"]), 65536, 60.0)
             for rep in range(repeats + (profile is not None)):
-                head, body = session_bytes(dofs, steps)
+                head, body = session_bytes(dofs, steps, per_message)
                 replies = 0
 
                 def send(_data: bytes) -> None:
@@ -133,13 +155,27 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-record", action="store_true")
     parser.add_argument("--limits", action="store_true", help="a disp limit with increment")
+    parser.add_argument("--whole-steps", action="store_true",
+                        help="feed each step's 14 messages as one chunk")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="override a TOML key (the value in TOML syntax)")
     parser.add_argument("--profile", type=Path, default=None)
     parser.add_argument("--sort", default="tottime")
     args = parser.parse_args(argv)
+    overrides: dict[str, dict[str, str]] = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        sect, dot, name = key.partition(".")
+        if not (sep and dot and name):
+            parser.error(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        overrides.setdefault(sect, {})[name] = value
     per_step = asyncio.run(run(args.dofs, args.steps, not args.no_record, args.limits,
-                               args.repeats, args.profile))
+                               args.repeats, args.profile, per_message=not args.whole_steps,
+                               overrides=overrides))
+    feed = "whole steps" if args.whole_steps else "per message"
+    sets = "".join(f", {item}" for item in args.set)
     print(f"step path, {args.dofs} DOF, record {'off' if args.no_record else 'on'}, limits "
-          f"{'on' if args.limits else 'off'}: {min(per_step):.1f} µs CPU/step best, "
+          f"{'on' if args.limits else 'off'}, {feed}{sets}: {min(per_step):.1f} µs CPU/step best, "
           f"{sorted(per_step)[len(per_step) // 2]:.1f} median of {len(per_step)}", flush=True)
     if args.profile is not None:
         pstats.Stats(str(args.profile)).sort_stats(args.sort).print_stats(30)

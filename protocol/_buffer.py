@@ -16,7 +16,7 @@ class ReceiveBuffer:
     __slots__ = ("_buf", "_pos", "consumed", "eof")
 
     def __init__(self) -> None:
-        self._buf = bytearray()
+        self._buf: bytes | bytearray = bytearray()
         self._pos = 0
         self.consumed = 0
         """Stream offset of the next unread byte (for error messages)."""
@@ -31,14 +31,19 @@ class ReceiveBuffer:
             raise LocalProtocolError(
                 f"receive_data() got {len(data)} bytes after EOF (b'') was already fed"
             )
-        if self._pos:
-            if self._pos == len(self._buf):
-                self._buf.clear()
-                self._pos = 0
-            elif self._pos >= _COMPACT_AT:
-                del self._buf[: self._pos]
-                self._pos = 0
-        self._buf += data
+        buf, pos = self._buf, self._pos
+        if pos == len(buf):  # everything read: the usual case, one request per segment
+            self._pos = 0
+            # immutable bytes are kept as they are (no copy); anything else is copied
+            self._buf = data if type(data) is bytes else bytearray(data)
+            return
+        if isinstance(buf, bytes):  # a kept segment with an unread tail: continue in a bytearray
+            buf = self._buf = bytearray(memoryview(buf)[pos:])
+            self._pos = pos = 0
+        elif pos >= _COMPACT_AT:
+            del buf[:pos]
+            self._pos = 0
+        buf += data
 
     @property
     def available(self) -> int:
@@ -52,15 +57,25 @@ class ReceiveBuffer:
         self.consumed += count
         return start
 
+    def take_if(self, count: int) -> int:
+        """Consume *count* bytes if that many are unread: their start offset in :attr:`data`
+        (read at once), else -1 and nothing consumed (one call on the per-vector path)."""
+        start = self._pos
+        if len(self._buf) - start < count:
+            return -1
+        self._pos = start + count
+        self.consumed += count
+        return start
+
     @property
-    def data(self) -> bytearray:
+    def data(self) -> bytes | bytearray:
         """The underlying buffer; valid for offsets from :meth:`take` until the next feed."""
         return self._buf
 
     def discard(self) -> int:
         """Drop every unread byte; return how many were dropped."""
         dropped = self.available
-        self._buf.clear()
+        self._buf = bytearray()
         self._pos = 0
         self.consumed += dropped
         return dropped

@@ -136,6 +136,7 @@ class ElementServerSession:
         "_owed",
         "_packed",
         "_reply",
+        "_reply_full",
         "_size_id",
         "_state",
         "_trial_layout",
@@ -156,6 +157,10 @@ class ElementServerSession:
         self._trial_layout: BlockLayout | None = None
         self._daq_layout: BlockLayout | None = None
         self._reply = bytearray()
+        self._reply_full: bytes | None = None
+        """The reply buffer's content when the last reply filled all of it from bytes kept
+        elsewhere (a packed matrix of n*n = dataSize values): copied in only when a later
+        reply writes part of the buffer."""
         self._zeros = b""
         self._packed: dict[int, tuple[tuple[float, ...], bytes]] = {}
         self._owed: Action | None = None
@@ -198,8 +203,8 @@ class ElementServerSession:
         state = self._state
         if state is ServerState.READY:
             buffered = self._in
-            if buffered.available >= self._vector_bytes:
-                start = buffered.take(self._vector_bytes)
+            start = buffered.take_if(self._vector_bytes)
+            if start >= 0:
                 return self._decode_vector(buffered.data, start)
             if buffered.eof:
                 return self._close()
@@ -242,7 +247,7 @@ class ElementServerSession:
         self._zeros = bytes(self._vector_bytes)
         self._state = ServerState.READY
 
-    def _decode_vector(self, data: bytearray, start: int) -> ElementServerEvent:
+    def _decode_vector(self, data: bytes | bytearray, start: int) -> ElementServerEvent:
         self.vectors_received += 1
         code: float = _SLOT0.unpack_from(data, start)[0]
         action = ACTION_BY_CODE.get(code)
@@ -294,8 +299,17 @@ class ElementServerSession:
                 f"{method}() cannot answer {owed.name} (code {owed.value}); {hint}"
             )
         if not self._keep_leftovers:
+            self._reply_full = None
             self._reply[:] = self._zeros
         return owed
+
+    def _writable(self) -> bytearray:
+        """The reply buffer, holding every left-over of the replies before."""
+        full = self._reply_full
+        if full is not None:
+            self._reply_full = None
+            self._reply[:] = full
+        return self._reply
 
     def _finish_reply(self) -> bytes:
         self._owed = None
@@ -315,8 +329,9 @@ class ElementServerSession:
         )
         layout = self._daq_layout
         assert layout is not None
+        reply = self._writable()
         if action is Action.GET_DAQ_RESPONSE:
-            layout.pack_into(self._reply, daq, "daq")
+            layout.pack_into(reply, daq, "daq")
             return self._finish_reply()
         requested = _DAQ_BLOCK_OF_ACTION[action]
         blocks = daq.as_tuple()
@@ -326,7 +341,7 @@ class ElementServerSession:
                 layout.check(daq, f"{action.name} reply: daq")
         for index, block in enumerate(blocks):
             if index == requested or block:
-                layout.pack_block_into(self._reply, index, block, "daq")
+                layout.pack_block_into(reply, index, block, "daq")
         return self._finish_reply()
 
     def send_matrix(self, column_major: Sequence[float]) -> bytes:
@@ -354,9 +369,14 @@ class ElementServerSession:
                     self._packed.clear()
                 cached = (column_major, doubles_struct(count).pack(*column_major))
                 self._packed[id(column_major)] = cached
-            self._reply[: 8 * count] = cached[1]
+            if count == self._size_id.data_size:  # the whole reply: no copy at all
+                self._reply_full = cached[1]
+                self._owed = None
+                self._state = ServerState.READY
+                return cached[1]
+            self._writable()[: 8 * count] = cached[1]
         else:
-            doubles_struct(count).pack_into(self._reply, 0, *column_major)
+            doubles_struct(count).pack_into(self._writable(), 0, *column_major)
         return self._finish_reply()
 
     def send_values(self, values: Sequence[float]) -> bytes:
@@ -367,5 +387,5 @@ class ElementServerSession:
             raise LocalProtocolError(
                 f"send_values() got {len(values)} values but dataSize is {self._size_id.data_size}"
             )
-        doubles_struct(len(values)).pack_into(self._reply, 0, *values)
+        doubles_struct(len(values)).pack_into(self._writable(), 0, *values)
         return self._finish_reply()

@@ -182,7 +182,7 @@ class ActorSession(SiteBase):
         return event
 
     def _decode_vector(
-        self, data: bytearray, start: int
+        self, data: bytes | bytearray, start: int
     ) -> ActorEvent | Literal[Sentinel.NEED_DATA]:
         self.vectors_received += 1
         nbytes = self._vector_bytes

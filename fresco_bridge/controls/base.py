@@ -73,6 +73,54 @@ class Controller(abc.ABC):
         """Release the link; the actuator keeps holding its last command."""
 
 
+class InlineController(Controller):
+    """An in-process controller: every call completes at once, so its synchronous ``*_now``
+    methods are the implementation and the coroutines only wrap them.
+
+    The site calls the ``*_now`` methods directly on its hot path: no coroutine, no eager step
+    and no deadline per call (``sites/experimental.py``, the ``*_eager`` methods). Nothing here
+    can lose a link: a failure is a ``ControllerError`` that HOLDs the site at once, never a
+    ``ControllerLinkError`` to wait out (``bridge.controller_recovery`` does not apply).
+    """
+
+    inline = True
+
+    @abc.abstractmethod
+    def set_ctrl_now(self, disp: tuple[float, ...]) -> None:
+        """Command absolute actuator displacements; returns when they are reached."""
+
+    @abc.abstractmethod
+    def get_daq_now(self) -> Daq:
+        """The measured displacements and forces for the current command."""
+
+    @abc.abstractmethod
+    def commit_now(self) -> None:
+        """The integrator accepted the step."""
+
+    @abc.abstractmethod
+    def tangent_stiffness_now(self) -> tuple[float, ...]:
+        """Current tangent stiffness in actuator space, n×n column-major (kN/mm)."""
+
+    @abc.abstractmethod
+    def initial_stiffness_now(self) -> tuple[float, ...]:
+        """Initial stiffness in actuator space, n×n column-major (kN/mm)."""
+
+    async def set_ctrl(self, disp: tuple[float, ...]) -> None:
+        self.set_ctrl_now(disp)
+
+    async def get_daq(self) -> Daq:
+        return self.get_daq_now()
+
+    async def commit(self) -> None:
+        self.commit_now()
+
+    async def tangent_stiffness(self) -> tuple[float, ...]:
+        return self.tangent_stiffness_now()
+
+    async def initial_stiffness(self) -> tuple[float, ...]:
+        return self.initial_stiffness_now()
+
+
 class PhysicalController(Controller):
     """A controller of a physical (or physically simulated) rig: every move really happens, so
     there is no trial state to commit, and the rig cannot report its stiffness: tangent and

@@ -20,7 +20,7 @@ from sim_actuator.config import RigConfig, RigConfigError, build_rig, load_rig_c
 from sim_actuator.rig import Measurement, Rig, RigError
 
 from ..config_model import ConfigPath
-from .base import ControllerError, Daq, PhysicalController
+from .base import ControllerError, Daq, InlineController, PhysicalController
 from .kind import ControllerConfigBase, ControllerKind
 
 
@@ -56,10 +56,10 @@ class RigControllerConfig(ControllerConfigBase):
             raise ValueError(str(exc)) from None
 
 
-class RigController(PhysicalController):
-    """One actuator of an in-process ``sim_actuator`` rig; answers without suspending."""
+class RigController(InlineController, PhysicalController):
+    """One actuator of an in-process ``sim_actuator`` rig; answers at once (called
+    synchronously by the site)."""
 
-    inline = True
     n_actuators = 1
 
     def __init__(self, config: RigControllerConfig) -> None:
@@ -69,14 +69,23 @@ class RigController(PhysicalController):
         self.rig: Rig = build_rig(self._rig_config)
         self._last: Measurement = self.rig.measure(noisy=False)
 
-    async def set_ctrl(self, disp: tuple[float, ...]) -> None:
+    def set_ctrl_now(self, disp: tuple[float, ...]) -> None:
         try:
             self._last = self.rig.execute(disp[0], self.config.ramp_time)
         except RigError as exc:
             raise ControllerError(f"simulated rig: move to {disp[0]!r} mm failed: {exc}") from exc
 
-    async def get_daq(self) -> Daq:
+    def get_daq_now(self) -> Daq:
         return Daq((self._last.displacement,), (self._last.force,))
+
+    def commit_now(self) -> None:
+        """A physical rig has no trial state to commit."""
+
+    def tangent_stiffness_now(self) -> tuple[float, ...]:
+        return (self.stiffness,)
+
+    def initial_stiffness_now(self) -> tuple[float, ...]:
+        return (self.stiffness,)
 
     async def hold(self) -> None:
         """Nothing to stop: moves complete inside ``set_ctrl``; the actuator stays where it is."""

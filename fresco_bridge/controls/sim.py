@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 from sim_actuator.config import ModelKindName
 from sim_actuator.models import MODEL_PARAMETERS, HysteresisModel, ModelParameterError, make_model
 
-from .base import Controller, Daq
+from .base import Daq, InlineController
 from .kind import ControllerConfigBase, ControllerKind
 
 
@@ -39,10 +39,8 @@ class SimControllerConfig(ControllerConfigBase):
         return self
 
 
-class SimController(Controller):
-    """A specimen model per actuator, answering without suspending (driven eagerly)."""
-
-    inline = True
+class SimController(InlineController):
+    """A specimen model per actuator, answering at once (the site calls it synchronously)."""
 
     def __init__(self, models: list[HysteresisModel]) -> None:
         if not models:
@@ -59,7 +57,7 @@ class SimController(Controller):
     def from_params(cls, n_actuators: int, kind: str, params: dict[str, float]) -> SimController:
         return cls([make_model(kind, **params) for _ in range(n_actuators)])
 
-    async def set_ctrl(self, disp: tuple[float, ...]) -> None:
+    def set_ctrl_now(self, disp: tuple[float, ...]) -> None:
         if len(self._models) == 1:
             f, k = self._models[0].set_trial(disp[0])
             self._disp, self._force, self._tangent = disp, (f,), (k,)
@@ -69,20 +67,20 @@ class SimController(Controller):
         self._force = tuple(r[0] for r in results)
         self._tangent = tuple(r[1] for r in results)
 
-    async def get_daq(self) -> Daq:
+    def get_daq_now(self) -> Daq:
         return Daq(self._disp, self._force)
 
-    async def commit(self) -> None:
+    def commit_now(self) -> None:
         for m in self._models:
             m.commit()
 
-    async def tangent_stiffness(self) -> tuple[float, ...]:
+    def tangent_stiffness_now(self) -> tuple[float, ...]:
         tangent = self._tangent
         if tangent != self._diag_of:  # the same matrix object while the tangent is unchanged
             self._diag_of, self._diag = tangent, _diagonal(tangent)
         return self._diag
 
-    async def initial_stiffness(self) -> tuple[float, ...]:
+    def initial_stiffness_now(self) -> tuple[float, ...]:
         return _diagonal(tuple(m.initial_tangent for m in self._models))
 
     def reset(self) -> None:

@@ -8,6 +8,8 @@ the transport, through the site.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING
 
 from .writer import RunRecord
@@ -24,19 +26,18 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_record", "site")
+    __slots__ = ("_record", "measurement", "site", "trial")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
         self.site = site
-
-    def trial(self, session: int, step: int, time: float, trial: tuple[float, ...],
-              ctrl: tuple[float, ...]) -> None:
-        self._record.trial(self.site, session, step, time, trial, ctrl)
-
-    def measurement(self, session: int, step: int, disp: tuple[float, ...],
-                    force: tuple[float, ...]) -> None:
-        self._record.measurement(self.site, session, step, disp, force)
+        # several times a step: the record's own methods with the site bound (no extra frame)
+        self.trial: Callable[[int, int, float, tuple[float, ...], tuple[float, ...]], None] = \
+            partial(record.trial, site)
+        """``trial(session, step, time, trial, ctrl)``: a command on its way to the controller."""
+        self.measurement: Callable[[int, int, tuple[float, ...], tuple[float, ...]], None] = \
+            partial(record.measurement, site)
+        """``measurement(session, step, disp, force)``: what the controller measured."""
 
     def step_committed(self, step: CommittedStep) -> None:
         self._record.commit(self.site, step.session, step.step, step.time)

@@ -237,21 +237,30 @@ class RunRecord:
         self._seq += 1
         self._buf.append(self._enc.line(time.monotonic() - self._t0, kind, site, session, body))
 
+    # trial, measurement and commit are ``_line`` written out: they run several times a step
     def trial(
         self, site: str, session: int, step: int, time_: float, trial: tuple[float, ...],
         ctrl: tuple[float, ...],
     ) -> None:
-        self._line("trial", site, session, self._enc.trial(site, session, step, time_, trial,
-                                                           ctrl))
+        enc = self._enc
+        self._seq += 1
+        self._buf.append(enc.line(time.monotonic() - self._t0, "trial", site, session,
+                                  enc.trial(site, session, step, time_, trial, ctrl)))
 
     def measurement(
         self, site: str, session: int, step: int, disp: tuple[float, ...],
         force: tuple[float, ...],
     ) -> None:
-        self._line("daq", site, session, self._enc.daq(site, session, step, disp, force))
+        enc = self._enc
+        self._seq += 1
+        self._buf.append(enc.line(time.monotonic() - self._t0, "daq", site, session,
+                                  enc.daq(site, session, step, disp, force)))
 
     def commit(self, site: str, session: int, step: int, time_: float) -> None:
-        self._line("commit", site, session, self._enc.commit(site, session, step, time_))
+        enc = self._enc
+        self._seq += 1
+        self._buf.append(enc.line(time.monotonic() - self._t0, "commit", site, session,
+                                  enc.commit(site, session, step, time_)))
         self.flush(sync=True)
 
     def event(self, site: str, session: int, kind: str, reason: str, **extra: object) -> None:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from time import perf_counter
 from typing import Any, Literal, Protocol
 
-from protocol import ActorSession, ElementServerSession, ProtocolError
+from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel
 
 from ..eager import Suspended, start_eager
 from ..sites import Site, SiteError
@@ -69,7 +69,9 @@ class _Handler(Protocol):
     introduced: bool
     """The client's size ID (or site setup) fitted: its session is open."""
 
-    def next_request(self) -> tuple[object, Coroutine[Any, Any, None] | None] | None: ...
+    def dispatch(self, ev: Any) -> Coroutine[Any, Any, None] | None:
+        """Handle ``ev`` at once (None) or return the coroutine that finishes it."""
+        ...
 
 
 class SessionPump:
@@ -172,23 +174,20 @@ class SessionPump:
         self.abort(reason)
 
     def _run(self) -> None:
-        next_request, metrics = self.handler.next_request, self.site.metrics
+        next_event, dispatch = self.session.next_event, self.handler.dispatch
+        metrics = self.site.metrics
         while not self.closed and not self._write_blocked:
             t0 = perf_counter() if metrics is not None else 0.0
             try:
-                request = next_request()
+                ev = next_event()
             except ProtocolError as exc:
                 self._end(f"protocol error from {self.peer}: {exc}", error=True)
                 return
-            if request is None:  # NEED_DATA or PAUSED
+            if type(ev) is Sentinel:  # NEED_DATA or PAUSED
                 return
-            ev, handling = request
-            if handling is None:  # answered at once (a constant reply)
-                if metrics is not None:
-                    metrics.message(ev, perf_counter() - t0)
-                continue
             try:
-                r = start_eager(handling)
+                handling = dispatch(ev)
+                r = None if handling is None else start_eager(handling)
             except SessionEnded as exc:
                 self._end(str(exc))
                 return

@@ -25,8 +25,8 @@ from protocol import (
     OpenReceived,
     ProbeReceived,
     ReplyRequested,
-    Sentinel,
     SetupReceived,
+    Signals,
     SignalSizes,
     SizeReceived,
     TrialReceived,
@@ -35,6 +35,7 @@ from protocol import (
 from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
+_DAQ_ACTIONS = frozenset(a for a in Action if Action.GET_DAQ_RESPONSE <= a <= Action.GET_TIME)
 
 Send = Callable[[bytes], None]
 
@@ -56,18 +57,41 @@ class ElementHandler:
         """Requests answered from the site's configuration (GenericClient asks for the damping
         matrix several times per step): no controller call, no coroutine."""
 
-    def next_request(self) -> tuple[ElementServerEvent, Coroutine[Any, Any, None] | None] | None:
-        """The next event and the coroutine handling it (None: already answered); None when
-        more data is needed (or the session is paused until its reply is sent)."""
-        ev = self.session.next_event()
-        if isinstance(ev, Sentinel):
-            return None
+    def dispatch(self, ev: ElementServerEvent) -> Coroutine[Any, Any, None] | None:
+        """Handle ``ev``: at once when it can be (None: done, replies sent), else the coroutine
+        that finishes it. The step's requests go to the site's ``*_eager`` methods, so with an
+        in-process controller a step runs without one coroutine; the rest goes to ``handle``."""
+        if type(ev) is TrialReceived:
+            return self.site.set_trial_eager(ev.trial)
         if type(ev) is ReplyRequested:
-            matrix = self._constant.get(ev.action)
+            action = ev.action
+            matrix = self._constant.get(action)
             if matrix is not None:
                 self.send(self.session.send_matrix(matrix))
-                return ev, None
-        return ev, self.handle(ev)
+                return None
+            if action is Action.GET_TANGENT_STIFF:
+                k = self.site.tangent_eager()
+                if not isinstance(k, tuple):
+                    return self._send_matrix_later(k)
+                self.send(self.session.send_matrix(k))
+                return None
+            if action in _DAQ_ACTIONS:
+                sid = self.session.size_id
+                assert sid is not None
+                out = self.site.out_signals_eager(sid.daq)
+                if not isinstance(out, Signals):
+                    return self._send_daq_later(out)
+                self.send(self.session.send_daq(out))
+                return None
+        elif type(ev) is CommitReceived:
+            return self.site.commit_eager()
+        return self.handle(ev)
+
+    async def _send_matrix_later(self, k: Coroutine[Any, Any, tuple[float, ...]]) -> None:
+        self.send(self.session.send_matrix(await k))
+
+    async def _send_daq_later(self, out: Coroutine[Any, Any, Signals]) -> None:
+        self.send(self.session.send_daq(await out))
 
     async def handle(self, ev: ElementServerEvent) -> None:
         site = self.site
@@ -124,12 +148,9 @@ class ActorHandler:
         self.size_out: SignalSizes | None = None
         self.introduced = False
 
-    def next_request(self) -> tuple[ActorEvent, Coroutine[Any, Any, None]] | None:
-        """The next event and the coroutine handling it; None when more data is needed."""
-        ev = self.session.next_event()
-        if isinstance(ev, Sentinel):
-            return None
-        return ev, self.handle(ev)
+    def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None]:
+        """The coroutine handling ``ev`` (driven eagerly by the connection)."""
+        return self.handle(ev)
 
     async def handle(self, ev: ActorEvent) -> None:
         site, session = self.site, self.session

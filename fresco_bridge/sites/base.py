@@ -8,8 +8,8 @@ committed steps) implements the same and is served, refused, paused and aborted 
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypeVar
 
 from protocol import Signals, SignalSizes
 
@@ -19,7 +19,11 @@ if TYPE_CHECKING:
     from ..server.access import RejectionLog
     from ..telemetry.metrics import SiteMetrics
 
-__all__ = ["Site", "SiteError"]
+__all__ = ["Later", "Site", "SiteError"]
+
+T = TypeVar("T")
+Later: TypeAlias = Coroutine[Any, Any, T]
+"""What is left of a request that must wait (controller I/O, an operator): await it."""
 
 
 class SiteError(Exception):
@@ -74,6 +78,16 @@ class Site(Protocol):
         ...
 
     # -- the step (the protocol handlers) ------------------------------------------------------
+    # ``*_eager``: done at once when the site can (its result, or None), else the coroutine
+    # that finishes the request (``Later``); the coroutines are the same requests, awaited.
+    def set_trial_eager(self, trial: Signals) -> Later[None] | None: ...
+
+    def commit_eager(self) -> Later[None] | None: ...
+
+    def out_signals_eager(self, sizes: SignalSizes) -> Signals | Later[Signals]: ...
+
+    def tangent_eager(self) -> tuple[float, ...] | Later[tuple[float, ...]]: ...
+
     async def set_trial(self, trial: Signals) -> None: ...
 
     async def commit(self) -> None: ...

@@ -25,12 +25,11 @@ from typing import TYPE_CHECKING
 from protocol import Signals, SignalSizes
 
 from ..config import SiteConfig
-from ..controls.base import Controller, Daq
+from ..controls.base import Controller, Daq, InlineController
 from ..record import RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
     Limiter,
-    LimitHit,
     SiteState,
     TransitionRefused,
     Trigger,
@@ -40,7 +39,8 @@ from ..safety import (
 from ..setups import LinearSetup, make_setup
 from ..steps import CommittedStep
 from ..telemetry.schema import SiteStatus
-from .base import SiteError
+from .base import Later, SiteError
+from .gate import CommandGate
 from .guard import ControllerGuard
 from .listeners import EventListener, SiteNotice, StepListener
 from .sizes import column_major, size_problems
@@ -51,8 +51,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("fresco_bridge.site")
 
-PAUSE_LOG_INTERVAL = 30.0
-"""While a command waits for an operator, a warning is logged this often (s)."""
 ABORT_GRACE = 5.0
 """After ``ctl abort`` the session's next request is answered NaN (the integrator stops and
 sends DIE); a session still open this many seconds later is ended by the bridge (an idle or
@@ -61,7 +59,7 @@ half-open client cannot keep an aborted site)."""
 RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
 
 
-class ExperimentalSite:
+class ExperimentalSite(CommandGate):
     """One site: config, setup, limits, controller (behind its guard), state, the current
     session's signals, and the listeners its committed steps and events go to."""
 
@@ -85,6 +83,8 @@ class ExperimentalSite:
             )
         self.guard = ControllerGuard(self, controller, timeout=controller_timeout,
                                      recovery=controller_recovery)
+        self._now = controller if isinstance(controller, InlineController) else None
+        """The controller's synchronous calls, when it is in process (the eager hot path)."""
         self.state = SiteState.IDLE
         self.reason = ""
         self.session = 0
@@ -266,20 +266,6 @@ class ExperimentalSite:
         """HOLD → RUNNING: the guard's recovery found the controller answering again."""
         self._transition(Trigger.RECOVERED, reason, **extra)
 
-    def resend_refused(self, command: tuple[float, ...],
-                       measured: tuple[float, ...]) -> str | None:
-        """Why ``command`` may not be re-sent from the ``measured`` position, or None."""
-        limiter = self._ctrl_limiter
-        if limiter is None:
-            return None
-        verdict = limiter.check_ctrl(command, measured, self.time - self._commit_time)
-        if verdict is None:
-            return None
-        what = verdict.describe() or (f"the move needs {len(verdict.commands)} sub-commands "
-                                      "under the velocity limit")
-        return (f"controller answers again with the actuator at {list(measured)} mm; re-sending "
-                f"{list(command)} mm from there is not within the limits ({what}); not sent")
-
     def _wake_waiter(self) -> None:
         if self._wake is not None:
             self._wake.set()
@@ -367,29 +353,6 @@ class ExperimentalSite:
                        accel=nan if sizes.accel else (), force=nan if sizes.force else (),
                        time=(self.time,) if sizes.time else ())
 
-    async def _wait_for_operator(self, command: tuple[float, ...]) -> None:
-        """Wait (logging every PAUSE_LOG_INTERVAL s) until resumed or aborted."""
-        self.pending = command
-        log.warning("site %s: command %s at step %d waits for an operator (%s): "
-                    "'fresco-bridge ctl resume --site %s' or 'abort'", self.name, list(command),
-                    self.step + 1, self.reason, self.name)
-        await asyncio.sleep(0)  # leave the eager path: asyncio.timeout needs a task
-        waited = 0.0
-        try:
-            while self.state is PAUSED:
-                self._wake = wake = asyncio.Event()
-                try:
-                    async with asyncio.timeout(PAUSE_LOG_INTERVAL):
-                        await wake.wait()
-                except TimeoutError:
-                    waited += PAUSE_LOG_INTERVAL
-                    log.warning("site %s: still PAUSED after %.0f s (%s); client %s waits for "
-                                "step %d", self.name, waited, self.reason, self.peer,
-                                self.step + 1)
-        finally:
-            self.pending = None
-            self._wake = None
-
     # -- listeners ------------------------------------------------------------------------------
     def add_listener(self, listener: StepListener | EventListener) -> None:
         """Committed steps (``step_committed``) and/or events (``site_event``) go to
@@ -417,28 +380,32 @@ class ExperimentalSite:
         """An online monitor's warning at committed ``step`` (the taps raise it)."""
         self.event("monitor-warning", reason, step=step)
 
-    def _limit_event(self, hit: LimitHit, action: str) -> None:
-        """Every limit hit is counted, logged, recorded and published (also when clamped)."""
-        self.limit_counts[hit.limit] = self.limit_counts.get(hit.limit, 0) + 1
-        log.warning("site %s: LIMIT at step %d: %s (policy %s: %s)", self.name, self.step + 1,
-                    hit.describe(), hit.policy, action)
-        self.event("limit", hit.describe(), **hit.as_record(), action=action, step=self.step)
-
     # -- the step ------------------------------------------------------------------------------
+    # Each request has one implementation, ``*_eager``: it runs to the end at once when it can
+    # (an in-process controller, called through ``guard.now``) and returns its result; when it
+    # must wait (a controller on the network, an operator, a recovery) it returns a coroutine
+    # (``Later``) that finishes it. The handlers call these; the coroutines of the same names
+    # (``set_trial``…) are the API for everything else that drives a site.
     async def set_trial(self, trial: Signals) -> None:
+        """Code 3: validate, transform, check limits, forward (see ``set_trial_eager``)."""
+        later = self.set_trial_eager(trial)
+        if later is not None:
+            await later
+
+    def set_trial_eager(self, trial: Signals) -> Later[None] | None:
         """Code 3: validate, transform, check limits, forward. Never forwards an unsafe command.
 
         In FAULT nothing happens here: the replies of the session are NaN from now on.
         """
         if self.state is FAULT:
-            return
+            return None
         values = trial.disp + trial.vel + trial.accel + trial.time
         if not all_finite(values):
             if self.state is not HOLD:
                 bad = [v for v in values if not math.isfinite(v)]
                 self.enter_hold(f"non-finite trial value(s) {bad} (disp {list(trial.disp)}); "
                                 "not forwarded to the controller")
-            return
+            return None
         self.trial = trial
         if trial.time:
             self.time = trial.time[0]
@@ -447,106 +414,63 @@ class ExperimentalSite:
             if self.state is not HOLD:
                 self.enter_hold(f"setup {self.setup.kind} turned trial {list(trial.disp)} into "
                                 f"non-finite ctrl {list(target)}; not forwarded")
-            return
+            return None
         self.target = target
         if self.state is HOLD:
-            return
+            return None
         self._daq_valid = False
-        if self.state is RUNNING and self._ctrl_limiter is None:  # the hot path: no limits
-            ctrl = target
-            self.ctrl = ctrl
+        if self.state is RUNNING and self.clear_of_limits(target):  # the hot path
+            self.ctrl = target
             if self.recorder is not None:
-                self.recorder.trial(self.session, self.step, self.time, trial.disp, ctrl)
-            if ctrl != self.guard.sent:
-                await self._send(ctrl)
-            return
-        commands = await self._commands_for(target)
-        if commands is None:
-            return
-        ctrl = self.ctrl = commands[-1]
-        if self.recorder is not None:
-            self.recorder.trial(self.session, self.step, self.time, trial.disp, ctrl)
-        for command in commands:
-            if command != self.guard.sent and not await self._send(command):
-                return
+                self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
+            if target != self.guard.sent:
+                if self._now is None:
+                    return self._send_later(target)
+                self._uncommitted = True
+                self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
+                self._sent(target)
+            return None
+        return self.set_trial_later(trial, target)
+
+    async def _send_later(self, command: tuple[float, ...]) -> None:
+        await self._send(command)
 
     async def _send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
         self._uncommitted = True
-        await self.guard.guarded("set_ctrl", lambda: self.controller.set_ctrl(command), command)
+        if self._now is not None:
+            self.guard.now("set_ctrl", self._now.set_ctrl_now, command)
+        else:
+            await self.guard.guarded("set_ctrl", lambda: self.controller.set_ctrl(command),
+                                     command)
+        return self._sent(command)
+
+    def _sent(self, command: tuple[float, ...]) -> bool:
+        """After ``command`` went to the controller (or failed: the site is in HOLD)."""
         if self.state is HOLD or self.state is FAULT:
             self._reference = None  # where the actuator stopped is not known
             return False
         self.guard.sent = self._reference = command
         return True
 
-    async def _commands_for(
-        self, target: tuple[float, ...]
-    ) -> tuple[tuple[float, ...], ...] | None:
-        """Wait out a pause, apply the limits: the commands to send in order, or None."""
-        while True:
-            if self.state is PAUSED:
-                await self._wait_for_operator(target)
-            if self._ctrl_limiter is None:
-                commands: tuple[tuple[float, ...], ...] | None = (target,)
-            else:
-                commands = await self._limited(target)
-            state = self.state
-            if commands is None or state is HOLD:
-                return None
-            if state is RUNNING:
-                return commands
-            if state is FAULT:
-                return None  # aborted while waiting: the next reply request ends the session
-            if state is not PAUSED:  # no session (IDLE): nothing is ever forwarded
-                log.error("site %s: command %s without a running session not forwarded",
-                          self.name, list(target))
-                return None
-            # paused by the operator while the limits were being checked: wait, check again
-
-    async def _limited(self, target: tuple[float, ...]) -> tuple[tuple[float, ...], ...] | None:
-        """The commands to send for ``target`` under the limits, or None (HOLD)."""
-        limiter = self._ctrl_limiter
-        assert limiter is not None
-        if self._reference is None and limiter.needs_reference:
-            daq = await self.guard.guarded("get_daq (reference position)", self.controller.get_daq)
-            if daq is None:
-                return None
-            self._reference = daq.disp
-        approved = False
-        while True:
-            verdict = limiter.check_ctrl(target, self._reference, self.time - self._commit_time,
-                                         approved=approved)
-            if verdict is None:
-                return (target,)
-            action = verdict.action
-            for hit in verdict.hits:
-                self._limit_event(hit, action)
-            if action == "reject":
-                self.enter_hold(f"limit exceeded, command {list(target)} not forwarded: "
-                                f"{verdict.describe()}")
-                return None
-            if action == "pause":
-                self._transition(Trigger.PAUSE, f"limit exceeded, command {list(target)} "
-                                 f"waits for an operator: {verdict.describe()}", step=self.step)
-                await self._wait_for_operator(target)
-                if self.state is not RUNNING:
-                    return None  # aborted
-                approved = True  # the operator saw it: increment/velocity waived, absolute not
-                continue
-            if action == "substep":
-                log.info("site %s: step %d sent as %d sub-commands (velocity limit)",
-                         self.name, self.step + 1, len(verdict.commands))
-                self.event("substep", f"{len(verdict.commands)} sub-commands within the "
-                           "velocity limit", substeps=len(verdict.commands),
-                           target=list(verdict.commands[-1]), step=self.step)
-            return verdict.commands
-
     async def acquire(self) -> Daq:
+        """The measurement for the current command, acquired once per trial."""
+        daq = self.acquire_eager()
+        return daq if isinstance(daq, Daq) else await daq
+
+    def acquire_eager(self) -> Daq | Later[Daq]:
         """The measurement for the current command, acquired once per trial."""
         if self._daq_valid or self.state is HOLD:
             return self.daq
-        daq = await self.guard.guarded("get_daq", self.controller.get_daq)
+        if self._now is not None:
+            return self._measured(self.guard.now("get_daq", self._now.get_daq_now))
+        return self._acquire_later()
+
+    async def _acquire_later(self) -> Daq:
+        return self._measured(await self.guard.guarded("get_daq", self.controller.get_daq))
+
+    def _measured(self, daq: Daq | None) -> Daq:
+        """Check and record what the controller measured (None: it failed, the site HOLDs)."""
         if daq is None:
             return self.daq
         if not (all_finite(daq.disp) and all_finite(daq.force)):
@@ -557,7 +481,7 @@ class ExperimentalSite:
             if hit is not None:
                 if self.recorder is not None:  # a real measurement: keep it in the record
                     self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
-                self._limit_event(hit, "hold")
+                self.limit_event(hit, "hold")
                 self.enter_hold(f"daq limit exceeded: {hit.describe()}")
                 return self.daq
         self.daq = daq
@@ -567,13 +491,39 @@ class ExperimentalSite:
         return daq
 
     async def commit(self) -> None:
+        """Code 5 (see ``commit_eager``)."""
+        later = self.commit_eager()
+        if later is not None:
+            await later
+
+    def commit_eager(self) -> Later[None] | None:
         """Code 5 (also while PAUSED: it completes a step already forwarded)."""
         if self.state is HOLD or self.state is FAULT:
-            return
-        await self.acquire()  # every committed step has its measurement in the record
+            return None
+        daq = self.acquire_eager()  # every committed step has its measurement in the record
+        if not isinstance(daq, Daq):
+            return self._commit_later(daq)
         if self.state is HOLD:
-            return
-        await self.guard.guarded("commit", self.controller.commit)
+            return None
+        if self._now is None:
+            return self._commit_later(None)
+        self.guard.now("commit", self._now.commit_now)
+        self._committed()
+        return None
+
+    async def _commit_later(self, daq: Later[Daq] | None) -> None:
+        if daq is not None:
+            await daq
+            if self.state is HOLD:
+                return
+        if self._now is not None:
+            self.guard.now("commit", self._now.commit_now)
+        else:
+            await self.guard.guarded("commit", self.controller.commit)
+        self._committed()
+
+    def _committed(self) -> None:
+        """The controller committed (or failed to: then the site is in HOLD): the step counts."""
         self.step += 1
         self._uncommitted = False
         self._commit_time = self.time
@@ -585,11 +535,24 @@ class ExperimentalSite:
                 listener.step_committed(committed)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
+        """Measured signals in basic DOFs (see ``out_signals_eager``)."""
+        out = self.out_signals_eager(sizes)
+        return out if isinstance(out, Signals) else await out
+
+    def out_signals_eager(self, sizes: SignalSizes) -> Signals | Later[Signals]:
         """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them;
         NaN once the integrator must stop (see ``_tell_integrator_to_stop``)."""
         if self._stopping():
             return self._nan_signals(sizes)
-        daq = await self.acquire()
+        daq = self.acquire_eager()
+        if not isinstance(daq, Daq):
+            return self._out_later(daq, sizes)
+        return self._out(daq, sizes)
+
+    async def _out_later(self, daq: Later[Daq], sizes: SignalSizes) -> Signals:
+        return self._out(await daq, sizes)
+
+    def _out(self, daq: Daq, sizes: SignalSizes) -> Signals:
         if self._stopping():
             return self._nan_signals(sizes)
         disp = self.setup.out_disp(self.trial.disp, self.target, daq.disp)
@@ -603,22 +566,38 @@ class ExperimentalSite:
         )
 
     async def tangent(self) -> tuple[float, ...]:
+        """Tangent in basic DOFs (see ``tangent_eager``)."""
+        k = self.tangent_eager()
+        return k if isinstance(k, tuple) else await k
+
+    def tangent_eager(self) -> tuple[float, ...] | Later[tuple[float, ...]]:
         """Tangent in basic DOFs (the last good one if the controller cannot give it); NaN
         when the integrator must stop."""
         if self._stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
-        if self.state is not HOLD:
-            k = await self.guard.guarded("tangent_stiffness", self.controller.tangent_stiffness)
-            if k is not None:
-                self._k_tangent = self.setup.basic_matrix(k)
+        if self.state is HOLD:
+            return self._k_tangent
+        if self._now is None:
+            return self._tangent_later()
+        return self._tangent_from(self.guard.now("tangent_stiffness",
+                                                 self._now.tangent_stiffness_now))
+
+    async def _tangent_later(self) -> tuple[float, ...]:
+        return self._tangent_from(await self.guard.guarded(
+            "tangent_stiffness", self.controller.tangent_stiffness))
+
+    def _tangent_from(self, k: tuple[float, ...] | None) -> tuple[float, ...]:
+        if k is not None:
+            self._k_tangent = self.setup.basic_matrix(k)
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
         if self._stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
         if self._k_initial is None or self.state is not HOLD:
-            k = await self.guard.guarded("initial_stiffness", self.controller.initial_stiffness)
+            k = (self.guard.now("initial_stiffness", self._now.initial_stiffness_now)
+                 if self._now is not None else
+                 await self.guard.guarded("initial_stiffness", self.controller.initial_stiffness))
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)
         return self._k_initial if self._k_initial is not None else self._k_tangent
-

@@ -109,6 +109,16 @@ class ControllerGuard:
             return coro
         return asyncio.wait_for(coro, self.timeout)
 
+    def now(self, what: str, call: Callable[..., T], *args: Any) -> T | None:
+        """An in-process controller's synchronous call (``InlineController.*_now``): no
+        deadline, no recovery (there is no link to lose); a failure HOLDs (None), as in
+        ``guarded``."""
+        try:
+            return call(*args)
+        except ControllerError as exc:
+            self.site.enter_hold(f"controller failed on {what}: {exc}")
+            return None
+
     async def guarded(self, what: str, call: Callable[[], Coroutine[Any, Any, T]],
                       command: tuple[float, ...] | None = None) -> T | None:
         """``call()`` under the deadline; a failure HOLDs (None). A lost or silent controller

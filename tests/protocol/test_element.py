@@ -372,23 +372,31 @@ def test_reply_leftovers_can_be_zeroed() -> None:
         assert struct.unpack_from("<4d", server.send_daq(Signals(force=(5.0, 6.0)))) == expected
 
 
-def test_a_reused_matrix_reply_equals_a_fresh_one_with_the_same_leftovers() -> None:
-    """A tuple matrix is packed once and reused; the reply is byte for byte what packing it
-    again gives, leftovers included, and a list (mutable) is packed every time."""
-    size_id = SizeID.for_generic_client(2, 8)
-    damping = (1.0, 2.0, 3.0, 4.0)
-    stiff = [9.0, 8.0, 7.0, 6.0]
-    sequence = [(14, damping), (10, None), (13, stiff), (14, damping), (10, None), (14, damping)]
-    cached, fresh = server_with(size_id), server_with(size_id)
+@pytest.mark.parametrize("keep", [True, False])
+@pytest.mark.parametrize("n", [2, 4])  # 4: the matrix fills the whole reply (n*n = dataSize)
+def test_a_reused_matrix_reply_equals_a_fresh_one_with_the_same_leftovers(
+        n: int, keep: bool) -> None:
+    """A tuple matrix is packed once and reused (as the whole reply when it fills it); the
+    reply is byte for byte what packing it again gives, leftovers included, and a list
+    (mutable) is packed every time."""
+    size_id = SizeID.for_generic_client(n, 8)
+    assert (size_id.data_size == n * n) == (n == 4)
+    damping = tuple(float(i) for i in range(1, n * n + 1))
+    stiff = [9.0 - i for i in range(n * n)]
+    sequence = [(14, damping), (10, None), (13, stiff), (14, damping), (14, damping),
+                (10, None), (14, damping), (13, stiff), (10, None)]
+    cached = server_with(size_id, keep_reply_leftovers=keep)
+    fresh = server_with(size_id, keep_reply_leftovers=keep)
+    ds = size_id.data_size
     force = 10.0
     for code, matrix in sequence:
-        cached.receive_data(vector(code, 8))
-        fresh.receive_data(vector(code, 8))
+        cached.receive_data(vector(code, ds))
+        fresh.receive_data(vector(code, ds))
         cached.next_event()
         fresh.next_event()
         if matrix is None:
             force += 1.0
-            daq = Signals(force=(force, -force))
+            daq = Signals(force=tuple(force * (i + 1) for i in range(n)))
             assert cached.send_daq(daq) == fresh.send_daq(daq)
         else:
             assert cached.send_matrix(matrix) == fresh.send_matrix(list(matrix))

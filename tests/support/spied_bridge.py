@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 import pytest
 
+from fresco_bridge.controls.base import InlineController
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.sites import SiteState
@@ -44,13 +45,14 @@ def spy(bridge: BridgeThread, site: str = "spec") -> list[tuple[float, ...]]:
     """Every command that reaches the (real, in-process) controller, in order."""
     calls: list[tuple[float, ...]] = []
     controller = bridge.bridge.sites[site].controller
-    original = controller.set_ctrl
+    assert isinstance(controller, InlineController), "the site calls set_ctrl_now: spied here"
+    original = controller.set_ctrl_now
 
-    async def set_ctrl(disp: tuple[float, ...]) -> None:
+    def set_ctrl_now(disp: tuple[float, ...]) -> None:
         calls.append(disp)
-        await original(disp)
+        original(disp)
 
-    bridge.call(lambda: setattr(controller, "set_ctrl", set_ctrl))
+    bridge.call(lambda: setattr(controller, "set_ctrl_now", set_ctrl_now))
     return calls
 
 

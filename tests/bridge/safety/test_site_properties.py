@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fresco_bridge.config import parse_config
+from fresco_bridge.controls.base import InlineController
 from fresco_bridge.daemon import make_controller
 from fresco_bridge.eager import Suspended, start_eager
 from fresco_bridge.sites import ExperimentalSite, SiteError, SiteState
@@ -38,15 +39,16 @@ policy = "{policy}"
     cfg = parse_config(text).sites[0]
     controller = make_controller(cfg)
     sent: list[tuple[int, float]] = []  # (session, command)
-    original = controller.set_ctrl
+    assert isinstance(controller, InlineController), "set_ctrl_now is what is spied"
+    original = controller.set_ctrl_now
     site = ExperimentalSite(cfg, controller, None, controller_timeout=1.0)
 
-    async def spy(disp: tuple[float, ...]) -> None:
+    def spy(disp: tuple[float, ...]) -> None:
         assert site.state is SiteState.RUNNING, f"command {disp} forwarded in {site.state}"
         sent.append((site.session, disp[0]))
-        await original(disp)
+        original(disp)
 
-    controller.set_ctrl = spy  # type: ignore[method-assign]
+    controller.set_ctrl_now = spy  # type: ignore[method-assign]
     return site, sent
 
 

@@ -7,7 +7,7 @@ arguments, so hypothesis (shrinking) and a seeded generator drive the same code.
 Sites: ``good`` (only ever used by the well-behaved client of the invariant check), ``fuzz``
 (TCP) and ``fuzzu`` (UDP), all an elastic specimen of stiffness ``K`` behind absolute limits
 ±``LIMIT`` mm and an increment limit, policy ``reject``. A spy on every controller's
-``set_ctrl`` records what reached a controller.
+``set_ctrl_now`` records what reached a controller.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import time
 from collections import deque
 from pathlib import Path
 
+from fresco_bridge.controls.base import InlineController
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import read_record
@@ -80,13 +81,15 @@ class FuzzTarget:
         self.bridge: BridgeThread = RunningBridge(CONFIG, run_root).__enter__()
         self.sent: list[tuple[float, ...]] = []
         for site in self.bridge.bridge.sites.values():
-            original = site.controller.set_ctrl
+            controller = site.controller
+            assert isinstance(controller, InlineController), "set_ctrl_now is what is spied"
+            original = controller.set_ctrl_now
 
-            async def spy(ctrl: tuple[float, ...], _orig=original) -> None:  # type: ignore[no-untyped-def]
+            def spy(ctrl: tuple[float, ...], _orig=original) -> None:  # type: ignore[no-untyped-def]
                 self.sent.append(tuple(ctrl))
-                await _orig(ctrl)
+                _orig(ctrl)
 
-            site.controller.set_ctrl = spy  # type: ignore[method-assign]
+            controller.set_ctrl_now = spy  # type: ignore[method-assign]
         self.held: deque[socket.socket] = deque()
         self.inputs = 0
         self.good_sessions = 0
