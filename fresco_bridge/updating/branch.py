@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.updating.base import UpdaterError, UpdaterInputError
+from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = ["BranchMemory", "BranchRls", "ReversalBasis", "initial_stiffness"]
@@ -211,7 +211,7 @@ class _Twin:
         return twin
 
 
-class BranchRls:
+class BranchRls(OwnsTwin):
     """One expert (see the module docstring); ``offline`` = (displacement, force) arrays."""
 
     name = "online_improved"
@@ -290,12 +290,7 @@ class BranchRls:
         return f_r + direction * float(phi @ self.weights)
 
     def observe(self, d: float, force: float) -> None:
-        if not (isinstance(d, int | float) and isinstance(force, int | float)
-                and math.isfinite(d) and math.isfinite(force)):  # fmt: skip
-            raise UpdaterInputError(
-                f"online_improved: measurement must be finite numbers, got d={d!r}, "
-                f"force={force!r}; nothing was learned from it"
-            )
+        d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         memory = self._source
         if d != memory.d:
@@ -315,12 +310,4 @@ class BranchRls:
             self.weights = np.asarray(np.linalg.solve(self._info, self._rhs), dtype=np.float64)
         self._source = memory.advanced(d, force)
         self._last_update = time.perf_counter() - start
-
-    @property
-    def twin(self) -> HysteresisModel:
-        return self._twin
-
-    @property
-    def last_update_seconds(self) -> float:
-        return self._last_update
 

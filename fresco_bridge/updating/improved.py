@@ -37,7 +37,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.updating.base import UpdaterError, UpdaterInputError
+from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, ReversalBasis
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
@@ -113,7 +113,7 @@ class _MixtureTwin:
         return twin
 
 
-class OnlineImproved:
+class OnlineImproved(OwnsTwin):
     """Our updater (see the module docstring); ``offline`` = (displacement, force) arrays.
 
     Keyword options only, so the class itself is the registry's factory."""
@@ -169,12 +169,7 @@ class OnlineImproved:
         return np.asarray(w / w.sum(), dtype=np.float64)
 
     def observe(self, d: float, force: float) -> None:
-        if not (isinstance(d, int | float) and isinstance(force, int | float)
-                and math.isfinite(d) and math.isfinite(force)):  # fmt: skip
-            raise UpdaterInputError(
-                f"online_improved: measurement must be finite numbers, got d={d!r}, "
-                f"force={force!r}; nothing was learned from it"
-            )
+        d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
         for k, expert in enumerate(self.experts):
@@ -190,11 +185,3 @@ class OnlineImproved:
             self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
             expert.observe(d, force)
         self._last_update = time.perf_counter() - start
-
-    @property
-    def twin(self) -> HysteresisModel:
-        return self._twin
-
-    @property
-    def last_update_seconds(self) -> float:
-        return self._last_update

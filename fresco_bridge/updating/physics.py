@@ -19,14 +19,13 @@ data do not support a residual.
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.updating.base import UpdaterError, UpdaterInputError
+from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BranchRls, initial_stiffness
 from sim_actuator.models.base import HysteresisModel, ModelInputError, ModelParameterError
 from sim_actuator.models.bouc_wen import BoucWen
@@ -119,7 +118,7 @@ class _PhysicsTwin:
         return _PhysicsTwin(self._law.clone(), self._residual.clone())
 
 
-class PhysicsResidual:
+class PhysicsResidual(OwnsTwin):
     """Bouc-Wen law (fitted offline, fixed) + residual reversal basis (RLS online)."""
 
     name = "online_improved"
@@ -152,19 +151,9 @@ class PhysicsResidual:
         return f_law + self.residual.predict(d)
 
     def observe(self, d: float, force: float) -> None:
-        if not (math.isfinite(d) and math.isfinite(force)):
-            raise UpdaterInputError(f"online_improved: measurement must be finite numbers, got "
-                                    f"d={d!r}, force={force!r}; nothing was learned from it")
+        d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         f_law = self._source.set_trial(d)[0]
         self._source.commit()
         self.residual.observe(d, force - f_law)
         self._last_update = time.perf_counter() - start
-
-    @property
-    def twin(self) -> HysteresisModel:
-        return self._twin
-
-    @property
-    def last_update_seconds(self) -> float:
-        return self._last_update

@@ -12,6 +12,7 @@ from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, initial_stiffness
 from fresco_bridge.updating.improved import EXPERTS, OnlineImproved
 from sim_actuator.models import make_model
+from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 8.0, "fy": 12.0, "alpha": 0.03, "R0": 12.0, "a1": 0.03, "a3": 0.03}
 
@@ -41,25 +42,8 @@ def updater() -> OnlineImproved:
 
 def test_it_is_an_updater_with_material_semantics(updater: OnlineImproved) -> None:
     assert isinstance(updater, Updater)
-    twin = updater.twin
-    for d in (0.5, 2.0, 1.0):
-        twin.set_trial(d)
-        twin.commit()
-    committed = twin.committed
-    first = twin.set_trial(3.0)
-    for d in (-5.0, 7.0, 3.3):
-        twin.set_trial(d)
-    assert twin.committed == committed
-    assert twin.set_trial(3.0) == first
-    twin.revert_to_last_commit()
-    assert twin.committed == committed
-    clone = twin.clone()
-    twin.set_trial(4.0)
-    twin.commit()
-    assert clone.committed == committed
-    twin.revert_to_start()
-    assert twin.committed == (0.0, 0.0)
-    assert 4.0 < twin.initial_tangent < 12.0  # learned: the law's k0 is 8
+    assert_material_semantics(updater.twin)
+    assert 4.0 < updater.twin.initial_tangent < 12.0  # learned: the law's k0 is 8
 
 
 @pytest.mark.parametrize("bad", [(math.nan, 1.0), (1.0, math.inf), (-math.inf, 0.0)])
