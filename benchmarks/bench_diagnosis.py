@@ -6,7 +6,9 @@ models' default resolution and at the diagnosis' (``DZ_MAX``); alternated, >= 3 
 min/median. Then ``diagnose`` (every candidate, pairs when triggered) on a 3000-step rig record
 and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), plus one cold
 CLI run in a fresh process (imports, JIT cache load) and the JIT compile cost with an empty
-cache. Run pinned: ``taskset -c 1 python -m benchmarks.bench_diagnosis``.
+cache; then the MR damper's first 30 000 samples (``../shared``: a benchmark may read it), CPU
+time in a fresh process per round, optionally alternated with another source tree. Run pinned:
+``taskset -c 1 python -m benchmarks.bench_diagnosis [--only mr --against TREE]``.
 """
 
 from __future__ import annotations
@@ -125,8 +127,59 @@ def cold() -> None:
               f"{float(out):.2f} s")
 
 
+MR_DAMPER = (Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
+             / "mr_damper_dyke_nees2012_1158" / "ransim_u_converted.csv.gz")
+MR_SAMPLES = 30_000
+_MR_CODE = """
+import csv, gzip, io, sys, time
+import numpy as np
+from fresco_bridge.diagnosis.load import record_from_arrays
+from fresco_bridge.diagnosis.verdict import diagnose
+rows = list(csv.reader(io.StringIO(gzip.decompress(open(sys.argv[1], 'rb').read()).decode())))
+cols = {h: i for i, h in enumerate(rows[0])}
+body = np.array([[float(r[cols[k]]) for k in 't D F'.split()] for r in rows[1:] if r and r[0]])
+body = body[:int(sys.argv[2])]
+warm = record_from_arrays(body[:300, 0], body[:300, 1] * 10.0, body[:300, 2] * 1e-3)
+diagnose(warm)  # JIT code loaded before the clock starts
+record = record_from_arrays(body[:, 0], body[:, 1] * 10.0, body[:, 2] * 1e-3, source='mr')
+started = time.process_time()
+result = diagnose(record)
+print(time.process_time() - started, result['baseline']['kind'], result['verdict']['effect'])
+"""
+
+
+def mr_damper(against: str | None) -> None:
+    """The MR damper's first 30 000 samples (cm, N -> mm, kN), every candidate, in a fresh
+    process per round (CPU time of the diagnosis alone); with ``against`` (a source tree, e.g.
+    ``git archive main``) the same in that tree, alternated round by round."""
+    variants = {"this tree": str(Path(__file__).resolve().parents[1])}
+    if against is not None:
+        variants["against " + against] = against
+    cpus: dict[str, list[float]] = {k: [] for k in variants}
+    for _ in range(ROUNDS):
+        for name, tree in variants.items():
+            env = dict(os.environ, PYTHONPATH=tree)
+            out = subprocess.run([sys.executable, "-c", _MR_CODE, str(MR_DAMPER),
+                                  str(MR_SAMPLES)], env=env, cwd=tree, check=True,
+                                 capture_output=True, text=True).stdout.split()
+            cpus[name].append(float(out[0]))
+            print(f"  {name}: {float(out[0]):.1f} s CPU (baseline {out[1]}, verdict {out[2]})",
+                  flush=True)
+    for name in variants:
+        print(f"MR damper ransim_u, first {MR_SAMPLES} samples, diagnosis CPU via {name}: "
+              f"{_stats(cpus[name])}")
+
+
 if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=("routes", "diagnoses", "cold", "mr"), default=None)
+    parser.add_argument("--against", default=None, metavar="TREE",
+                        help="mr: also run this source tree, alternated (e.g. git archive main)")
+    args = parser.parse_args()
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()}")
-    routes()
-    diagnoses()
-    cold()
+    for name, run in (("routes", routes), ("diagnoses", diagnoses), ("cold", cold),
+                      ("mr", lambda: mr_damper(args.against))):
+        if args.only in (None, name):
+            run()

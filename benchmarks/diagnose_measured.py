@@ -77,17 +77,17 @@ def main() -> None:
     parser.add_argument("--only", default=None, help="substring of the test names to run")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for name, path, units, note in tests(args.out):
         if args.only and args.only not in name:
             continue
         out_json = path.with_suffix(".json")
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         rc = cli_main(["diagnose", str(path), "--units", units, "--json", str(out_json),
                        "--report", str(path.with_suffix("")), "--no-progress"])
-        wall = time.perf_counter() - started
+        wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
         if rc != 0:
-            rows.append((name, "error", "", "", "", f"{wall:.1f}"))
+            rows.append((name, "error", "", "", "", "", f"{wall:.1f}", f"{cpu:.1f}"))
             continue
         doc = json.loads(out_json.read_text())
         v = doc["verdict"]
@@ -95,12 +95,13 @@ def main() -> None:
         params = "" if winner is None else ", ".join(
             f"{k} {p['value']:.4g}±{(p['std'] or 0):.2g} {p['unit']}"
             for k, p in winner["params"].items())
-        rows.append((name, f"{doc['record']['samples']}", v["effect"],
+        rows.append((name, f"{doc['record']['samples']}", doc["baseline"]["kind"], v["effect"],
                      f"{v['confidence']:.2f}",
                      f"{v['gap_before_pct']:.2f} → {v['gap_after_pct']:.2f} %", params,
-                     f"{wall:.1f}", note))
-    print("| test | samples | verdict | confidence | withheld gap | parameters | s | note |")
-    print("|---|---|---|---|---|---|---|---|")
+                     f"{wall:.1f}", f"{cpu:.1f}", note))
+    print("| test | samples | baseline | verdict | confidence | withheld gap | parameters | "
+          "wall s | CPU s | note |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print("| " + " | ".join(r) + " |")
 

@@ -12,19 +12,22 @@ forms, not the candidates' shapes) instead of ``synth.synthetic_record``; same s
 from __future__ import annotations
 
 import math
+import os
+import pickle
 import time
 from collections import Counter
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .model import EFFECT_NAMES
-from .synth import synthetic_record
+from .synth import SyntheticRecord, synthetic_record
 from .verdict import diagnose
 
 __all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "diagnose_one", "effect_magnitude",
-           "format_bench", "summarise_bench"]
+           "format_bench", "generate", "summarise_bench"]
 
 CLASSES = (*EFFECT_NAMES, "none", "none")
 MAGNITUDE_OF = {
@@ -34,40 +37,74 @@ MAGNITUDE_OF = {
 }
 """The parameter whose relative error is the effect's "magnitude" error. For degradation it is
 the mean of delta_nu and delta_eta: on these records strength and stiffness degradation trade
-off against each other (their sum is well determined, each alone is not; both are reported)."""
+off against each other (their sum is well determined, each alone is not; both are reported),
+per unit *physical* hysteretic energy (kN*mm), i.e. times k0 / fy**2 of the law it belongs to.
+Bouc-Wen's fy and beta + gamma are redundant (only (beta + gamma) / fy**n enters the force), so
+a fit may land anywhere on that ridge, and a rate per unit energy normalised by the fitted
+fy * dy moves with it; the rate per kN*mm does not."""
 
 
-def effect_magnitude(effect: str, values: Mapping[str, float]) -> float | None:
-    """The effect's magnitude from its parameter values (None when absent)."""
+def effect_magnitude(effect: str, values: Mapping[str, float],
+                     law: Mapping[str, float] | None = None) -> float | None:
+    """The effect's magnitude from its parameter values (None when absent); ``law`` (k0, fy)
+    puts an energy rate in physical units."""
     name = MAGNITUDE_OF.get(effect)
     if name == "delta_mean":
         if "delta_nu" not in values or "delta_eta" not in values:
             return None
-        return 0.5 * (values["delta_nu"] + values["delta_eta"])
+        mean = 0.5 * (values["delta_nu"] + values["delta_eta"])
+        return mean if law is None else mean * law["k0"] / law["fy"] ** 2
     return None if name is None or name not in values else values[name]
+
+
 MAGNITUDE_TOLERANCE = 0.20
 
 
-BenchItem = tuple[int, str, int, int, bool]
-"""(index, effect, record seed, steps, realism) of one record."""
+BenchItem = tuple[int, str, int, int, bool, str | None]
+"""(index, effect, record seed, steps, realism, record cache directory or None) of a record."""
 
 
-def bench_items(n: int, seed: int, steps: int, realism: bool = False) -> list[BenchItem]:
-    """(index, effect, record seed, steps, realism) of every record of the bench."""
-    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism)
+def bench_items(n: int, seed: int, steps: int, realism: bool = False,
+                cache: str | None = None) -> list[BenchItem]:
+    """(index, effect, record seed, steps, realism, cache) of every record of the bench."""
+    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism, cache)
             for i in range(n)]
 
 
-def diagnose_one(item: BenchItem) -> dict[str, Any]:
-    """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
-    index, effect, record_seed, steps, realism = item
-    started = time.perf_counter()
+def generate(item: BenchItem) -> SyntheticRecord:
+    """Record ``item`` as the generator makes it; with a cache directory, read from there when
+    it was generated before (a compliant-frame realism record takes minutes on the rig's
+    substep solver, its diagnosis seconds), written there otherwise. The cache is keyed by
+    bench, seed, effect and steps and is only ever written by this function (pickle: trusted,
+    local)."""
+    _index, effect, record_seed, steps, realism, cache = item
+    path = None
+    if cache is not None:
+        path = Path(cache) / (f"{'realism' if realism else 'plain'}-{record_seed}-{effect}-"
+                              f"{steps}.pickle")
+        if path.exists():
+            loaded = pickle.loads(path.read_bytes())
+            if isinstance(loaded, SyntheticRecord):
+                return loaded
     if realism:
         from .realism import realistic_record
 
         synthetic = realistic_record(effect, record_seed, steps=steps)
     else:
         synthetic = synthetic_record(effect, record_seed, steps=steps)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(pickle.dumps(synthetic))
+        tmp.replace(path)
+    return synthetic
+
+
+def diagnose_one(item: BenchItem) -> dict[str, Any]:
+    """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
+    index, effect, record_seed, _steps, _realism, _cache = item
+    started = time.perf_counter()
+    synthetic = generate(item)
     generated = time.perf_counter()
     result = diagnose(synthetic.record)
     verdict = result["verdict"]
@@ -76,12 +113,19 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
         name: p["value"] for name, p in true_candidate["params"].items()}
     errors = {name: abs(estimates[name] - value) / abs(value)
               for name, value in synthetic.truth.items() if name in estimates and value}
-    true_size = effect_magnitude(effect, synthetic.truth)
-    found = effect_magnitude(effect, estimates)
+    true_size = effect_magnitude(effect, synthetic.truth, synthetic.specimen)
+    found = effect_magnitude(effect, estimates,
+                             None if true_candidate is None else true_candidate["law"])
     if true_size and found is not None:
         errors["magnitude"] = abs(found - true_size) / abs(true_size)
+        plain_truth, plain_found = (effect_magnitude(effect, synthetic.truth),
+                                    effect_magnitude(effect, estimates))
+        if plain_truth and plain_found is not None and plain_truth != true_size:
+            # the earlier definition (per unit energy normalised by each law's own fy * dy)
+            errors["magnitude_normalised"] = abs(plain_found - plain_truth) / abs(plain_truth)
     return {
         "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
+        "baseline": result["baseline"]["kind"],
         "confidence": verdict["confidence"], "truth": synthetic.truth, "estimates": estimates,
         "relative_errors": errors, "specimen": synthetic.specimen, "law": synthetic.law,
         "gap_before_pct": result["baseline"]["gap_withheld"]["total_pct"],
@@ -132,7 +176,8 @@ def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
             for law in sorted({r.get("law", "bouc-wen") for r in rows})
             for sub in [[r for r in rows if r.get("law", "bouc-wen") == law]]},
         "failures": [{k: r.get(k) for k in ("index", "seed", "effect", "predicted",
-                                            "confidence", "gap_before_pct", "truth", "law")}
+                                            "confidence", "gap_before_pct", "truth", "law",
+                                            "baseline")}
                      for r in rows if r["predicted"] != r["effect"]],
     }
 
@@ -176,7 +221,8 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
         d = summary["diagnose_seconds"]
         lines.append(f"diagnosis time per record: median {d['median']:.1f} s, max {d['max']:.1f} s")
     for f in summary["failures"]:
-        lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}) "
+        lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}, baseline "
+                     f"{f.get('baseline')}) "
                      f"{f['effect']} -> {f['predicted']} (confidence {f['confidence']:.2f}, "
                      f"gap {f['gap_before_pct']:.2f} %)")
     return "\n".join(lines)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from .load import UNITS, DiagnosisInputError, load_record
-from .names import BASELINES
+from .names import AUTO, AUTO_FAMILIES, BASELINES
 
 __all__ = ["COMMANDS", "add_diagnosis_parsers", "diagnosis_command", "read_baseline"]
 
@@ -22,8 +22,9 @@ COMMANDS = frozenset({"diagnose", "diagnose-bench"})
 _TOML_NAMES = {
     "bilinear": ("k0", "fy", "alpha"),
     "bouc-wen": ("k0", "fy", "alpha", "n", "beta", "gamma"),
-    "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "delta_nu",
+    "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "p", "delta_nu",
              "delta_eta"),
+    "menegotto-pinto": ("k0", "fy", "alpha", "R0", "cR1", "cR2"),
 }
 
 
@@ -36,9 +37,11 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
     p.add_argument("record", type=Path,
                    help="a bridge run directory, or a CSV with time,cmd_disp,meas_force "
                         "(meas_disp optional)")
-    p.add_argument("--baseline", default="bouc-wen",
-                   help=f"the sim's law: {', '.join(BASELINES)}, or a PARAMS.toml "
-                        "(kind, [params], fit = true|false); default bouc-wen")
+    p.add_argument("--baseline", default=AUTO,
+                   help=f"the sim's law: {AUTO} (default: each of "
+                        f"{', '.join(AUTO_FAMILIES)} fitted on the calibration part, the one "
+                        f"the BIC prefers kept), {', '.join(BASELINES)}, or a PARAMS.toml "
+                        "(kind, [params], fit = true|false)")
     p.add_argument("--site", default=None, help="the site to diagnose (records with several)")
     p.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write the diagnosis as JSON (schema: README)")
@@ -66,18 +69,21 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                         "specimen in a third of the records, varied noise")
     b.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write every record's result and the summary as JSON")
+    b.add_argument("--records", type=Path, default=None, metavar="DIR",
+                   help="keep the generated records in DIR and reuse them on the next run "
+                        "(a realism record can take minutes to generate)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def read_baseline(text: str) -> tuple[str, dict[str, float], bool]:
     """(kind, given parameters in fitting names, fit?) from ``--baseline``."""
-    if text in BASELINES:
+    if text == AUTO or text in BASELINES:
         return text, {}, True
     path = Path(text)
     if path.suffix != ".toml":
         raise DiagnosisInputError(
-            f"--baseline: unknown baseline {text!r}; choose {', '.join(BASELINES)} or a "
-            "PARAMS.toml file")
+            f"--baseline: unknown baseline {text!r}; choose {AUTO}, {', '.join(BASELINES)} "
+            "or a PARAMS.toml file")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -154,7 +160,8 @@ def _bench(args: argparse.Namespace) -> int:
         raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
     if args.steps < 200:
         raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
-    items = bench_items(args.n, args.seed, args.steps, args.realism)
+    items = bench_items(args.n, args.seed, args.steps, args.realism,
+                        None if args.records is None else str(args.records))
     bar = ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress)
     started = time.perf_counter()
     rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,

@@ -26,7 +26,7 @@ from sim_actuator.models.paths import drive_many
 
 from .model import DZ_MAX, Context, Param, Spec, _law_vector, finish, law_force, piston_path
 
-__all__ = ["Fit", "fit_spec", "predict"]
+__all__ = ["Fit", "autocorrelation", "fit_spec", "predict"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -126,7 +126,7 @@ class _Problem:
         return jac
 
 
-def _autocorrelation(r: FloatArray) -> float:
+def autocorrelation(r: FloatArray) -> float:
     r = r - r.mean()
     denom = float(np.dot(r, r))
     return float(np.dot(r[1:], r[:-1])) / denom if denom > 0.0 else 0.0
@@ -157,7 +157,7 @@ def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None,
     r = np.asarray(result.fun, dtype=np.float64)
     jac = np.asarray(result.jac, dtype=np.float64)
     dof = max(r.size - x.size, 1)
-    rho = min(max(_autocorrelation(r), 0.0), 0.99)
+    rho = min(max(autocorrelation(r), 0.0), 0.99)
     s2 = float(np.dot(r, r)) / dof * (1.0 + rho) / (1.0 - rho)
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     std = {p.name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, p in enumerate(problem.free)}

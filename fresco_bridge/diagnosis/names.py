@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
-__all__ = ["BASELINES", "EFFECT_NAMES"]
+__all__ = ["AUTO", "AUTO_FAMILIES", "BASELINES", "EFFECT_NAMES"]
 
-BASELINES = ("bilinear", "bouc-wen", "bwbn")
+BASELINES = ("bilinear", "bouc-wen", "bwbn", "menegotto-pinto")
+"""The laws a baseline can be (``sim_actuator.models`` kinds with a fast drive)."""
+AUTO = "auto"
+"""``--baseline auto`` (the default): the tool chooses the law on the calibration part."""
+AUTO_FAMILIES = ("bilinear", "bouc-wen", "menegotto-pinto")
+"""What ``auto`` chooses from: the specimen laws without an effect built in (BWBN's pinching and
+degradation are candidate effects, so a BWBN baseline would hide them)."""
 EFFECT_NAMES = ("actuator_delay", "actuator_amplitude", "backlash", "friction", "pinching",
                 "degradation", "rate_dependence", "sensor_bias", "sensor_noise")
 """The candidate effects, in the order they are reported (``none`` is the baseline alone)."""

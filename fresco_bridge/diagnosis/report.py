@@ -38,6 +38,9 @@ def summary(result: dict[str, Any]) -> str:
         f"calibration {cal[0]}-{cal[1]}, withheld {wh[0]}-{wh[1]}",
         f"baseline  {base['kind']}: " + ", ".join(
             f"{k} {_f(v)}" for k, v in base["params"].items()),
+        *([] if base.get("selection") is None else
+          [f"          chosen by {base['requested']} (BIC, calibration part): "
+           f"{base['selection']['reason']}"]),
         f"gap       withheld: force {_pct(gap['force_pct'])}, displacement "
         f"{_pct(gap['disp_pct'])}, total {_pct(gap['total_pct'])} (floor "
         f"{noise['floor_pct']:g} %, white noise alone {_pct(noise['noise_only_gap_pct'])})",
@@ -117,7 +120,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     x = m if m is not None else c
     ax.plot(x[::k], f[::k], lw=0.9, color="0.2", label="measured")
     ax.plot(c[::k], sim[::k], lw=0.9, ls="--", color="tab:blue", label="sim (baseline)")
-    if best is not None and name not in ("none", "unexplained"):
+    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
         bd = s["best_disp"] if s["best_disp"] is not None else c
         ax.plot(bd[::k], best[::k], lw=0.9, ls=":", color="tab:red", label=f"sim + {name}")
     ax.set_xlabel("displacement (mm)")
@@ -132,7 +135,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     ax = fig.add_subplot()
     phase = phase_angle(c)
     ax.scatter(phase[::k], (f - sim)[::k], s=3, alpha=0.5, label="measured − sim (baseline)")
-    if best is not None and name not in ("none", "unexplained"):
+    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
         ax.scatter(phase[::k], (f - best)[::k], s=3, alpha=0.5, color="tab:red",
                    label=f"measured − sim + {name}")
     ax.set_xlabel("loop phase of the command (deg; 0 = positive peak, ±180 = negative peak)")
@@ -154,7 +157,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     for label, r, color in (("force: measured − sim", f - sim, "tab:blue"),
                             (f"force: measured − sim + {name}",
                              None if best is None else f - best, "tab:red")):
-        if r is None or (name in ("none", "unexplained") and color == "tab:red"):
+        if r is None or (name in ("none", "unexplained", "baseline_misfit") and color == "tab:red"):
             continue
         spectrum = np.abs(np.fft.rfft((r - r.mean()) * np.hanning(r.size)))[1:]
         ax.semilogy(freqs, spectrum, lw=0.8, color=color, label=label)

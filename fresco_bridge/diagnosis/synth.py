@@ -21,7 +21,6 @@ import numpy.typing as npt
 from sim_actuator.config import build_rig, parse_rig_config
 
 from .load import Record, record_from_arrays
-from .model import PINCHING_FIXED
 
 __all__ = [
     "MAGNITUDES",
@@ -48,6 +47,10 @@ MAGNITUDES: dict[str, str] = {
     "none": "instrument noise only",
 }
 """What each effect's random magnitude is drawn from (the bench's definition)."""
+
+PLAIN_PINCHING = {"p": 1.0, "lam": 0.5, "delta_psi": 0.0}
+"""The plain bench's pinching build-up: within the first cycle (p = 1 per unit normalised
+energy), Foliente's coupling 0.5, a constant spread."""
 
 NOMINAL_LVDT_NOISE = 0.001
 """Instrument noise of every record: LVDT std as a fraction of the peak displacement."""
@@ -130,7 +133,7 @@ def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
         kind = "bwbn"
         truth.update(zeta_s=_uniform(rng, 0.3, 0.8), psi0=_uniform(rng, 0.1, 0.3),
                      q=_uniform(rng, 0.0, 0.2))
-        specimen.update(truth, **PINCHING_FIXED)
+        specimen.update(truth, **PLAIN_PINCHING)
     elif effect == "degradation":
         kind = "bwbn"
         delta = _uniform(rng, 0.2, 0.6) / path_u

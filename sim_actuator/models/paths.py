@@ -6,7 +6,8 @@ A fit evaluates a law over a whole displacement history hundreds of times; the p
 objects (``set_trial``/``commit``) cost tens of ms per 3000-step history, this form well under
 one. It is the *same* algorithm as the scalar models, operation for operation — Steel01 of
 ``bilinear``; the BWBN equations, RK4 substeps sized by ``dz_max`` and the split at z = 0 of
-``bwbn`` (classic Bouc-Wen is BWBN with no degradation and no pinching) — and
+``bwbn`` (classic Bouc-Wen is BWBN with no degradation and no pinching); Steel02 of
+``menegotto_pinto`` (closed form per trial: no substeps) — and
 ``tests/sim_actuator/test_model_paths.py`` checks it against them to ~1e-12. Change a law in
 both places or in neither.
 
@@ -30,11 +31,15 @@ import numpy.typing as npt
 from numba import njit
 
 from sim_actuator.models.bouc_wen import DEFAULT_DZ_MAX, MAX_SUBSTEPS
+from sim_actuator.models.menegotto_pinto import MenegottoPinto
 
 __all__ = [
     "BWBN_PARAMETERS",
     "LAW_BILINEAR",
     "LAW_BWBN",
+    "LAW_MENEGOTTO_PINTO",
+    "MENEGOTTO_PINTO_PARAMETERS",
+    "STATE_SIZE",
     "bwbn_vector",
     "drive",
     "drive_many",
@@ -47,6 +52,9 @@ LAW_BILINEAR = 0
 """``params`` = [k0, fy, alpha]."""
 LAW_BWBN = 1
 """``params`` = :data:`BWBN_PARAMETERS` in that order (Bouc-Wen: A0 = A, the rest zero)."""
+LAW_MENEGOTTO_PINTO = 2
+"""``params`` = :data:`MENEGOTTO_PINTO_PARAMETERS` in that order (Steel02)."""
+MENEGOTTO_PINTO_PARAMETERS = ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1", "a2", "a3", "a4")
 
 BWBN_PARAMETERS = (
     "k0", "fy", "alpha", "n", "beta", "gamma", "A0", "delta_a", "delta_nu", "delta_eta",
@@ -71,7 +79,13 @@ def law_vector(kind: str, params: Mapping[str, float]) -> tuple[int, FloatArray]
         return LAW_BILINEAR, np.array([params["k0"], params["fy"], params["alpha"]], np.float64)
     if kind in ("bouc-wen", "bwbn"):
         return LAW_BWBN, bwbn_vector(params)
-    raise ValueError(f"no fast drive for model kind {kind!r} (bilinear, bouc-wen, bwbn)")
+    if kind == "menegotto-pinto":
+        values = {p.name: p.default for p in MenegottoPinto.PARAMS if p.default is not None}
+        values.update(params)
+        return LAW_MENEGOTTO_PINTO, np.array(
+            [float(values[name]) for name in MENEGOTTO_PINTO_PARAMETERS], np.float64)
+    raise ValueError(f"no fast drive for model kind {kind!r} "
+                     "(bilinear, bouc-wen, bwbn, menegotto-pinto)")
 
 
 # -- BWBN (bwbn.py, line by line) ----------------------------------------------------------------
@@ -188,24 +202,103 @@ def _bilinear_trial(prm: FloatArray, d_c: float, f_c: float, d: float) -> float:
     return f_c
 
 
+# -- Giuffre-Menegotto-Pinto, Steel02 (menegotto_pinto.py, line by line) ----------------------
+_MP_VIRGIN, _MP_LOADING, _MP_UNLOADING, _MP_AT_REST = 0.0, 1.0, 2.0, 3.0
+
+
 @njit(cache=True)
-def _trial(law: int, prm: FloatArray, state: FloatArray, d: float,
-           dz_max: float) -> tuple[float, float, float, bool]:
-    """(force, z, e, ok); ``state`` = [d_c, f_c, z_c, e_c]."""
+def _mp_trial(prm: FloatArray, c: FloatArray, d: float, out: FloatArray) -> bool:
+    """Trial of ``MenegottoPinto.set_trial`` from the committed state ``c`` into ``out``
+    (layout of :func:`_drive`'s state; the tangent is not kept)."""
+    d_step = d - c[0]
+    if not math.isfinite(d_step):
+        return False
+    k0, fy, alpha = prm[0], prm[1], prm[2]
+    esh = alpha * k0
+    dy = fy / k0
+    d_max, d_min, d_pl, d_0, f_0, d_r, f_r, kon = c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11]
+    if kon in (_MP_VIRGIN, _MP_AT_REST):
+        if abs(d_step) < 10.0 * _DBL_EPSILON:
+            out[:] = c
+            out[0], out[1], out[11] = d, 0.0, _MP_AT_REST
+            return True
+        d_max = dy
+        d_min = -dy
+        if d_step < 0.0:
+            kon, d_0, f_0, d_pl = _MP_UNLOADING, d_min, -fy, d_min
+        else:
+            kon, d_0, f_0, d_pl = _MP_LOADING, d_max, fy, d_max
+    if kon == _MP_UNLOADING and d_step > 0.0:
+        kon = _MP_LOADING
+        d_r, f_r = c[0], c[1]
+        if c[0] < d_min:
+            d_min = c[0]
+        d1 = (d_max - d_min) / (2.0 * (prm[9] * dy))
+        shift = 1.0 + prm[8] * d1**0.8
+        d_0 = (fy * shift - esh * dy * shift - f_r + k0 * d_r) / (k0 - esh)
+        f_0 = fy * shift + esh * (d_0 - dy * shift)
+        d_pl = d_max
+    elif kon == _MP_LOADING and d_step < 0.0:
+        kon = _MP_UNLOADING
+        d_r, f_r = c[0], c[1]
+        if c[0] > d_max:
+            d_max = c[0]
+        d1 = (d_max - d_min) / (2.0 * (prm[7] * dy))
+        shift = 1.0 + prm[6] * d1**0.8
+        d_0 = (-fy * shift + esh * dy * shift - f_r + k0 * d_r) / (k0 - esh)
+        f_0 = -fy * shift + esh * (d_0 + dy * shift)
+        d_pl = d_min
+    if d_0 == d_r:
+        force = f_r + esh * (d - d_r)
+    else:
+        xi = abs((d_pl - d_0) / dy)
+        r = prm[3] * (1.0 - (prm[4] * xi) / (prm[5] + xi))
+        ratio = (d - d_r) / (d_0 - d_r)
+        dum1 = 1.0 + abs(ratio) ** r
+        # Python's pow raises OverflowError where numba's is inf: the scalar law then takes
+        # (1 + |ratio|**r)**(1/r) as |ratio|, exactly
+        dum2 = abs(ratio) if math.isinf(dum1) else dum1 ** (1 / r)
+        force = alpha * ratio + (1.0 - alpha) * ratio / dum2
+        force = force * (f_0 - f_r) + f_r
+    out[0], out[1], out[2], out[3] = d, force, 0.0, 0.0
+    out[4], out[5], out[6], out[7], out[8] = d_max, d_min, d_pl, d_0, f_0
+    out[9], out[10], out[11] = d_r, f_r, kon
+    return math.isfinite(force)
+
+
+# -- one trial of any law, and the whole-history drive -------------------------------------------
+STATE_SIZE = 12
+"""[d, f, z, e] (the Bouc-Wen family's committed state; bilinear uses d, f), then Steel02's
+d_max, d_min, d_pl, d_0, f_0, d_r, f_r, kon."""
+
+
+@njit(cache=True)
+def _initial(law: int, prm: FloatArray) -> FloatArray:
+    state = np.zeros(STATE_SIZE)
+    if law == LAW_MENEGOTTO_PINTO:
+        dy = prm[1] / prm[0]
+        state[4], state[5] = dy, -dy
+    return state
+
+
+@njit(cache=True)
+def _trial(law: int, prm: FloatArray, state: FloatArray, d: float, dz_max: float,
+           out: FloatArray) -> bool:
+    """Trial to ``d`` from the committed ``state`` into ``out``; False if the law refuses."""
+    if law == LAW_MENEGOTTO_PINTO:
+        return _mp_trial(prm, state, d, out)
     if law == LAW_BILINEAR:
         f = _bilinear_trial(prm, state[0], state[1], d)
-        return f, 0.0, 0.0, math.isfinite(f)
-    return _bwbn_trial(prm, state[0], state[2], state[3], state[1], d, dz_max)
-
-
-@njit(cache=True)
-def _commit(state: FloatArray, d: float, f: float, z: float, e: float) -> None:
-    state[0], state[1], state[2], state[3] = d, f, z, e
+        out[0], out[1] = d, f
+        return math.isfinite(f)
+    f, z, e, ok = _bwbn_trial(prm, state[0], state[2], state[3], state[1], d, dz_max)
+    out[0], out[1], out[2], out[3] = d, f, z, e
+    return ok
 
 
 @njit(cache=True)
 def _free_position(law: int, prm: FloatArray, state: FloatArray, lo: float, hi: float,
-                   f_lo: float, f_hi: float, dz_max: float) -> float:
+                   f_lo: float, f_hi: float, dz_max: float, out: FloatArray) -> float:
     """Where the unloaded specimen rests inside [lo, hi], f(lo) <= 0 <= f(hi): its force is
     zero there. Illinois regula falsi from the committed position (a handful of trials where
     bisection took ~45: each trial of a stiff law across a wide gap is hundreds of substeps)."""
@@ -214,9 +307,9 @@ def _free_position(law: int, prm: FloatArray, state: FloatArray, lo: float, hi: 
     u = min(max(d_c, lo), hi)
     side = 0
     for _ in range(200):
-        f, _z, _e, ok = _trial(law, prm, state, u, dz_max)
-        if not ok:
+        if not _trial(law, prm, state, u, dz_max, out):
             return math.nan
+        f = out[1]
         if f == 0.0:
             return u
         if f > 0.0:
@@ -243,29 +336,31 @@ def _free_position(law: int, prm: FloatArray, state: FloatArray, lo: float, hi: 
 @njit(cache=True)
 def _drive(law: int, prm: FloatArray, d: FloatArray, gap: float, dz_max: float) -> FloatArray:
     out = np.empty(d.size)
-    state = np.zeros(4)
+    state = _initial(law, prm)
+    trial = np.empty(STATE_SIZE)
     free = gap > 0.0
     for k in range(d.size):
         p = d[k]
         if gap == 0.0:
-            f, z, e, ok = _trial(law, prm, state, p, dz_max)
-            if not ok:
+            if not _trial(law, prm, state, p, dz_max, trial):
                 out[k:] = math.nan
                 return out
-            _commit(state, p, f, z, e)
-            out[k] = f
+            state[:] = trial
+            out[k] = trial[1]
             continue
-        f, z, e, ok = _trial(law, prm, state, p - gap, dz_max)
+        ok = _trial(law, prm, state, p - gap, dz_max, trial)
+        f = trial[1]
         if ok and f > 0.0:
-            _commit(state, p - gap, f, z, e)
+            state[:] = trial
             out[k] = f
             free = False
             continue
         f_lo = f
         if ok:
-            f, z, e, ok = _trial(law, prm, state, p + gap, dz_max)
+            ok = _trial(law, prm, state, p + gap, dz_max, trial)
+            f = trial[1]
         if ok and f < 0.0:
-            _commit(state, p + gap, f, z, e)
+            state[:] = trial
             out[k] = f
             free = False
             continue
@@ -275,12 +370,11 @@ def _drive(law: int, prm: FloatArray, d: FloatArray, gap: float, dz_max: float) 
         if free and p - gap <= state[0] <= p + gap:
             u = state[0]
         else:
-            u = _free_position(law, prm, state, p - gap, p + gap, f_lo, f, dz_max)
-        f, z, e, ok = _trial(law, prm, state, u, dz_max)
-        if not ok:
+            u = _free_position(law, prm, state, p - gap, p + gap, f_lo, f, dz_max, trial)
+        if not _trial(law, prm, state, u, dz_max, trial):
             out[k:] = math.nan
             return out
-        _commit(state, u, f, z, e)
+        state[:] = trial
         out[k] = 0.0
         free = True
     return out

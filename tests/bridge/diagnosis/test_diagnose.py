@@ -34,8 +34,9 @@ def test_each_effect_is_named_and_measured(effect: str) -> None:
     if effect == "none":
         return
     winner = next(e for e in result["effects"] if e["name"] == effect)
-    estimate = effect_magnitude(effect, {k: p["value"] for k, p in winner["params"].items()})
-    truth = effect_magnitude(effect, synthetic.truth)
+    estimate = effect_magnitude(effect, {k: p["value"] for k, p in winner["params"].items()},
+                                winner["law"])
+    truth = effect_magnitude(effect, synthetic.truth, synthetic.specimen)
     assert estimate is not None and truth is not None
     assert abs(estimate - truth) <= 0.2 * abs(truth), (MAGNITUDE_OF[effect], estimate, truth)
     assert winner["shrink_pct"] > 50.0

@@ -17,6 +17,9 @@ CASES = [
     ("bwbn", {"k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 1.5, "beta": 0.5, "gamma": 0.5,
               "delta_nu": 0.002, "delta_eta": 0.003, "delta_a": 0.0005, "zeta_s": 0.6,
               "p": 0.8, "q": 0.1, "psi0": 0.2, "delta_psi": 0.004, "lam": 0.5}),
+    ("menegotto-pinto", {"k0": 20.0, "fy": 10.0, "alpha": 0.02, "R0": 18.0}),
+    ("menegotto-pinto", {"k0": 5.0, "fy": 30.0, "alpha": 0.1, "R0": 8.0, "cR1": 0.8,
+                         "cR2": 0.3, "a1": 0.05, "a2": 2.0, "a3": 0.04, "a4": 3.0}),
 ]
 
 
@@ -33,7 +36,7 @@ def _history(seed: int, n: int = 200, peak: float = 6.0) -> np.ndarray:
 def test_drive_equals_the_scalar_model(kind: str, params: dict[str, float],
                                        dz_max: float) -> None:
     d = _history(3)
-    extra = {} if kind == "bilinear" else {"dz_max": dz_max}
+    extra = {} if kind in ("bilinear", "menegotto-pinto") else {"dz_max": dz_max}
     model = make_model(kind, **params)
     if extra:
         model = type(model)(**params, **extra)  # type: ignore[call-arg]
@@ -47,7 +50,7 @@ def test_drive_equals_the_scalar_model(kind: str, params: dict[str, float],
     np.testing.assert_allclose(got, expected, rtol=0.0, atol=1e-12 * params["fy"])
 
 
-@pytest.mark.parametrize(("kind", "params"), CASES[:2])
+@pytest.mark.parametrize(("kind", "params"), [*CASES[:2], CASES[4]])
 def test_drive_behind_a_gap_equals_the_rigs_load_path(kind: str,
                                                        params: dict[str, float]) -> None:
     d = _history(5, 300)
@@ -83,3 +86,18 @@ def test_a_refused_history_is_nan_from_where_the_scalar_model_refuses_it() -> No
     law, vec = law_vector("bwbn", params)
     out = drive(law, vec, d)
     assert np.all(np.isfinite(out[:refused])) and np.all(np.isnan(out[refused:]))
+
+
+def test_menegotto_pinto_from_rest_and_with_an_overflowing_curve() -> None:
+    """Holds at the virgin state (Steel02's "at rest" branch) and an R so large that
+    |x|**R overflows: the drive takes the scalar law's exact limit, not inf."""
+    params = {"k0": 10.0, "fy": 5.0, "alpha": 0.01, "R0": 800.0, "cR1": 0.0}
+    d = np.concatenate([np.zeros(3), _history(11, 150, 40.0)])
+    model = make_model("menegotto-pinto", **params)
+    expected = []
+    for x in d:
+        force, _ = model.set_trial(float(x))
+        model.commit()
+        expected.append(force)
+    law, vec = law_vector("menegotto-pinto", params)
+    np.testing.assert_allclose(drive(law, vec, d), expected, rtol=0.0, atol=1e-12 * 5.0)
