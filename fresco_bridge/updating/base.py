@@ -15,11 +15,12 @@ or only through ``i - 1`` is the caller's choice (replay's ``--lag`` flag), not 
 
 from __future__ import annotations
 
+import math
 from typing import Protocol, runtime_checkable
 
 from sim_actuator.models.base import HysteresisModel
 
-__all__ = ["Updater", "UpdaterError", "UpdaterInputError"]
+__all__ = ["OwnsTwin", "Updater", "UpdaterError", "UpdaterInputError", "check_measurement"]
 
 
 class UpdaterError(ValueError):
@@ -53,3 +54,31 @@ class Updater(Protocol):
     def last_update_seconds(self) -> float:
         """Wall time the last ``observe`` spent updating (0.0 for a fixed model)."""
         ...
+
+
+def check_measurement(name: str, d: float, force: float) -> tuple[float, float]:
+    """(d, force) as floats, or UpdaterInputError naming the updater and the bad value."""
+    try:
+        d_f, f_f = float(d), float(force)
+    except (TypeError, ValueError) as exc:
+        raise UpdaterInputError(f"{name}: measurement must be two numbers, got d={d!r}, "
+                                f"force={force!r}") from exc
+    if not (math.isfinite(d_f) and math.isfinite(f_f)):
+        raise UpdaterInputError(f"{name}: measurement rejected, d={d_f!r} mm, force={f_f!r} kN "
+                                "(must be finite); the updater is unchanged")
+    return d_f, f_f
+
+
+class OwnsTwin:
+    """The two read-only properties of an updater that keeps its twin and times its update."""
+
+    _twin: HysteresisModel
+    _last_update: float = 0.0
+
+    @property
+    def twin(self) -> HysteresisModel:
+        return self._twin
+
+    @property
+    def last_update_seconds(self) -> float:
+        return self._last_update

@@ -26,7 +26,6 @@ measurement ``(d_i, F_i)`` of the tested element:
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
@@ -36,7 +35,7 @@ import numpy.typing as npt
 from sim_actuator.models.base import HysteresisModel
 
 from .ann import AnnModel, AnnTwin
-from .base import UpdaterError, UpdaterInputError
+from .base import UpdaterError, UpdaterInputError, check_measurement
 from .features import feature_row, next_energy
 from .lm import LmOptions, LmResult, levenberg_marquardt
 from .window import SampleWindow
@@ -55,19 +54,6 @@ _EPS = float(np.finfo(np.float64).eps)
 PAPER_ONLINE_LM = LmOptions(max_iterations=50, mu=1e-5, momentum=0.1)
 """The paper's online LM (``online_ann``'s default): damping 1e-5, at most 50 iterations,
 momentum 0.1, ``trainlm``'s stopping rules."""
-
-
-def check_measurement(name: str, d: float, force: float) -> tuple[float, float]:
-    """(d, force) as floats, or UpdaterInputError naming the updater and the bad value."""
-    try:
-        d_f, f_f = float(d), float(force)
-    except (TypeError, ValueError) as exc:
-        raise UpdaterInputError(f"{name}: measurement must be two numbers, got d={d!r}, "
-                                f"force={force!r}") from exc
-    if not (math.isfinite(d_f) and math.isfinite(f_f)):
-        raise UpdaterInputError(f"{name}: measurement rejected, d={d_f!r} mm, force={f_f!r} kN "
-                                "(must be finite); the updater is unchanged")
-    return d_f, f_f
 
 
 class FixedModelUpdater:

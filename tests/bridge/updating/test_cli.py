@@ -167,3 +167,20 @@ def test_bad_options_are_clear_errors(files: dict[str, Path], tmp_path: Path,
     assert "no such model file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*base, "--updater", "none", "--units", "furlong,N"])
+
+
+def test_replay_online_improved_with_an_offline_database_and_its_options(
+    files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Our updater from an offline CSV, a subset of its experts, and a bad expert name."""
+    base = ["updater", "replay", "--source", str(files["source"]), "--twin", str(files["twin"]),
+            "--updater", "online_improved", "--offline", str(files["offline"]), "--quiet"]
+    out = tmp_path / "pred.csv"
+    assert main([*base, "--option", 'experts="reversal,reversal+memory"', "-o", str(out)]) == 0
+    assert "MAETH" in capsys.readouterr().out
+    rows = _rows(out)
+    assert len(rows) == N and all(np.isfinite(float(r["force_pred"])) for r in rows)
+    assert main([*base, "--option", 'experts="reversal,plays"', "-o", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "experts must be distinct names" in err
+    assert not (tmp_path / "x.csv").exists()

@@ -1,0 +1,159 @@
+"""A physics expert for ``online_improved``: a Bouc-Wen law fitted to the offline data, plus a
+reversal basis (``branch.BranchRls``) learning its residual online.
+
+Why: a smooth state-variable law generalises from the tested element's history to the twin's
+through its own state ``z`` (each element integrates its own), which a basis of branch
+coordinates has to learn from data; the residual basis corrects what the law cannot express.
+Why Bouc-Wen and why it is honest: the classic Bouc-Wen (``sim_actuator.models.bouc_wen``, six
+parameters, n free) has no degradation and no pinching, so neither study specimen (the rig's
+BWBN with energy-driven degradation and pinching, Menegotto-Pinto with isotropic hardening and
+excursion-dependent curvature) lies in its family, nor in the family of law plus basis.
+
+The fit: least squares (scipy ``least_squares``, trust region, bounded) of the Bouc-Wen force
+along the offline displacement history, every second sample, from a start taken from the data
+(k_init of the first loading, the peak force, n = 2, beta = gamma = 0.5). The law's parameters
+stay fixed online; only the residual basis learns (the fit costs seconds, an online step does
+not), and its ridge pulls it towards zero, so the expert falls back on the law where recent
+data do not support a residual.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
+from fresco_bridge.updating.branch import BranchRls, initial_stiffness
+from sim_actuator.models.base import HysteresisModel, ModelInputError, ModelParameterError
+from sim_actuator.models.bouc_wen import BoucWen
+
+__all__ = ["BOUC_WEN_DZ_MAX", "PhysicsResidual", "bouc_wen_forces", "fit_bouc_wen"]
+
+FloatArray = npt.NDArray[np.float64]
+
+BOUC_WEN_DZ_MAX = 0.05
+"""RK4 step of the law in z (fit and online alike): 5x the specimen default, a model not a
+reference (the fit absorbs the integration error; keeps an online step well under 1 ms)."""
+
+_FIT_STRIDE = 2
+_FIT_EVALUATIONS = 60
+_PARAMS = ("k0", "fy", "alpha", "n", "beta", "gamma")
+
+
+def bouc_wen_forces(params: dict[str, float], disp: FloatArray) -> FloatArray:
+    """The law's force along a displacement history from the virgin state."""
+    model = BoucWen(**params, dz_max=BOUC_WEN_DZ_MAX)
+    out = np.empty(disp.size)
+    for i, d in enumerate(disp.tolist()):
+        out[i] = model.set_trial(d)[0]
+        model.commit()
+    return out
+
+
+def fit_bouc_wen(disp: FloatArray, force: FloatArray) -> dict[str, float]:
+    """Bouc-Wen parameters fitted to a (d, F) history (see the module docstring)."""
+    from scipy.optimize import least_squares  # type: ignore[import-untyped]
+
+    k_init = initial_stiffness(disp, force)
+    f_peak = float(np.max(np.abs(force)))
+    if not (k_init > 0.0 and f_peak > 0.0):
+        raise UpdaterError(f"online_improved: cannot fit a Bouc-Wen law to offline data with "
+                           f"first-loading stiffness {k_init!r} and peak force {f_peak!r}")
+    d, f = disp[::_FIT_STRIDE], force[::_FIT_STRIDE]
+    start = np.array([k_init, f_peak, 0.05, 2.0, 0.5, 0.5])
+    lower = [0.1 * k_init, 0.05 * f_peak, 0.0, 1.0, 0.01, 0.0]
+    upper = [10.0 * k_init, 5.0 * f_peak, 0.5, 20.0, 5.0, 5.0]
+    bad = np.full(d.size, 10.0 * f_peak)
+
+    def residual(x: FloatArray) -> FloatArray:
+        try:
+            return bouc_wen_forces(dict(zip(_PARAMS, x.tolist(), strict=True)), d) - f
+        except (ModelInputError, ModelParameterError):
+            return bad
+
+    fit: Any = least_squares(residual, start, bounds=(lower, upper), max_nfev=_FIT_EVALUATIONS,
+                             x_scale=[k_init, f_peak, 0.01, 1.0, 0.1, 0.1])  # fmt: skip
+    return dict(zip(_PARAMS, (float(v) for v in fit.x), strict=True))
+
+
+class _PhysicsTwin:
+    """Law plus residual on the twin's own history (material semantics)."""
+
+    name = "online_improved"
+
+    def __init__(self, law: HysteresisModel, residual: HysteresisModel) -> None:
+        self._law = law
+        self._residual = residual
+
+    def set_trial(self, d: float) -> tuple[float, float]:
+        f_law, k_law = self._law.set_trial(d)
+        f_res, k_res = self._residual.set_trial(d)
+        return f_law + f_res, k_law + k_res
+
+    def commit(self) -> None:
+        self._law.commit()
+        self._residual.commit()
+
+    def revert_to_last_commit(self) -> None:
+        self._law.revert_to_last_commit()
+        self._residual.revert_to_last_commit()
+
+    def revert_to_start(self) -> None:
+        self._law.revert_to_start()
+        self._residual.revert_to_start()
+
+    @property
+    def initial_tangent(self) -> float:
+        return self._law.initial_tangent + self._residual.initial_tangent
+
+    @property
+    def committed(self) -> tuple[float, float]:
+        d, f_law = self._law.committed
+        return d, f_law + self._residual.committed[1]
+
+    def clone(self) -> HysteresisModel:
+        return _PhysicsTwin(self._law.clone(), self._residual.clone())
+
+
+class PhysicsResidual(OwnsTwin):
+    """Bouc-Wen law (fitted offline, fixed) + residual reversal basis (RLS online)."""
+
+    name = "online_improved"
+
+    def __init__(self, *, offline: tuple[npt.ArrayLike, npt.ArrayLike],
+                 law: dict[str, float] | None = None, shrink: bool = True,
+                 **rls: Any) -> None:
+        """``law``: Bouc-Wen parameters (fitted to ``offline`` when None); ``shrink``: the
+        residual's ridge pulls towards zero (BENCHMARKS.md: the residual learned on the tested
+        element otherwise transfers to the twin where the law alone was right)."""
+        disp = np.asarray(offline[0], dtype=np.float64)
+        force = np.asarray(offline[1], dtype=np.float64)
+        self.law = fit_bouc_wen(disp, force) if law is None else dict(law)
+        residual = force - bouc_wen_forces(self.law, disp)
+        # scales and k_init from the whole force (the residual may even be zero); the memory's
+        # forces are the residual's, so its plastic-part term is close to the branch length
+        self.residual = BranchRls(offline=(disp, residual), memory_terms=True,
+                                  force_scale=float(np.max(np.abs(force))),
+                                  stiffness=initial_stiffness(disp, force), shrink=shrink,
+                                  **rls)  # fmt: skip
+        self._source = BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX)
+        self._twin = _PhysicsTwin(BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
+                                  self.residual.twin)  # fmt: skip
+        self._last_update = 0.0
+
+    def predict(self, d: float) -> float:
+        """One-step-ahead force of the tested element at ``d`` (nothing committed)."""
+        f_law = self._source.set_trial(d)[0]
+        self._source.revert_to_last_commit()
+        return f_law + self.residual.predict(d)
+
+    def observe(self, d: float, force: float) -> None:
+        d, force = check_measurement(self.name, d, force)
+        start = time.perf_counter()
+        f_law = self._source.set_trial(d)[0]
+        self._source.commit()
+        self.residual.observe(d, force - f_law)
+        self._last_update = time.perf_counter() - start
