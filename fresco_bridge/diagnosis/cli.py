@@ -22,8 +22,8 @@ COMMANDS = frozenset({"diagnose", "diagnose-bench"})
 _TOML_NAMES = {
     "bilinear": ("k0", "fy", "alpha"),
     "bouc-wen": ("k0", "fy", "alpha", "n", "beta", "gamma"),
-    "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "p", "delta_nu",
-             "delta_eta"),
+    "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "p", "delta_psi",
+             "delta_nu", "delta_eta"),
     "menegotto-pinto": ("k0", "fy", "alpha", "R0", "cR1", "cR2"),
 }
 

@@ -139,6 +139,8 @@ _PINCHING = (
     Param("q", "law", "1", 0.0, 0.6, 0.1, "pinching centre, fraction of z_u (BWBN q)"),
     Param("p", "law", "1", 0.01, 20.0, 1.0,
           "build-up rate of pinching per unit normalised hysteretic energy (BWBN p)"),
+    Param("delta_psi", "law", "1", 0.0, 0.2, 1e-4,
+          "growth of the pinching spread per unit normalised energy (BWBN delta_psi)"),
 )
 _DEGRADATION = (
     Param("delta_nu", "law", "1", 0.0, 0.5, 2e-4, "strength degradation per unit energy"),
@@ -147,12 +149,13 @@ _DEGRADATION = (
 """No degrading A (delta_a): to first order it lowers the stiffness like delta_eta and the
 strength like delta_nu, so the three are not identifiable together (measured: with delta_a
 fitted too, a plain-bench degradation record's mean rate came out 20 % off instead of 2 %)."""
-PINCHING_FIXED = {"lam": 0.5, "delta_psi": 0.0}
-"""BWBN pinching terms the candidate holds fixed: Foliente's coupling lambda = 0.5 (the
+PINCHING_FIXED = {"lam": 0.5}
+"""The BWBN pinching term the candidate holds fixed: Foliente's coupling lambda = 0.5 (the
 sim-actuator preset; with psi0 fitted, the spread psi0 (lambda + zeta1) is what the data fix
-once pinching has built up) and no growth of the spread with energy. The build-up rate p is
-fitted: pinching that develops over several cycles is a different loop history from pinching
-present from the first one."""
+once pinching has built up). Both evolution terms are fitted: the build-up rate p (pinching
+that develops over several cycles is a different loop history from pinching present from the
+first one) and the growth of the spread with energy delta_psi (the pinched zone widens as the
+damage grows; without it the loop's drift over a record was taken by a degradation pair)."""
 
 
 def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
@@ -249,7 +252,8 @@ def _law_vector(kind: str, values: Mapping[str, float]) -> tuple[int, FloatArray
             "delta_a": 0.0, "delta_nu": values.get("delta_nu", 0.0),
             "delta_eta": values.get("delta_eta", 0.0), "zeta_s": values.get("zeta_s", 0.0),
             "q": values.get("q", 0.0), "psi0": values.get("psi0", 0.2),
-            "p": values.get("p", 1.0), **PINCHING_FIXED}
+            "p": values.get("p", 1.0), "delta_psi": values.get("delta_psi", 0.0),
+            **PINCHING_FIXED}
     return LAW_BWBN, np.array([full[name] for name in BWBN_PARAMETERS])
 
 
@@ -263,7 +267,7 @@ def baseline_report(kind: str, values: Mapping[str, float]) -> dict[str, float]:
     s, r = values.get("bg_sum", 1.0), values.get("beta_share", 0.5)
     out = {k: float(values[k]) for k in ("k0", "fy", "alpha", "n") if k in values}
     out.update(beta=float(r * s), gamma=float((1.0 - r) * s))
-    for k in ("zeta_s", "psi0", "q", "p", "delta_nu", "delta_eta"):
+    for k in ("zeta_s", "psi0", "q", "p", "delta_psi", "delta_nu", "delta_eta"):
         if k in values:
             out[k] = float(values[k])
     return out

@@ -56,10 +56,11 @@ def test_a_steel_specimen_without_effect_is_none_under_auto_and_a_misfit_under_b
 
 def test_pinching_with_a_slow_build_up_has_its_rate_identified() -> None:
     """A BWBN specimen whose pinching builds up over several cycles (p = 0.25 per unit
-    normalised energy instead of within the first), noise-free: the candidate's free p."""
+    normalised energy instead of within the first) and widens with energy (delta_psi),
+    noise-free: the candidate's free p and delta_psi."""
     rng = np.random.default_rng(3)
     law = {"k0": 10.0, "fy": 20.0, "alpha": 0.05, "n": 2.0, "beta": 0.5, "gamma": 0.5,
-           "zeta_s": 0.6, "psi0": 0.2, "q": 0.1, "p": 0.25, "lam": 0.5, "delta_psi": 0.0}
+           "zeta_s": 0.6, "psi0": 0.2, "q": 0.1, "p": 0.25, "lam": 0.5, "delta_psi": 0.005}
     cmd = command_history(rng, 1500, 0.01, 5.0 * law["fy"] / law["k0"])
     model = make_model("bwbn", **law)
     force = np.empty(cmd.size)
@@ -76,6 +77,9 @@ def test_pinching_with_a_slow_build_up_has_its_rate_identified() -> None:
     assert per_kn_mm == pytest.approx(0.25 * law["k0"] / law["fy"] ** 2, rel=0.05)
     assert fit.values["zeta_s"] == pytest.approx(0.6, rel=0.05)
     assert 0.0 < fit.std["p"] < 0.1 * fit.values["p"]
+    # the spread scales with z, i.e. with fy along the same ridge: delta_psi / fy is fixed
+    assert fit.values["delta_psi"] / fit.values["fy"] == pytest.approx(
+        law["delta_psi"] / law["fy"], rel=0.05)
 
 
 def test_a_long_record_fits_its_candidates_in_two_stages_and_still_names_the_effect() -> None:
