@@ -16,6 +16,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -53,14 +54,22 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, timeout=60)
 
 
+_STARTED: list[subprocess.Popen[str]] = []
+
+
 class Serve:
-    """A real bridge process; ``port`` once it printed its ready line."""
+    """A real bridge process; ``port`` once it printed its ready line.
+
+    Every process started is kept in ``_STARTED`` so the test's teardown kills what a failed
+    assertion left running (a leaked bridge would outlive the test run).
+    """
 
     def __init__(self, cwd: Path, *args: str) -> None:
         self.log = cwd / f"serve-{time.monotonic_ns()}.log"
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fresco_bridge.cli", *args], cwd=cwd,
             stdout=subprocess.PIPE, stderr=self.log.open("w"), text=True)
+        _STARTED.append(self.proc)
         assert self.proc.stdout is not None
         deadline = time.monotonic() + 30
         line = ""
@@ -76,6 +85,16 @@ class Serve:
         self.proc.send_signal(sig)
         self.proc.wait(30)
         return self.log.read_text()
+
+
+@pytest.fixture(autouse=True)
+def _kill_leftover_bridges() -> Iterator[None]:
+    yield
+    while _STARTED:
+        proc = _STARTED.pop()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
 
 
 def _steps(port: int, start: int, n: int, *, commit_last: bool = True) -> None:
