@@ -1,8 +1,10 @@
 """Protocol handlers: turn protocol events into site calls and replies.
 
-One handler per connection, ``match`` over the protocol's typed event union (the h11-consumer
-style). ``handle`` is a coroutine that the connection drives eagerly, so with an in-process
-controller a request is answered inside ``data_received``.
+One handler per connection. ``dispatch`` sends the step's events (trial, force/daq, tangent,
+commit) to the site's ``*_eager`` requests, so with an in-process controller a request is
+answered inside ``data_received`` without a coroutine; what must wait comes back as a coroutine
+the connection finishes in a task. Every other event goes to ``handle``, a ``match`` over the
+protocol's typed event union (the h11-consumer style), driven eagerly the same way.
 """
 
 from __future__ import annotations
