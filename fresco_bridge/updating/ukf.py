@@ -28,10 +28,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sim_actuator.models import Bilinear, BilinearState
-from sim_actuator.models.base import HysteresisModel
 
-from .base import UpdaterError
-from .updaters import check_measurement
+from .base import OwnsTwin, UpdaterError, check_measurement
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -126,8 +124,10 @@ class BilinearTwin:
         return BilinearTwin(self.law.clone())
 
 
-class OnlineUkfUpdater:
+class OnlineUkfUpdater(OwnsTwin):
     """UKF on [k0, alpha, Fy] of a Bilinear twin (filterpy 2.0.0 ``UnscentedKalmanFilter``)."""
+
+    _twin: BilinearTwin
 
     name = "online_ukf"
 
@@ -167,7 +167,7 @@ class OnlineUkfUpdater:
         self._ukf.Q = np.diag(_triple("q", q))
         self._ukf.R = np.array([[float(r)]])
         self._twin = BilinearTwin(Bilinear(k0=k0, fy=fy, alpha=alpha))
-        self._last_seconds = 0.0
+        self._last_update = 0.0
         self.skipped_updates = 0
         self.steps = 0
 
@@ -188,14 +188,6 @@ class OnlineUkfUpdater:
     def covariance(self) -> FloatArray:
         return np.array(self._ukf.P, copy=True)
 
-    @property
-    def twin(self) -> HysteresisModel:
-        return self._twin
-
-    @property
-    def last_update_seconds(self) -> float:
-        return self._last_seconds
-
     def observe(self, d: float, force: float) -> None:
         d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
@@ -214,4 +206,4 @@ class OnlineUkfUpdater:
         self._d_c, self._f_c = d, force
         self._twin.retarget(ukf.x)
         self.steps += 1
-        self._last_seconds = time.perf_counter() - start
+        self._last_update = time.perf_counter() - start

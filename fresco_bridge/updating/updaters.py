@@ -35,7 +35,7 @@ import numpy.typing as npt
 from sim_actuator.models.base import HysteresisModel
 
 from .ann import AnnModel, AnnTwin
-from .base import UpdaterError, UpdaterInputError, check_measurement
+from .base import OwnsTwin, UpdaterError, UpdaterInputError, check_measurement
 from .features import feature_row, next_energy
 from .lm import LmOptions, LmResult, levenberg_marquardt
 from .window import SampleWindow
@@ -80,8 +80,10 @@ class FixedModelUpdater:
         return 0.0
 
 
-class OnlineAnnUpdater:
+class OnlineAnnUpdater(OwnsTwin):
     """The paper's online ANN updater (see the module docstring for the exact algorithm)."""
+
+    _twin: AnnTwin
 
     name = "online_ann"
 
@@ -117,7 +119,7 @@ class OnlineAnnUpdater:
         self._theta = model.theta.copy()
         self._d_prev = self._f_prev = self._e_prev = 0.0
         self._row = np.empty(len(model.spec.inputs))
-        self._last_seconds = 0.0
+        self._last_update = 0.0
         self.last_fit: LmResult | None = None
         self.steps = 0
 
@@ -127,17 +129,9 @@ class OnlineAnnUpdater:
                 f"window_share={self.window_share}, lm={self.lm})")
 
     @property
-    def twin(self) -> HysteresisModel:
-        return self._twin
-
-    @property
     def theta(self) -> FloatArray:
         """The network parameters after the last update (a copy)."""
         return self._theta.copy()
-
-    @property
-    def last_update_seconds(self) -> float:
-        return self._last_seconds
 
     def training_set(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """This step's (X, y, w): random offline rows then the window, weights summing to 1."""
@@ -175,7 +169,7 @@ class OnlineAnnUpdater:
         self._twin.set_params(fit.theta)
         self.last_fit = fit
         self.steps += 1
-        self._last_seconds = time.perf_counter() - start
+        self._last_update = time.perf_counter() - start
 
 
 def online_lm_options(max_iterations: int | None = None, rtol: float | None = None,
