@@ -45,8 +45,11 @@ __all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis
 
 FloatArray = npt.NDArray[np.float64]
 
-EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory")
-"""The experts ``online_improved`` can combine (all of them by default)."""
+EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
+"""The experts ``online_improved`` combines by default."""
+
+OPTIONAL_EXPERTS = ("reversal+memory+stops",)
+"""Experts that can be asked for by name but are not in the default mixture."""
 
 SCORES = ("both", "free-run", "one-step")
 """How an expert is scored on the tested element (module docstring)."""
@@ -133,10 +136,10 @@ class OnlineImproved(OwnsTwin):
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
             tuple(experts))  # fmt: skip
-        unknown = [e for e in names if e not in EXPERTS]
+        unknown = [e for e in names if e not in EXPERTS + OPTIONAL_EXPERTS]
         if not names or unknown or len(set(names)) != len(names):
             raise UpdaterError(f"online_improved: experts must be distinct names from "
-                               f"{', '.join(EXPERTS)} (got {', '.join(names) or 'none'})")
+                               f"{', '.join(EXPERTS + OPTIONAL_EXPERTS)} (got {', '.join(names) or 'none'})")
         if score not in SCORES:
             raise UpdaterError(f"online_improved: score must be one of {', '.join(SCORES)} "
                                f"(got {score!r})")
@@ -149,6 +152,11 @@ class OnlineImproved(OwnsTwin):
                 from fresco_bridge.updating.physics import PhysicsResidual
 
                 built.append(PhysicsResidual(offline=offline, **rls))
+            elif name in ("reversal+stops", "reversal+memory+stops"):
+                from fresco_bridge.updating.play import BranchStopRls
+
+                built.append(BranchStopRls(offline=offline, memory_terms="memory" in name,
+                                           **rls))
             else:
                 built.append(BranchRls(offline=offline, memory_terms=name != "reversal", **rls))
         self.expert_names = names
