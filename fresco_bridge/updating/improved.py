@@ -23,9 +23,13 @@ the twin's history.
 
 Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md),
 ``reversal+memory`` (plus the previous-branch and envelope terms), ``bouc-wen+memory`` (the
-fitted law plus the memory basis on its residual, shrunk towards zero). Each learns by its own
-exponentially weighted, ridge-regularised least squares with Huber gating (``forgetting``,
-``ridge``, ``gate``). Cost per step: the experts' updates and shadows, tenths of a millisecond.
+fitted law plus the memory basis on its residual, shrunk towards zero), ``reversal+stops`` (the
+basis plus stop operators scheduled on the element's own plastic deformation, ``play``: a twin
+that is still virgin keeps what the tested element taught while it was virgin). Optional, not
+in the default mixture: ``reversal+memory+stops``. Each learns by its own exponentially
+weighted, ridge-regularised least squares with Huber gating (``forgetting``, ``ridge``,
+``gate``; ``branch.WeightedRls``). Cost per step: the experts' updates and shadows, tenths of
+a millisecond.
 """
 
 from __future__ import annotations
@@ -138,8 +142,9 @@ class OnlineImproved(OwnsTwin):
             tuple(experts))  # fmt: skip
         unknown = [e for e in names if e not in EXPERTS + OPTIONAL_EXPERTS]
         if not names or unknown or len(set(names)) != len(names):
-            raise UpdaterError(f"online_improved: experts must be distinct names from "
-                               f"{', '.join(EXPERTS + OPTIONAL_EXPERTS)} (got {', '.join(names) or 'none'})")
+            known = ", ".join(EXPERTS + OPTIONAL_EXPERTS)
+            raise UpdaterError(f"online_improved: experts must be distinct names from {known} "
+                               f"(got {', '.join(names) or 'none'})")
         if score not in SCORES:
             raise UpdaterError(f"online_improved: score must be one of {', '.join(SCORES)} "
                                f"(got {score!r})")
