@@ -312,6 +312,10 @@ class RunRecord:
         self._pending[site].append(
             (MONITOR, session, step, (tracking_error, ti, nrms, fei_amplitude, fei_delay)))
 
+    def pending(self, site: str) -> list[Item]:
+        """The list ``site``'s pending items wait in (the same list for the record's life)."""
+        return self._pending[site]
+
     def _write_pending(self, site: str, t: float) -> None:
         items = self._pending.get(site)
         if items:
