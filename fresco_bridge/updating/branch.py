@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -43,9 +45,11 @@ from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measuremen
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = [
+    "BasisTwin",
     "BranchMemory",
     "BranchRls",
     "ReversalBasis",
+    "TwinBasis",
     "WeightedRls",
     "initial_stiffness",
     "offline_arrays",
@@ -201,6 +205,12 @@ class ReversalBasis:
         self._n_g = 4 + self._ranges.size + memory
         self.size = (1 + len(self.SATURATIONS)) * self._n_g
 
+    def virgin(self) -> BranchMemory:
+        return BranchMemory()
+
+    def advanced(self, memory: BranchMemory, d: float, f: float) -> BranchMemory:
+        return memory.advanced(d, f)
+
     def features(self, memory: BranchMemory, d: float) -> tuple[float, float, FloatArray]:
         """(direction, F_r, phi): the force at ``d`` is ``F_r + direction * phi @ w``."""
         direction, d_r, f_r = memory.branch(d)
@@ -227,19 +237,42 @@ class ReversalBasis:
         return direction, f_r, np.outer(psi, g).ravel()
 
 
-class _Twin:
-    """The twin: the shared weights on its own branch memory (material semantics)."""
+class _Memory(Protocol):
+    @property
+    def d(self) -> float: ...
+    @property
+    def f(self) -> float: ...
+
+
+M = TypeVar("M", bound=_Memory)
+
+
+class TwinBasis(Protocol[M]):
+    """What a twin needs of a basis written in reversal coordinates (``ReversalBasis`` and the
+    stop experts' ``play.BranchStopBasis``)."""
+
+    @property
+    def disp_scale(self) -> float: ...
+    def virgin(self) -> M: ...
+    def features(self, memory: M, d: float) -> tuple[float, float, FloatArray]: ...
+    def advanced(self, memory: M, d: float, f: float) -> M: ...
+
+
+class BasisTwin(Generic[M]):
+    """The twin of an expert: the shared weights (``weights()``, read at each call) on its own
+    memory of its own history (material semantics)."""
 
     name = "online_improved"
 
-    def __init__(self, owner: BranchRls) -> None:
-        self._owner = owner
-        self._committed = BranchMemory()
+    def __init__(self, basis: TwinBasis[M], weights: Callable[[], FloatArray]) -> None:
+        self._basis = basis
+        self._weights = weights
+        self._committed = basis.virgin()
         self._trial = self._committed
 
-    def _force(self, memory: BranchMemory, d: float) -> float:
-        direction, f_r, phi = self._owner.basis.features(memory, d)
-        return f_r + direction * float(phi @ self._owner.weights)
+    def _force(self, memory: M, d: float) -> float:
+        direction, f_r, phi = self._basis.features(memory, d)
+        return f_r + direction * float(phi @ self._weights())
 
     def set_trial(self, d: float) -> tuple[float, float]:
         if not math.isfinite(d):
@@ -249,10 +282,10 @@ class _Twin:
             self._trial = c
             return c.f, self.initial_tangent
         force = self._force(c, d)
-        h = 1e-6 * self._owner.basis.disp_scale
+        h = 1e-6 * self._basis.disp_scale
         probe = d + h if d > c.d else d - h
         tangent = (self._force(c, probe) - force) / (probe - d)
-        self._trial = c.advanced(d, force)
+        self._trial = self._basis.advanced(c, d, force)
         return force, tangent
 
     def commit(self) -> None:
@@ -262,19 +295,19 @@ class _Twin:
         self._trial = self._committed
 
     def revert_to_start(self) -> None:
-        self._committed = self._trial = BranchMemory()
+        self._committed = self._trial = self._basis.virgin()
 
     @property
     def initial_tangent(self) -> float:
-        h = 1e-6 * self._owner.basis.disp_scale
-        return self._force(BranchMemory(), h) / h
+        h = 1e-6 * self._basis.disp_scale
+        return self._force(self._basis.virgin(), h) / h
 
     @property
     def committed(self) -> tuple[float, float]:
         return self._committed.d, self._committed.f
 
     def clone(self) -> HysteresisModel:
-        twin = _Twin(self._owner)
+        twin = BasisTwin(self._basis, self._weights)
         twin._committed, twin._trial = self._committed, self._trial
         return twin
 
@@ -312,7 +345,7 @@ class BranchRls(OwnsTwin):
         self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
                                noise_floor=1e-6 * self.basis.force_scale**2, shrink=shrink)
         self._source = BranchMemory()
-        self._twin = _Twin(self)
+        self._twin = BasisTwin(self.basis, lambda: self.rls.weights)
         self._last_update = 0.0
 
     @property

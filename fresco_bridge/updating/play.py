@@ -35,13 +35,13 @@ import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import (
+    BasisTwin,
     BranchMemory,
     ReversalBasis,
     WeightedRls,
     initial_stiffness,
     offline_arrays,
 )
-from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = ["BranchStopBasis", "BranchStopRls", "StopBasis", "StopMemory", "yield_threshold"]
 
@@ -140,6 +140,14 @@ class DualMemory:
     stops: StopMemory
     stops_r: FloatArray
 
+    @property
+    def d(self) -> float:
+        return self.branch.d
+
+    @property
+    def f(self) -> float:
+        return self.branch.f
+
 
 class BranchStopBasis:
     """The reversal basis plus the scheduled stop increments (module docstring)."""
@@ -147,6 +155,7 @@ class BranchStopBasis:
     def __init__(self, branch: ReversalBasis, stops: StopBasis) -> None:
         self.branch = branch
         self.stops = stops
+        self.disp_scale = branch.disp_scale
         self.size = branch.size + stops.size
 
     def virgin(self) -> DualMemory:
@@ -168,58 +177,6 @@ class BranchStopBasis:
         stops = self.stops.advanced(memory.stops, d - memory.branch.d)
         stops_r = memory.stops.stops if memory.branch.reversal(d) else memory.stops_r
         return DualMemory(memory.branch.advanced(d, f), stops, stops_r)
-
-
-class _Twin:
-    """The twin: the shared weights on its own branch memory and stops (material semantics)."""
-
-    name = "online_improved"
-
-    def __init__(self, owner: BranchStopRls) -> None:
-        self._owner = owner
-        self._committed = owner.basis.virgin()
-        self._trial = self._committed
-
-    def _force(self, memory: DualMemory, d: float) -> float:
-        direction, f_r, phi = self._owner.basis.features(memory, d)
-        return f_r + direction * float(phi @ self._owner.rls.weights)
-
-    def set_trial(self, d: float) -> tuple[float, float]:
-        if not math.isfinite(d):
-            raise trial_input_error(self.name, d)
-        c = self._committed
-        if d == c.branch.d:
-            self._trial = c
-            return c.branch.f, self.initial_tangent
-        force = self._force(c, d)
-        h = 1e-6 * self._owner.basis.branch.disp_scale
-        probe = d + h if d > c.branch.d else d - h
-        tangent = (self._force(c, probe) - force) / (probe - d)
-        self._trial = self._owner.basis.advanced(c, d, force)
-        return force, tangent
-
-    def commit(self) -> None:
-        self._committed = self._trial
-
-    def revert_to_last_commit(self) -> None:
-        self._trial = self._committed
-
-    def revert_to_start(self) -> None:
-        self._committed = self._trial = self._owner.basis.virgin()
-
-    @property
-    def initial_tangent(self) -> float:
-        h = 1e-6 * self._owner.basis.branch.disp_scale
-        return self._force(self._owner.basis.virgin(), h) / h
-
-    @property
-    def committed(self) -> tuple[float, float]:
-        return self._committed.branch.d, self._committed.branch.f
-
-    def clone(self) -> HysteresisModel:
-        twin = _Twin(self._owner)
-        twin._committed, twin._trial = self._committed, self._trial
-        return twin
 
 
 class BranchStopRls(OwnsTwin):
@@ -251,7 +208,7 @@ class BranchStopRls(OwnsTwin):
         self.rls = WeightedRls(np.array(rows), np.array(targets), forgetting=forgetting,
                                ridge=ridge, gate=gate, noise_floor=1e-6 * force_scale**2)
         self._source = self.basis.virgin()
-        self._twin = _Twin(self)
+        self._twin = BasisTwin(self.basis, lambda: self.rls.weights)
         self._last_update = 0.0
 
     @property
