@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
@@ -259,20 +258,20 @@ class TwinBasis(Protocol[M]):
 
 
 class BasisTwin(Generic[M]):
-    """The twin of an expert: the shared weights (``weights()``, read at each call) on its own
+    """The twin of an expert: the learner's current weights (read at each call) on its own
     memory of its own history (material semantics)."""
 
     name = "online_improved"
 
-    def __init__(self, basis: TwinBasis[M], weights: Callable[[], FloatArray]) -> None:
+    def __init__(self, basis: TwinBasis[M], learner: WeightedRls) -> None:
         self._basis = basis
-        self._weights = weights
+        self._learner = learner
         self._committed = basis.virgin()
         self._trial = self._committed
 
     def _force(self, memory: M, d: float) -> float:
         direction, f_r, phi = self._basis.features(memory, d)
-        return f_r + direction * float(phi @ self._weights())
+        return f_r + direction * float(phi @ self._learner.weights)
 
     def set_trial(self, d: float) -> tuple[float, float]:
         if not math.isfinite(d):
@@ -307,7 +306,7 @@ class BasisTwin(Generic[M]):
         return self._committed.d, self._committed.f
 
     def clone(self) -> HysteresisModel:
-        twin = BasisTwin(self._basis, self._weights)
+        twin = BasisTwin(self._basis, self._learner)
         twin._committed, twin._trial = self._committed, self._trial
         return twin
 
@@ -345,7 +344,7 @@ class BranchRls(OwnsTwin):
         self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
                                noise_floor=1e-6 * self.basis.force_scale**2, shrink=shrink)
         self._source = BranchMemory()
-        self._twin = BasisTwin(self.basis, lambda: self.rls.weights)
+        self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
     @property

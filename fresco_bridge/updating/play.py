@@ -208,7 +208,7 @@ class BranchStopRls(OwnsTwin):
         self.rls = WeightedRls(np.array(rows), np.array(targets), forgetting=forgetting,
                                ridge=ridge, gate=gate, noise_floor=1e-6 * force_scale**2)
         self._source = self.basis.virgin()
-        self._twin = BasisTwin(self.basis, lambda: self.rls.weights)
+        self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
     @property
