@@ -127,11 +127,12 @@ class _Syncer(threading.Thread):
 
     def run(self) -> None:
         last = -math.inf
+        attempted = 0  # lines the last fdatasync was for (a failed one is retried on request)
         while True:
             # idle until a line is waiting for a sync (the flag is set before the check, the
             # request is stored before the flag is read: no request can be missed)
             self._idle = True
-            if self._requested == self.durable and not (self._urgent or self._stopping):
+            if self._requested == attempted and not (self._urgent or self._stopping):
                 self._wait()
             self._idle = False
             while not (self._urgent or self._stopping):  # at most one sync per interval
@@ -142,13 +143,13 @@ class _Syncer(threading.Thread):
             if self._stopping:
                 return
             self._urgent = False
-            covered = self._requested
+            attempted = self._requested
             last = time.monotonic()
             try:
                 os.fdatasync(self._fd)
-                self.durable = covered
+                self.durable = attempted
                 self.syncs += 1
-            except OSError as exc:  # reported on the next flush; retried an interval later
+            except OSError as exc:  # reported on the next flush; retried on the next request
                 self.error = exc
 
     def stop(self) -> None:
