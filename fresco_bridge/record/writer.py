@@ -44,6 +44,10 @@ CONFIG_FILE = "config.toml"
 META_FILE = "run.json"
 DEFAULT_SYNC_INTERVAL = 0.01
 """Group commit: at most one fdatasync per this many seconds (events sync at once)."""
+PENDING_LIMIT = 256
+"""A site's trials waiting for its commit past this many items are written as format-2 lines
+(an integrator iterating for ever without committing neither grows the bridge's memory nor
+keeps its trials out of the file)."""
 
 
 class RecordError(OSError):
@@ -268,7 +272,11 @@ class RunRecord:
         self, site: str, session: int, step: int, time_: float, trial: tuple[float, ...],
         ctrl: tuple[float, ...],
     ) -> None:
-        self._pending[site].append((TRIAL, session, step, time_, trial, ctrl))
+        items = self._pending[site]
+        items.append((TRIAL, session, step, time_, trial, ctrl))
+        if len(items) > PENDING_LIMIT:
+            self._write_pending(site, time.monotonic() - self._t0)
+            self.flush()
 
     def measurement(
         self, site: str, session: int, step: int, disp: tuple[float, ...],
