@@ -1,4 +1,4 @@
-"""The record's line format: a lean encoder (format 2) and one decoder for every format.
+"""The record's line format: a lean encoder (format 3) and one decoder for every format.
 
 Format 1 (until issue 8) wrote every field on every line: ``seq``, ``t``, ``kind``, ``site``,
 ``session`` and the values, 8 lines and ~1160 bytes per committed 1-DOF step, most of it
@@ -37,8 +37,9 @@ lines was the largest cost left on the step path)::
   the lines it stands for read back with that ``t``.
 
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
-version) back into complete format-1 dicts, in the order the bridge recorded them, so every
-reader (export, report, ``runs``, HDF5, recovery) sees exactly what it saw before.
+version) back into complete format-1 dicts, in file order (each site's lines in the order it
+recorded them), so every reader (export, report, ``runs``, HDF5, recovery) sees exactly what
+it saw before.
 """
 
 from __future__ import annotations
