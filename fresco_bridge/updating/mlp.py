@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -106,12 +107,15 @@ class Mlp:
         acts.append(a @ w.T + b)
         return acts
 
-    def jacobian(self, theta: FloatArray, x: FloatArray, out: FloatArray | None = None,
+    def jacobian(self, theta: FloatArray, x: FloatArray,
+                 out: npt.NDArray[np.floating[Any]] | None = None,
                  acts: list[FloatArray] | None = None,
-                 row_scale: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+                 row_scale: FloatArray | None = None,
+                 ) -> tuple[FloatArray, npt.NDArray[np.floating[Any]]]:
         """(outputs (n,), J (n x n_params)) with J[i, k] = d out_i / d theta_k.
 
         ``acts`` (from :meth:`activations` at the same theta and x) saves the forward pass.
+        ``out`` may be float32 (computed in float64, stored in single precision).
         ``row_scale`` (n,) multiplies row i of J by ``row_scale[i]`` (LM's sqrt of the weights)
         at no extra cost: every block of J is linear in the output's seed delta.
         """
