@@ -43,11 +43,15 @@ from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "faithful (50 it)": {},
-    "rtol 1e-2": {"rtol": 0.01},
-    "rtol 3e-2": {"rtol": 0.03},
-    "10 it": {"max_iterations": 10},
-    "5 it": {"max_iterations": 5},
+    "faithful (50 it)": {"divide": "none"},
+    "dividerand": {"divide": "dividerand"},
+    "dividerand f32": {"divide": "dividerand", "single_precision_hessian": True},
+    "50 it f32": {"divide": "none", "single_precision_hessian": True},
+    "rtol 1e-2": {"divide": "none", "rtol": 0.01},
+    "rtol 3e-2": {"divide": "none", "rtol": 0.03},
+    "10 it": {"divide": "none", "max_iterations": 10},
+    "8 it f32": {"divide": "none", "max_iterations": 8, "single_precision_hessian": True},
+    "5 it": {"divide": "none", "max_iterations": 5},
 }
 
 
@@ -100,8 +104,12 @@ def _lm(iterations: int) -> Any:
     return replace(PRETRAIN_LM, max_iterations=iterations)
 
 
-def run(updater: Updater, pair: Pair, lag: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(predictions, wall s, cpu s) per step; the replay loop with CPU time around observe."""
+def run(updater: Updater, pair: Pair, lag: bool,
+        iterations: list[int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(predictions, wall s, cpu s) per step; the replay loop with CPU time around observe.
+
+    ``iterations`` collects the LM iterations of every update (online_ann).
+    """
     twin = updater.twin
     n = len(pair.twin_d)
     pred, wall, cpu = np.empty(n), np.empty(n), np.empty(n)
@@ -113,6 +121,8 @@ def run(updater: Updater, pair: Pair, lag: bool) -> tuple[np.ndarray, np.ndarray
         updater.observe(float(pair.src_d[i]), float(pair.src_f[i]))
         cpu[i] = time.thread_time() - c0
         wall[i] = updater.last_update_seconds
+        if iterations is not None:
+            iterations.append(updater.last_fit.iterations)  # type: ignore[attr-defined]
         if not lag:
             pred[i] = twin.set_trial(float(pair.twin_d[i]))[0]
             twin.commit()
@@ -160,17 +170,23 @@ def timing(model: AnnModel, pair: Pair, rounds: int, steps: int,
                  pair.twin_d[:steps], pair.twin_f[:steps])
     for rnd in range(rounds):
         for name in variants:
+            its: list[int] = []
             _, wall, cpu = run(make_updater("online_ann", model=model, seed=1,
-                                            **VARIANTS[name]), short, lag=False)
+                                            **VARIANTS[name]), short, lag=False, iterations=its)
             rec = out.setdefault(name, {"wall_median": [], "wall_p99": [], "cpu_median": [],
-                                        "cpu_p99": []})
+                                        "cpu_p99": [], "iterations_mean": [],
+                                        "iterations_p99": []})
+            rec["iterations_mean"].append(float(np.mean(its)))
+            rec["iterations_p99"].append(float(np.percentile(its, 99)))
             rec["wall_median"].append(1e3 * float(np.median(wall)))
             rec["wall_p99"].append(1e3 * float(np.percentile(wall, 99)))
             rec["cpu_median"].append(1e3 * float(np.median(cpu)))
             rec["cpu_p99"].append(1e3 * float(np.percentile(cpu, 99)))
-            print(f"  round {rnd + 1}/{rounds} {name:<17} wall median "
+            print(f"  round {rnd + 1}/{rounds} {name:<16} wall median "
                   f"{rec['wall_median'][-1]:.2f} p99 {rec['wall_p99'][-1]:.2f} ms; cpu median "
-                  f"{rec['cpu_median'][-1]:.2f} p99 {rec['cpu_p99'][-1]:.2f} ms", flush=True)
+                  f"{rec['cpu_median'][-1]:.2f} p99 {rec['cpu_p99'][-1]:.2f} ms; LM iterations "
+                  f"mean {rec['iterations_mean'][-1]:.1f} p99 {rec['iterations_p99'][-1]:.0f}",
+                  flush=True)
     return out
 
 
@@ -201,7 +217,8 @@ def pieces(rounds: int) -> dict[str, list[float]]:
     wj = jac * w[:, None]
     js = (jac * np.sqrt(w)[:, None])[-516:].copy()
     hess = js.T @ js + 1e-5 * np.eye(301)
-    js32 = js.astype(np.float32)
+    jsf = np.asfortranarray(js)
+    js32 = np.asfortranarray(js, dtype=np.float32)
     hess_f = np.asfortranarray(hess)
     out: dict[str, list[float]] = {}
     torch_mm: Callable[[], object] | None = None
@@ -230,8 +247,9 @@ def pieces(rounds: int) -> dict[str, list[float]]:
                 ("J^T W J gemm, 700 rows (naive)", lambda: wj.T @ jac),
                 ("J^T W J syrk, 516 rows (numpy A.T @ A)", lambda: js.T @ js),
                 ("J^T W J dsyrk in place, lower only (ours)",
-                 lambda: dsyrk(1.0, js.T, lower=1)),
-                ("J^T W J ssyrk float32 (not used)", lambda: ssyrk(1.0, js32.T, lower=1)),
+                 lambda: dsyrk(1.0, jsf, lower=1, trans=1)),
+                ("J^T W J ssyrk float32 (option)",
+                 lambda: ssyrk(1.0, js32, lower=1, trans=1)),
                 ("dpotrf + dpotrs 301, LAPACK direct (ours)",
                  lambda: dpotrs(dpotrf(hess_f, lower=1, clean=0)[0], js[0], lower=1)),
                 ("cholesky + solve 301", lambda: scipy.linalg.cho_solve(
@@ -257,7 +275,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--layouts", default="paper,generalisation")
     p.add_argument("--variants", default=",".join(VARIANTS),
                    help=f"comma-separated subset of: {', '.join(VARIANTS)}")
-    p.add_argument("--timing-variants", default="faithful (50 it),rtol 1e-2,5 it",
+    p.add_argument("--timing-variants", default="faithful (50 it),50 it f32,dividerand,"
+                                                "dividerand f32,5 it",
                    help="comma-separated variants alternated in the timing section")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-timing", action="store_true")

@@ -214,13 +214,13 @@ def _levenberg_marquardt(
     theta = theta0.copy()
     n_params = net.n_params
     # J^T W J as (sqrt(W) J)^T (sqrt(W) J) by BLAS syrk (half the flops of a general product):
-    # the rows of J come out of the Jacobian already scaled by sqrt(w), and a C-ordered J is
-    # the Fortran-ordered J^T, so syrk reads it in place. Only the lower triangle is formed;
-    # LAPACK's Cholesky (potrf/potrs) reads only that, from a copy, so mu retries reuse it.
+    # the rows of J come out of the Jacobian already scaled by sqrt(w), Fortran-ordered, so
+    # syrk (trans) reads it in place. Only the lower triangle is formed; LAPACK's Cholesky
+    # (potrf/potrs) reads only that, from a copy, so mu retries reuse it.
     single = options.single_precision_hessian
     dtype = np.float32 if single else np.float64
     syrk = ssyrk if single else dsyrk
-    jac = np.empty((n, n_params), dtype=dtype)
+    jac = np.empty((n, n_params), dtype=dtype, order="F")
     hess = np.zeros((n_params, n_params), dtype=dtype, order="F")
     work = np.empty((n_params, n_params), order="F")
     diag = np.arange(n_params)
@@ -243,7 +243,7 @@ def _levenberg_marquardt(
         if float(np.linalg.norm(grad)) < options.min_gradient:
             result.stop = "gradient"
             break
-        hess = syrk(1.0, jac.T, lower=1, c=hess, overwrite_c=1)
+        hess = syrk(1.0, jac, lower=1, trans=1, c=hess, overwrite_c=1)
         accepted = False
         while mu <= options.mu_max:
             work[...] = hess  # (cast to float64 when J^T W J is single precision)
