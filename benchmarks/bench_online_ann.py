@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -39,6 +40,7 @@ from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating import make_updater
 from fresco_bridge.updating.ann import PRETRAIN_LM, AnnModel, pretrain
 from fresco_bridge.updating.base import Updater
+from fresco_bridge.updating.features import feature_rows
 from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 
@@ -104,15 +106,20 @@ def _lm(iterations: int) -> Any:
     return replace(PRETRAIN_LM, max_iterations=iterations)
 
 
-def run(updater: Updater, pair: Pair, lag: bool,
-        iterations: list[int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def run(updater: Updater, pair: Pair, lag: bool, iterations: list[int] | None = None,
+        teacher: list[float] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(predictions, wall s, cpu s) per step; the replay loop with CPU time around observe.
 
-    ``iterations`` collects the LM iterations of every update (online_ann).
+    ``iterations`` collects the LM iterations of every update (online_ann); ``teacher`` the
+    network's force at each step from the twin's *true* previous state, after the update
+    (teacher forcing: the fit's own error, free of the recurrence's chaos).
     """
     twin = updater.twin
     n = len(pair.twin_d)
     pred, wall, cpu = np.empty(n), np.empty(n), np.empty(n)
+    model: AnnModel | None = getattr(updater, "model", None)
+    x_true = None if teacher is None or model is None else \
+        model.scaler.x(feature_rows(pair.twin_d, pair.twin_f)[0])
     for i in range(n):
         if lag:
             pred[i] = twin.set_trial(float(pair.twin_d[i]))[0]
@@ -123,6 +130,9 @@ def run(updater: Updater, pair: Pair, lag: bool,
         wall[i] = updater.last_update_seconds
         if iterations is not None:
             iterations.append(updater.last_fit.iterations)  # type: ignore[attr-defined]
+        if x_true is not None and teacher is not None and model is not None:
+            y = model.net.forward(updater.theta, x_true[i:i + 1])[0]  # type: ignore[attr-defined]
+            teacher.append(float(y) * model.scaler.y_range + model.scaler.y_min)
         if not lag:
             pred[i] = twin.set_trial(float(pair.twin_d[i]))[0]
             twin.commit()
@@ -130,7 +140,7 @@ def run(updater: Updater, pair: Pair, lag: bool,
 
 
 def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
-             variants: list[str]) -> list[dict[str, Any]]:
+             variants: list[str], lag: bool = True) -> list[dict[str, Any]]:
     rows = []
     for pair in pairs:
         model = models[pair.label.split("/")[0]]
@@ -143,20 +153,29 @@ def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
                      "one_step_rmse": indicators.one_step_rmse(pair.twin_f, base)})
         for name in variants:
             opts = VARIANTS[name]
+            its: list[int] = []
+            forced: list[float] = []
             pred, wall, cpu = run(make_updater("online_ann", model=model, seed=1, **opts), pair,
-                                  lag=False)
-            ahead, _, _ = run(make_updater("online_ann", model=model, seed=1, **opts), pair,
-                              lag=True)
+                                  lag=False, iterations=its, teacher=forced)
+            one_step = math.nan
+            if lag:
+                ahead, _, _ = run(make_updater("online_ann", model=model, seed=1, **opts), pair,
+                                  lag=True)
+                one_step = indicators.one_step_rmse(pair.twin_f, ahead)
             row = {"pair": pair.label, "layout": pair.layout, "variant": name,
                    "maeth": indicators.maeth(pair.twin_f, pred),
-                   "one_step_rmse": indicators.one_step_rmse(pair.twin_f, ahead),
+                   "one_step_rmse": one_step,
+                   "teacher_forced_rmse": indicators.one_step_rmse(pair.twin_f, np.array(forced)),
+                   "iterations_mean": float(np.mean(its)),
                    "wall_ms_median": 1e3 * float(np.median(wall)),
                    "wall_ms_p99": 1e3 * float(np.percentile(wall, 99)),
                    "cpu_ms_median": 1e3 * float(np.median(cpu)),
                    "cpu_ms_p99": 1e3 * float(np.percentile(cpu, 99))}
             rows.append(row)
             print(f"  {pair.label} {pair.layout}: {name:<17} MAETH {row['maeth']:7.3f} kN, "
-                  f"one-step RMSE {row['one_step_rmse']:.4f} kN; update wall median "
+                  f"one-step RMSE {row['one_step_rmse']:.4f} kN, teacher-forced RMSE "
+                  f"{row['teacher_forced_rmse']:.4f} kN, LM iterations mean "
+                  f"{row['iterations_mean']:.1f}; update wall median "
                   f"{row['wall_ms_median']:.1f} p99 {row['wall_ms_p99']:.1f} ms, cpu median "
                   f"{row['cpu_ms_median']:.1f} p99 {row['cpu_ms_p99']:.1f} ms", flush=True)
     return rows
@@ -280,6 +299,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="comma-separated variants alternated in the timing section")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-timing", action="store_true")
+    p.add_argument("--no-lag", action="store_true",
+                   help="accuracy without the one-step-ahead replay (half the time)")
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
     info = machine()
@@ -298,7 +319,7 @@ def main(argv: list[str] | None = None) -> None:
                                   args.timing_steps, args.timing_variants.split(","))
     if not args.skip_accuracy:
         print("accuracy:", flush=True)
-        result["accuracy"] = accuracy(models, pairs, args.variants.split(","))
+        result["accuracy"] = accuracy(models, pairs, args.variants.split(","), not args.no_lag)
     result["machine_end"] = machine()
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))
