@@ -18,8 +18,12 @@ measurement ``(d_i, F_i)`` of the tested element:
 4. Levenberg-Marquardt (:mod:`.lm`: damping 1e-5, momentum 0.1, warm start from the previous
    step's network) refits the network: at most 50 iterations, as in the paper, stopped
    earlier only by ``trainlm``'s own rules (gradient norm < 1e-7, damping > 1e10; see
-   :mod:`.lm`). A smaller cap or a relative-decrease stop (``rtol``) is an option, not the
-   default: it changes the method, and BENCHMARKS.md measures by how much;
+   :mod:`.lm`). A smaller cap, a relative-decrease stop (``rtol``), MATLAB ``train``'s
+   default data division with its validation stop (``divide="dividerand"``: every step 70 %
+   of the rows train, 15 % validate, 15 % are held out, the best-validation network is kept)
+   and a float32 J^T W J are options, not the default: each changes the fit, and
+   BENCHMARKS.md (part 5) measures by how much and argues why the paper's reading is "all
+   700 rows train";
 5. the twin (an :class:`~.ann.AnnTwin` with its own committed recurrence) uses the new network
    from its next trial on.
 """
