@@ -24,12 +24,12 @@ from .indicators import xcorr_delay as _xcorr_delay
 from .record.export import (
     CommittedStep,
     MonitorLine,
-    RecordFormatError,
     monitor_lines,
     pair_commits,
     read_record,
     record_is_torn,
 )
+from .record.lines import RecordFormatError
 from .record.recovery import open_sessions, run_state
 from .record.writer import CONFIG_FILE, META_FILE, RECORD_FILE
 
@@ -206,7 +206,8 @@ class RunListing:
 
 
 def scan_run(path: Path) -> RunListing:
-    """Counts for ``runs list`` without decoding every line (commit lines are only counted)."""
+    """Counts for ``runs list`` without decoding every line (step and commit lines are only
+    counted)."""
     try:
         meta = _read_meta(check_run_dir(path))
         steps = sessions = holds = 0
@@ -214,7 +215,7 @@ def scan_run(path: Path) -> RunListing:
             for line in fh:
                 if not line.endswith(b"\n"):
                     continue  # a torn last line, as load_run skips it
-                if b'"kind":"commit"' in line:
+                if b'"kind":"step"' in line or b'"kind":"commit"' in line:  # format 3, 1/2
                     steps += 1
                 elif b'"kind":"event"' in line:
                     ev = json.loads(line).get("event")

@@ -16,12 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .lines import expand
+from .lines import RecordFormatError, expand
 from .writer import RECORD_FILE
-
-
-class RecordFormatError(ValueError):
-    """A record line is not what the writer produces (names file, line and reason)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +50,7 @@ def _float(v: Any) -> float:
 
 
 def read_record(run_dir: Path) -> Iterator[dict[str, Any]]:
-    """Yield the record's lines as complete dicts (format 1 or 2, see ``lines.py``). A torn
+    """Yield the record's lines as complete dicts (format 1, 2 or 3, see ``lines.py``). A torn
     last line (crash mid-write) is skipped."""
     return expand(_decoded_lines(run_dir))
 

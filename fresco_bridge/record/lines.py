@@ -16,9 +16,29 @@ repeated. Format 2 writes each line as a JSON object too, but only what changed:
 - numbers in the shortest form that reads back to the same double (``repr``); non-finite
   values as the strings ``"nan"``/``"inf"``/``"-inf"``, as in format 1.
 
-``expand`` turns lines of either format (or a file mixing them: a format-1 run resumed by
-this version) back into complete format-1 dicts, so every reader (export, report, ``runs``,
-HDF5, recovery) sees exactly what it saw before.
+Format 3 (issue 8, the default since) is format 2 plus the **step line**: a committed step's
+trial and daq lines, its commit line and the monitor line of the step before, folded into one
+line written at the commit (one line per step instead of eight; the Python formatting of the
+lines was the largest cost left on the step path)::
+
+    {"t":…,"kind":"step","step":S,"time":T,"mon":M,"it":[I1,I2,…]}
+
+- ``step``/``time`` are the commit's; every trial of the step had step ``S − 1`` and time ``T``
+  (the step line is only written then: otherwise the step's lines are format-2 lines);
+- ``it``: one entry per trial, each followed by its measurement (the Newton iterations):
+  ``0`` when trial, ctrl, daq disp and force all equal the previous iteration's (for the first,
+  the previous trial and daq lines of the site and session), else ``[trial, disp, force]`` or
+  ``[trial, disp, force, ctrl]`` (ctrl absent: equal to the trial), where a ``0`` in place of a
+  vector means "unchanged from the previous iteration";
+- ``mon`` (optional): the monitor line of step ``S − 1`` (it is computed after that commit and
+  goes to the file with the next one, as in format 2): ``[err, ti, nrms, fei_amp, fei_delay]``,
+  or ``0`` for the values of the previous monitor line;
+- ``site``/``session`` as on every line; ``t`` is when the line was written (the commit), and
+  the lines it stands for read back with that ``t``.
+
+``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
+version) back into complete format-1 dicts, in the order the bridge recorded them, so every
+reader (export, report, ``runs``, HDF5, recovery) sees exactly what it saw before.
 """
 
 from __future__ import annotations
@@ -28,9 +48,18 @@ import math
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 INHERITED_KINDS = frozenset(("trial", "daq", "commit", "monitor"))
 """Line kinds whose absent value fields repeat the previous line's (same site, session)."""
+TRIAL, DAQ, MONITOR = 0, 1, 2
+"""Kinds of a site's pending items (``LineEncoder.fold``, ``LineEncoder.lines``): ``(TRIAL,
+session, step, time, trial, ctrl)``, ``(DAQ, session, step, disp, force)``, ``(MONITOR, session,
+step, (err, ti, nrms, fei_amp, fei_delay))``."""
+Item = tuple[Any, ...]
+
+
+class RecordFormatError(ValueError):
+    """A record line is not what the writer produces (names file, line and reason)."""
 
 
 def num(v: float) -> str:
@@ -51,7 +80,7 @@ def opt(v: float | None) -> str:
 
 
 class LineEncoder:
-    """Format-2 lines; remembers what the file already says (not thread-safe).
+    """Format-3 lines; remembers what the file already says (not thread-safe).
 
     Every line it returns must reach the file in order: the next lines are written relative
     to it.
@@ -66,7 +95,9 @@ class LineEncoder:
         """The last vector formatted and its text: an in-process specimen measures the very
         command tuple it was sent, so its daq disp is formatted once, not twice (~0.5 µs a
         number: 64 DOFs)."""
-        self._trial: dict[str, tuple[int, int, float, tuple[float, ...]]] = {}
+        # per site: (session, step, time, trial, ctrl); (session, step, disp, force);
+        # (session, step, time); (session, (step, err, ti, nrms, fei_amp, fei_delay))
+        self._trial: dict[str, tuple[int, int, float, tuple[float, ...], tuple[float, ...]]] = {}
         self._daq: dict[str, tuple[int, int, tuple[float, ...], tuple[float, ...]]] = {}
         self._commit: dict[str, tuple[int, int, float]] = {}
         self._monitor: dict[str, tuple[Any, ...]] = {}
@@ -99,7 +130,7 @@ class LineEncoder:
                 body += f',"trial":{self._vector(trial)}'
         if ctrl != trial:
             body += f',"ctrl":{self._vector(ctrl)}'
-        self._trial[site] = (session, step, time_, trial)
+        self._trial[site] = (session, step, time_, trial, ctrl)
         return body
 
     def daq(self, site: str, session: int, step: int, disp: tuple[float, ...],
@@ -146,13 +177,82 @@ class LineEncoder:
         return "," + json.dumps({"event": kind, "reason": reason, **extra},
                                 separators=(",", ":"))[1:-1]
 
+    def lines(self, t: float, site: str, items: list[Item]) -> list[str]:
+        """A site's pending items as format-2 lines (what ``fold`` cannot fold), in order."""
+        out = []
+        for item in items:
+            kind, session = item[0], item[1]
+            if kind == TRIAL:
+                out.append(self.line(t, "trial", site, session, self.trial(site, *item[1:])))
+            elif kind == DAQ:
+                out.append(self.line(t, "daq", site, session, self.daq(site, *item[1:])))
+            else:
+                out.append(self.line(t, "monitor", site, session,
+                                     self.monitor(site, session, item[2], *item[3])))
+        return out
+
+    def fold(self, t: float, site: str, session: int, step: int, time_: float,
+             items: list[Item]) -> str | None:
+        """The step line of committed ``step``: ``items`` (the site's lines since its last
+        commit) and the commit in one line; None when they do not have the step line's shape
+        (then they are written as format-2 lines)."""
+        last_t = self._trial.get(site)
+        last_d = self._daq.get(site)
+        if last_t is None or last_d is None or last_t[0] != session or last_d[0] != session:
+            return None
+        n = len(items)
+        prev = step - 1
+        i = 0
+        mon = ""
+        monitor = None
+        if n and items[0][0] == MONITOR:
+            monitor = items[0]
+            if monitor[1] != session or monitor[2] != prev:
+                return None
+            values = monitor[3]
+            last_m = self._monitor.get(site)
+            if last_m is not None and last_m[0] == session and last_m[1][1:] == values:
+                mon = ',"mon":0'
+            else:
+                err, ti, nrms, fei_amp, fei_delay = values
+                mon = (f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},'
+                       f'{opt(fei_delay)}]')
+            i = 1
+        if n - i < 2 or (n - i) % 2:
+            return None
+        pt, pc, pd, pf = last_t[3], last_t[4], last_d[2], last_d[3]
+        vector = self._vector
+        its = []
+        for j in range(i, n, 2):
+            tr, dq = items[j], items[j + 1]
+            if (tr[0] != TRIAL or dq[0] != DAQ or tr[1] != session or dq[1] != session
+                    or tr[2] != prev or dq[2] != prev or tr[3] != time_):
+                return None
+            trial, ctrl, disp, force = tr[4], tr[5], dq[3], dq[4]
+            if trial == pt and ctrl == pc and disp == pd and force == pf:
+                its.append("0")
+            else:
+                its.append(f'[{"0" if trial == pt else vector(trial)},'
+                           f'{"0" if disp == pd else vector(disp)},'
+                           f'{"0" if force == pf else vector(force)}'
+                           f'{"" if ctrl == trial else "," + vector(ctrl)}]')
+            pt, pc, pd, pf = trial, ctrl, disp, force
+        self._trial[site] = (session, prev, time_, pt, pc)
+        self._daq[site] = (session, prev, pd, pf)
+        self._commit[site] = (session, step, time_)
+        if monitor is not None:
+            self._monitor[site] = (session, (prev, *monitor[3]))
+        body = f',"step":{step},"time":{num(time_)}{mon},"it":[{",".join(its)}]'
+        return self.line(t, "step", site, session, body)
+
 
 _MONITOR_FLOATS = ("err", "ti", "nrms", "fei_amp", "fei_delay")
 
 
 def expand(objs: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
     """Complete format-1 dicts (with ``seq``, ``site``, ``session`` and every value) from the
-    decoded lines of a record of format 1, 2 or both, in order."""
+    decoded lines of a record of format 1, 2, 3 or a mix, in order. RecordFormatError: a step
+    line without the lines it is relative to (not a record this writer wrote)."""
     seq, site, session = 0, "", 0
     last: dict[tuple[str, str], dict[str, Any]] = {}
     for obj in objs:
@@ -163,14 +263,19 @@ def expand(objs: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
                 last[(site, obj["kind"])] = obj
             yield obj
             continue
-        seq += 1
         if "site" in obj:
             site = str(obj["site"])
         if "session" in obj:
             session = int(obj["session"])
         kind = obj.get("kind")
-        full: dict[str, Any] = {"seq": seq, "t": obj.get("t", 0.0), "kind": kind, "site": site,
-                                "session": session}
+        if kind == "step":
+            for line in _unfold(obj, site, session, seq, last):
+                seq = line["seq"]
+                yield line
+            continue
+        seq += 1
+        full = {"seq": seq, "t": obj.get("t", 0.0), "kind": kind, "site": site,
+                "session": session}
         if kind in INHERITED_KINDS:
             prev = last.get((site, kind))
             if prev is not None and prev.get("session") == session:
@@ -188,3 +293,49 @@ def expand(objs: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
                 if k not in ("t", "kind", "site", "session"):
                     full[k] = v
         yield full
+
+
+def _unfold(obj: dict[str, Any], site: str, session: int, seq: int,
+            last: dict[tuple[str, str], dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    """The format-1 lines of one step line (format 3): [monitor], trial, daq, …, commit."""
+
+    def before(kind: str) -> dict[str, Any]:
+        prev = last.get((site, kind))
+        if prev is None or prev.get("session") != session:
+            raise RecordFormatError(
+                f"step line after seq {seq} ({site!r} session {session}): no {kind} line of "
+                "that site and session before it, which the step line is written relative to")
+        return prev
+
+    t, step, time_ = obj.get("t", 0.0), int(obj["step"]), obj["time"]
+    head = {"t": t, "site": site, "session": session}
+    mon = obj.get("mon")
+    if mon is not None:
+        values = ([before("monitor")[k] for k in _MONITOR_FLOATS] if mon == 0 else mon)
+        seq += 1
+        m = {"seq": seq, "kind": "monitor", **head, "step": step - 1,
+             **dict(zip(_MONITOR_FLOATS, values, strict=True))}
+        last[(site, "monitor")] = m
+        yield m
+    its = obj["it"]
+    if not its:
+        raise RecordFormatError(f"step line after seq {seq}: no iteration in 'it'")
+    tr, dq = before("trial"), before("daq")
+    trial, ctrl, disp, force = tr["trial"], tr["ctrl"], dq["disp"], dq["force"]
+    for it in its:
+        if it != 0:
+            trial = trial if it[0] == 0 else it[0]
+            disp = disp if it[1] == 0 else it[1]
+            force = force if it[2] == 0 else it[2]
+            ctrl = it[3] if len(it) > 3 else trial
+        tr = {"seq": seq + 1, "kind": "trial", **head, "step": step - 1, "time": time_,
+              "trial": trial, "ctrl": ctrl}
+        dq = {"seq": seq + 2, "kind": "daq", **head, "step": step - 1, "disp": disp,
+              "force": force}
+        seq += 2
+        yield tr
+        yield dq
+    last[(site, "trial")], last[(site, "daq")] = tr, dq
+    commit = {"seq": seq + 1, "kind": "commit", **head, "step": step, "time": time_}
+    last[(site, "commit")] = commit
+    yield commit

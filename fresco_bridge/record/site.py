@@ -1,9 +1,10 @@
 """One site's writer of the run record: the only code that writes that site's lines.
 
-Trials and measurements are written as they happen (crash safety: what reached the controller
-is on record before the answer goes out); committed steps and events arrive as a listener
-(``sites/listeners.py``); monitor samples from the telemetry taps; refused connections from
-the transport, through the site.
+Trials and measurements are recorded as they happen and reach the file with the site's next
+commit or event (a committed step is one line, ``record/lines.py``); committed steps and events
+arrive as a listener (``sites/listeners.py``); monitor samples from the telemetry taps (after
+the commit: they go out with the next one); refused connections from the transport, through
+the site.
 """
 
 from __future__ import annotations

@@ -1,10 +1,11 @@
 """Append-only run record, safe against kill -9 and, within ``sync_interval``, power loss.
 
 One run directory per bridge run: ``config.toml`` (snapshot), ``run.json`` (metadata) and
-``record.jsonl`` (one JSON object per line, format in ``record/lines.py``). Lines are buffered
-in memory between commits; at each commit (and at every event) the buffer goes to the kernel
-with one ``write`` before the bridge processes the next message, so killing the process loses
-no committed step. ``fdatasync`` makes it durable against a power loss:
+``record.jsonl`` (one JSON object per line, format in ``record/lines.py``). A site's trials,
+measurements and monitor samples wait in memory for its next commit or event; the commit (one
+step line) or the event goes to the kernel with one ``write`` before the bridge processes the
+next message, so killing the process loses no committed step. ``fdatasync`` makes it durable
+against a power loss:
 
 - ``fsync="background"`` (default): group commit, as databases do. A syncer thread runs one
   ``fdatasync`` for every commit written since the last one, at most once per
@@ -31,11 +32,12 @@ import os
 import socket
 import threading
 import time
+from collections import defaultdict
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Literal
 
-from .lines import FORMAT_VERSION, LineEncoder
+from .lines import DAQ, FORMAT_VERSION, MONITOR, TRIAL, Item, LineEncoder
 
 RECORD_FILE = "record.jsonl"
 CONFIG_FILE = "config.toml"
@@ -84,53 +86,74 @@ class _Syncer(threading.Thread):
     Syncs at most once per ``interval``; a request while the last sync is younger than that
     waits out the rest of the interval, unless it is urgent (an event). Requests that arrive
     during a sync or a wait are coalesced into the next sync.
+
+    Why a bare lock and flags rather than ``threading.Event``: a commit's request is then two
+    attribute stores on the step loop (the thread is woken only when it is idle or for an
+    event), and the thread itself wakes once per sync, not once per request; both sides run
+    next to no Python code (an ``Event`` runs a ``Condition`` in Python on every call).
     """
 
     def __init__(self, fd: int, interval: float) -> None:
         super().__init__(name="fresco-record-sync", daemon=True)
         self._fd = fd
         self._interval = interval
-        self._wanted = threading.Event()
-        self._urgent = threading.Event()
+        self._kick = threading.Lock()
+        self._kick.acquire()  # released to wake the thread (a binary semaphore)
+        self._kicked = False  # a release is pending: do not release twice
+        self._idle = True  # the thread waits for a request, not for the interval to pass
+        self._urgent = False
         self._stopping = False
         self._requested = 0  # lines written to the kernel when the last request came
         self.durable = 0  # lines covered by the last completed fdatasync
         self.syncs = 0
         self.error: OSError | None = None
 
+    def _wake(self) -> None:
+        if not self._kicked:
+            self._kicked = True
+            self._kick.release()
+
     def request(self, lines: int, urgent: bool) -> None:
         self._requested = lines
         if urgent:
-            self._urgent.set()
-        if not self._wanted.is_set():
-            self._wanted.set()
+            self._urgent = True
+            self._wake()
+        elif self._idle:  # else the thread's own timer covers these lines
+            self._wake()
+
+    def _wait(self, timeout: float = -1) -> None:
+        if self._kick.acquire(timeout=timeout):
+            self._kicked = False
 
     def run(self) -> None:
         last = -math.inf
         while True:
-            self._wanted.wait()
+            # idle until a line is waiting for a sync (the flag is set before the check, the
+            # request is stored before the flag is read: no request can be missed)
+            self._idle = True
+            if self._requested == self.durable and not (self._urgent or self._stopping):
+                self._wait()
+            self._idle = False
+            while not (self._urgent or self._stopping):  # at most one sync per interval
+                wait = last + self._interval - time.monotonic()
+                if wait <= 0.0:
+                    break
+                self._wait(wait)
             if self._stopping:
                 return
-            wait = last + self._interval - time.monotonic()
-            if wait > 0.0 and not self._urgent.is_set():
-                self._urgent.wait(wait)
-                if self._stopping:
-                    return
-            self._urgent.clear()
-            self._wanted.clear()
+            self._urgent = False
             covered = self._requested
             last = time.monotonic()
             try:
                 os.fdatasync(self._fd)
                 self.durable = covered
                 self.syncs += 1
-            except OSError as exc:  # reported at close and on the next flush
+            except OSError as exc:  # reported on the next flush; retried an interval later
                 self.error = exc
 
     def stop(self) -> None:
         self._stopping = True
-        self._urgent.set()
-        self._wanted.set()
+        self._wake()
         self.join(timeout=5.0)
 
 
@@ -145,6 +168,9 @@ class RunRecord:
         self._fsync = fsync
         self._seq = seq
         self._buf: list[str] = []
+        self._pending: defaultdict[str, list[Item]] = defaultdict(list)
+        """Per site, its trials, measurements and monitor samples since its last commit: they
+        become one step line at the commit (``LineEncoder.fold``), format-2 lines otherwise."""
         self._enc = LineEncoder()
         self._t0 = time.monotonic() - t
         path = directory / RECORD_FILE
@@ -233,77 +259,97 @@ class RunRecord:
         return record
 
     # -- appending -------------------------------------------------------------------------
-    def _line(self, kind: str, site: str, session: int, body: str) -> None:
-        self._seq += 1
-        self._buf.append(self._enc.line(time.monotonic() - self._t0, kind, site, session, body))
-
-    # trial, measurement and commit are ``_line`` written out: they run several times a step
+    # A site's trials, measurements and monitor samples wait in memory for its next commit or
+    # event (as the lines did in the buffer before format 3): nothing reaches the kernel
+    # between two commits, and the commit writes them, folded into one step line when they
+    # have its shape. So a commit's data is in the kernel before the next message is read.
     def trial(
         self, site: str, session: int, step: int, time_: float, trial: tuple[float, ...],
         ctrl: tuple[float, ...],
     ) -> None:
-        enc = self._enc
-        self._seq += 1
-        self._buf.append(enc.line(time.monotonic() - self._t0, "trial", site, session,
-                                  enc.trial(site, session, step, time_, trial, ctrl)))
+        self._pending[site].append((TRIAL, session, step, time_, trial, ctrl))
 
     def measurement(
         self, site: str, session: int, step: int, disp: tuple[float, ...],
         force: tuple[float, ...],
     ) -> None:
-        enc = self._enc
-        self._seq += 1
-        self._buf.append(enc.line(time.monotonic() - self._t0, "daq", site, session,
-                                  enc.daq(site, session, step, disp, force)))
+        self._pending[site].append((DAQ, session, step, disp, force))
 
     def commit(self, site: str, session: int, step: int, time_: float) -> None:
         enc = self._enc
-        self._seq += 1
-        self._buf.append(enc.line(time.monotonic() - self._t0, "commit", site, session,
-                                  enc.commit(site, session, step, time_)))
+        t = time.monotonic() - self._t0
+        items = self._pending.get(site)
+        if items:
+            line = enc.fold(t, site, session, step, time_, items)
+            if line is None:
+                self._buf += enc.lines(t, site, items)
+                line = enc.line(t, "commit", site, session,
+                                enc.commit(site, session, step, time_))
+            self._seq += len(items) + 1
+            items.clear()
+        else:
+            line = enc.line(t, "commit", site, session, enc.commit(site, session, step, time_))
+            self._seq += 1
+        self._buf.append(line)
         self.flush(sync=True)
 
     def event(self, site: str, session: int, kind: str, reason: str, **extra: object) -> None:
-        """A state change or fault; written and synced at once so it survives what follows."""
-        self._line("event", site, session, self._enc.event(kind, reason, extra))
+        """A state change or fault; written and synced at once so it survives what follows
+        (after the site's pending lines, which it may explain)."""
+        t = time.monotonic() - self._t0
+        self._write_pending(site, t)
+        self._buf.append(self._enc.line(t, "event", site, session,
+                                        self._enc.event(kind, reason, extra)))
+        self._seq += 1
         self.flush(sync=True, urgent=True)
 
     def monitor(
         self, site: str, session: int, step: int, tracking_error: float, ti: float,
         nrms: float | None, fei_amplitude: float | None, fei_delay: float | None,
     ) -> None:
-        """Online error monitors after committed ``step`` (derived data: buffered, not flushed;
-        it goes to the file with the next commit or event)."""
-        self._line("monitor", site, session, self._enc.monitor(
-            site, session, step, tracking_error, ti, nrms, fei_amplitude, fei_delay))
+        """Online error monitors after committed ``step`` (derived data: it goes to the file
+        with the site's next commit or event)."""
+        self._pending[site].append(
+            (MONITOR, session, step, (tracking_error, ti, nrms, fei_amplitude, fei_delay)))
+
+    def _write_pending(self, site: str, t: float) -> None:
+        items = self._pending.get(site)
+        if items:
+            self._buf += self._enc.lines(t, site, items)
+            self._seq += len(items)
+            items.clear()
 
     # -- durability ------------------------------------------------------------------------
     def flush(self, *, sync: bool = False, urgent: bool = False) -> None:
         if self.closed:
             return
-        if self._buf:
-            data = "".join(self._buf).encode()
-            self._buf.clear()
+        buf = self._buf
+        if buf:
+            data = (buf[0] if len(buf) == 1 else "".join(buf)).encode()
+            buf.clear()
             try:
-                view = memoryview(data)
-                while view:
-                    n = os.write(self._fd, view)
-                    view = view[n:]
+                n = os.write(self._fd, data)
+                if n < len(data):  # a short write (a signal, a full disk): write the rest
+                    view = memoryview(data)[n:]
+                    while view:
+                        view = view[os.write(self._fd, view):]
             except OSError as exc:
                 raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
         if not sync or self._fsync == "off":
             return
-        if self._syncer is not None:
-            if self._syncer.error is not None:
-                err, self._syncer.error = self._syncer.error, None
+        syncer = self._syncer
+        if syncer is not None:
+            if syncer.error is not None:
+                err, syncer.error = syncer.error, None
                 raise RecordError(err.errno, f"run record fdatasync failed: {err.strerror}")
-            self._syncer.request(self._seq, urgent)
+            syncer.request(self._seq, urgent)
         else:
             os.fdatasync(self._fd)
 
     @property
     def lines(self) -> int:
-        """Lines appended so far (0: nothing was ever recorded)."""
+        """Lines written so far, counted as format-1 lines (a step line counts the lines it
+        stands for; 0: nothing was ever recorded)."""
         return self._seq
 
     @property
@@ -322,6 +368,9 @@ class RunRecord:
     def close(self) -> None:
         if self.closed:
             return
+        t = time.monotonic() - self._t0
+        for site in list(self._pending):
+            self._write_pending(site, t)
         self.flush()
         if self._syncer is not None:
             self._syncer.stop()

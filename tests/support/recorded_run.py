@@ -85,15 +85,20 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
     format 2 (README "Run record") filled in here by its written rules — a missing ``seq`` is
     the line's position, missing ``site``/``session`` are the previous line's, a missing value
     of a trial/daq/commit/monitor line is that of the previous line of its kind, site and
-    session, a missing ``ctrl`` equals the trial."""
+    session, a missing ``ctrl`` equals the trial — and format 3's step lines unfolded into the
+    monitor, trial, daq and commit lines they stand for."""
     text = (run_dir / "record.jsonl").read_text()
     out: list[dict[str, Any]] = []
     seen: dict[tuple[str, int, str], dict[str, Any]] = {}
-    for n, line in enumerate(text.split("\n")[:-1], 1):
+    for line in text.split("\n")[:-1]:
         rec = json.loads(line)
         if "seq" not in rec:
             where = out[-1] if out else {}
-            rec = {"seq": n, "site": where.get("site"), "session": where.get("session"), **rec}
+            rec = {"seq": len(out) + 1, "site": where.get("site"),
+                   "session": where.get("session"), **rec}
+            if rec["kind"] == "step":
+                out += unfold_step(rec, seen)
+                continue
             if rec["kind"] != "event":
                 had = "ctrl" in rec
                 rec = {**seen.get((rec["site"], rec["session"], rec["kind"]), {}), **rec}
@@ -101,4 +106,38 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
                     rec["ctrl"] = rec["trial"]
         seen[(rec["site"], rec["session"], rec["kind"])] = rec
         out.append(rec)
+    return out
+
+
+def unfold_step(rec: dict[str, Any], seen: dict[tuple[str, int, str], dict[str, Any]]
+                ) -> list[dict[str, Any]]:
+    """A step line: [the monitor line of the step before], a trial and a daq line per entry of
+    ``it`` (0: all as before; else [trial, disp, force(, ctrl)], 0 for an unchanged vector),
+    the commit line. ``seq`` follows on from the step line's position."""
+    site, session, seq, step = rec["site"], rec["session"], rec["seq"], rec["step"]
+    common = {"t": rec["t"], "site": site, "session": session}
+    out: list[dict[str, Any]] = []
+    if "mon" in rec:
+        names = ("err", "ti", "nrms", "fei_amp", "fei_delay")
+        values = rec["mon"]
+        if values == 0:
+            values = [seen[(site, session, "monitor")][k] for k in names]
+        out.append({**common, "kind": "monitor", "step": step - 1,
+                    **dict(zip(names, values, strict=True))})
+    trial = seen[(site, session, "trial")]
+    daq = seen[(site, session, "daq")]
+    for it in rec["it"]:
+        if it != 0:
+            new_trial = trial["trial"] if it[0] == 0 else it[0]
+            trial = {**common, "kind": "trial", "trial": new_trial,
+                     "ctrl": it[3] if len(it) == 4 else new_trial}
+            daq = {**common, "kind": "daq", "disp": daq["disp"] if it[1] == 0 else it[1],
+                   "force": daq["force"] if it[2] == 0 else it[2]}
+        trial = {**trial, **common, "step": step - 1, "time": rec["time"]}
+        daq = {**daq, **common, "step": step - 1}
+        out += [trial, daq]
+    out.append({**common, "kind": "commit", "step": step, "time": rec["time"]})
+    for n, line in enumerate(out):
+        line["seq"] = seq + n
+        seen[(site, session, line["kind"])] = line
     return out

@@ -21,7 +21,7 @@ import pytest
 
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import RunRecord, read_record
-from fresco_bridge.record.export import committed_steps
+from fresco_bridge.record.export import committed_steps, monitor_lines
 
 DEADLINE = 10.0
 
@@ -49,7 +49,8 @@ def test_commits_are_written_at_once_and_synced_together(tmp_path: Path) -> None
         for n in range(2, 51):
             step(record, n)
             # in the kernel before the next message is processed: another reader sees it
-            assert path.read_bytes().count(b'"kind":"commit"') == n
+            assert path.read_bytes().count(b'"kind":"step"') == n - 1  # one line a step
+            assert committed_steps(record.directory)[-1].meas_force == (1.0 * n,)
         assert record.syncs == 1 and record.durable_lines == 3  # the rest waits the interval
         record.event("s", 1, "hold", "limit exceeded")
         wait_for(lambda: record.syncs == 2, "the event's sync")  # events do not wait
@@ -130,5 +131,12 @@ def test_kill_9_after_the_last_commit_loses_no_step_with_a_long_sync_interval(
             proc.kill()
             proc.wait(10)
     (run,) = (tmp_path / "runs").iterdir()
-    assert [s.step for s in committed_steps(run)] == list(range(1, 41))
+    steps = committed_steps(run)
+    assert [s.step for s in steps] == list(range(1, 41))
+    assert [s.cmd_disp for s in steps] == [(0.01 * i,) for i in range(1, 41)]
+    assert [s.meas_force for s in steps] == [(10.0 * (0.01 * i),) for i in range(1, 41)]
     assert sum(r["kind"] == "trial" for r in read_record(run)) >= 40
+    # format 3: one line a step after the session's first; a step's monitor line goes out
+    # with the next commit (derived data, as before), so the 40th waited in memory
+    assert (run / "record.jsonl").read_text().count('"kind":"step"') == 39
+    assert [m.step for m in monitor_lines(read_record(run))] == list(range(1, 40))
