@@ -46,7 +46,7 @@ from sim_actuator.models import Bilinear
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "faithful (50 it)": {"divide": "none"},
-    "faithful, seed 2": {"divide": "none", "seed": 2},  # other random offline rows: the spread
+    "faithful seed 2": {"divide": "none", "seed": 2},  # other random offline rows: the spread
     "dividerand": {"divide": "dividerand"},
     "dividerand f32": {"divide": "dividerand", "single_precision_hessian": True},
     "50 it f32": {"divide": "none", "single_precision_hessian": True},
