@@ -1,4 +1,4 @@
-"""The record's line format: a lean encoder (format 2) and one decoder for every format.
+"""The record's line format: a lean encoder (format 3) and one decoder for every format.
 
 Format 1 (until issue 8) wrote every field on every line: ``seq``, ``t``, ``kind``, ``site``,
 ``session`` and the values, 8 lines and ~1160 bytes per committed 1-DOF step, most of it
@@ -37,15 +37,16 @@ lines was the largest cost left on the step path)::
   the lines it stands for read back with that ``t``.
 
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
-version) back into complete format-1 dicts, in the order the bridge recorded them, so every
-reader (export, report, ``runs``, HDF5, recovery) sees exactly what it saw before.
+version) back into complete format-1 dicts, in file order (each site's lines in the order it
+recorded them), so every reader (export, report, ``runs``, HDF5, recovery) sees exactly what
+it saw before.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 FORMAT_VERSION = 3
@@ -67,9 +68,9 @@ def num(v: float) -> str:
     return repr(float(v)) if math.isfinite(v) else f'"{v}"'
 
 
-def nums(values: Iterable[float]) -> str:
+def nums(values: Sequence[float]) -> str:
     """JSON array of floats in their shortest exact form (non-finite as strings)."""
-    body = ",".join(map(repr, values))
+    body = repr(values[0]) if len(values) == 1 else ",".join(map(repr, values))
     if "n" in body:  # nan / inf / -inf (no finite repr contains an "n")
         body = ",".join(num(v) for v in values)
     return "[" + body + "]"
@@ -200,13 +201,12 @@ class LineEncoder:
         last_d = self._daq.get(site)
         if last_t is None or last_d is None or last_t[0] != session or last_d[0] != session:
             return None
-        n = len(items)
         prev = step - 1
+        n = len(items)
         i = 0
         mon = ""
-        monitor = None
-        if n and items[0][0] == MONITOR:
-            monitor = items[0]
+        monitor = items[0]
+        if monitor[0] == MONITOR:
             if monitor[1] != session or monitor[2] != prev:
                 return None
             values = monitor[3]
@@ -218,32 +218,37 @@ class LineEncoder:
                 mon = (f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},'
                        f'{opt(fei_delay)}]')
             i = 1
-        if n - i < 2 or (n - i) % 2:
+        if n - i < 2 or (n - i) & 1:
             return None
+        trial_head = (TRIAL, session, prev, time_)
+        daq_head = (DAQ, session, prev)
         pt, pc, pd, pf = last_t[3], last_t[4], last_d[2], last_d[3]
         vector = self._vector
         its = []
         for j in range(i, n, 2):
             tr, dq = items[j], items[j + 1]
-            if (tr[0] != TRIAL or dq[0] != DAQ or tr[1] != session or dq[1] != session
-                    or tr[2] != prev or dq[2] != prev or tr[3] != time_):
+            if tr[:4] != trial_head or dq[:3] != daq_head:
                 return None
-            trial, ctrl, disp, force = tr[4], tr[5], dq[3], dq[4]
-            if trial == pt and ctrl == pc and disp == pd and force == pf:
-                its.append("0")
+            trial, ctrl = tr[4], tr[5]
+            disp, force = dq[3], dq[4]
+            if trial == pt:
+                if ctrl == pc and disp == pd and force == pf:
+                    its.append("0")
+                    continue
+                text = "[0,"
             else:
-                its.append(f'[{"0" if trial == pt else vector(trial)},'
-                           f'{"0" if disp == pd else vector(disp)},'
-                           f'{"0" if force == pf else vector(force)}'
-                           f'{"" if ctrl == trial else "," + vector(ctrl)}]')
+                text = "[" + vector(trial) + ","
+            text += "0," if disp == pd else vector(disp) + ","
+            text += "0" if force == pf else vector(force)
+            its.append(text + "]" if ctrl == trial else text + "," + vector(ctrl) + "]")
             pt, pc, pd, pf = trial, ctrl, disp, force
         self._trial[site] = (session, prev, time_, pt, pc)
         self._daq[site] = (session, prev, pd, pf)
         self._commit[site] = (session, step, time_)
-        if monitor is not None:
+        if i:
             self._monitor[site] = (session, (prev, *monitor[3]))
-        body = f',"step":{step},"time":{num(time_)}{mon},"it":[{",".join(its)}]'
-        return self.line(t, "step", site, session, body)
+        return self.line(t, "step", site, session,
+                         f',"step":{step},"time":{num(time_)}{mon},"it":[{",".join(its)}]')
 
 
 _MONITOR_FLOATS = ("err", "ti", "nrms", "fei_amp", "fei_delay")

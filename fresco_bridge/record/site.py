@@ -13,6 +13,7 @@ from collections.abc import Callable
 from functools import partial
 from typing import TYPE_CHECKING
 
+from .lines import MONITOR
 from .writer import RunRecord
 
 if TYPE_CHECKING:
@@ -27,11 +28,12 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_record", "measurement", "site", "trial")
+    __slots__ = ("_pending", "_record", "measurement", "site", "trial")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
         self.site = site
+        self._pending = record.pending(site)
         # several times a step: the record's own methods with the site bound (no extra frame)
         self.trial: Callable[[int, int, float, tuple[float, ...], tuple[float, ...]], None] = \
             partial(record.trial, site)
@@ -50,5 +52,6 @@ class SiteRecorder:
         self._record.event(self.site, session, kind, reason, **extra)
 
     def monitor(self, session: int, step: int, sample: MonitorSample) -> None:
-        self._record.monitor(self.site, session, step, sample.tracking_error, sample.ti,
-                             sample.nrms, sample.fei_amplitude, sample.fei_delay)
+        """The monitors after committed ``step`` (``RunRecord.monitor`` without its frame:
+        once a step; the sample's first five fields are the recorded values)."""
+        self._pending.append((MONITOR, session, step, sample[:5]))

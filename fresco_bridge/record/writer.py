@@ -44,6 +44,10 @@ CONFIG_FILE = "config.toml"
 META_FILE = "run.json"
 DEFAULT_SYNC_INTERVAL = 0.01
 """Group commit: at most one fdatasync per this many seconds (events sync at once)."""
+PENDING_LIMIT = 256
+"""A site's trials waiting for its commit past this many items are written as format-2 lines
+(an integrator iterating for ever without committing neither grows the bridge's memory nor
+keeps its trials out of the file)."""
 
 
 class RecordError(OSError):
@@ -127,11 +131,12 @@ class _Syncer(threading.Thread):
 
     def run(self) -> None:
         last = -math.inf
+        attempted = 0  # lines the last fdatasync was for (a failed one is retried on request)
         while True:
             # idle until a line is waiting for a sync (the flag is set before the check, the
             # request is stored before the flag is read: no request can be missed)
             self._idle = True
-            if self._requested == self.durable and not (self._urgent or self._stopping):
+            if self._requested == attempted and not (self._urgent or self._stopping):
                 self._wait()
             self._idle = False
             while not (self._urgent or self._stopping):  # at most one sync per interval
@@ -142,13 +147,13 @@ class _Syncer(threading.Thread):
             if self._stopping:
                 return
             self._urgent = False
-            covered = self._requested
+            attempted = self._requested
             last = time.monotonic()
             try:
                 os.fdatasync(self._fd)
-                self.durable = covered
+                self.durable = attempted
                 self.syncs += 1
-            except OSError as exc:  # reported on the next flush; retried an interval later
+            except OSError as exc:  # reported on the next flush; retried on the next request
                 self.error = exc
 
     def stop(self) -> None:
@@ -267,7 +272,11 @@ class RunRecord:
         self, site: str, session: int, step: int, time_: float, trial: tuple[float, ...],
         ctrl: tuple[float, ...],
     ) -> None:
-        self._pending[site].append((TRIAL, session, step, time_, trial, ctrl))
+        items = self._pending[site]
+        items.append((TRIAL, session, step, time_, trial, ctrl))
+        if len(items) > PENDING_LIMIT:
+            self._write_pending(site, time.monotonic() - self._t0)
+            self.flush()
 
     def measurement(
         self, site: str, session: int, step: int, disp: tuple[float, ...],
@@ -311,6 +320,10 @@ class RunRecord:
         with the site's next commit or event)."""
         self._pending[site].append(
             (MONITOR, session, step, (tracking_error, ti, nrms, fei_amplitude, fei_delay)))
+
+    def pending(self, site: str) -> list[Item]:
+        """The list ``site``'s pending items wait in (the same list for the record's life)."""
+        return self._pending[site]
 
     def _write_pending(self, site: str, t: float) -> None:
         items = self._pending.get(site)

@@ -8,6 +8,7 @@ the sync, and then at most ``sync_interval`` of commits is at stake).
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import signal
@@ -20,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from fresco_bridge.integrator.link import GenericClientLink
-from fresco_bridge.record import RunRecord, read_record
+from fresco_bridge.record import RecordError, RunRecord, read_record
 from fresco_bridge.record.export import committed_steps, monitor_lines
 
 DEADLINE = 10.0
@@ -85,6 +86,34 @@ def test_inline_syncs_before_the_commit_returns(tmp_path: Path, monkeypatch: pyt
         assert len(calls) == 4
     finally:
         record.close()
+
+
+def test_a_failed_fdatasync_is_reported_once_and_retried_on_the_next_commit(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    attempts: list[int] = []
+    real = os.fdatasync
+
+    def first_fails(fd: int) -> None:
+        attempts.append(fd)
+        if len(attempts) == 1:
+            raise OSError(errno.EIO, "Input/output error")
+        real(fd)
+
+    monkeypatch.setattr(os, "fdatasync", first_fails)
+    record = RunRecord.create(tmp_path, "g", "", {}, sync_interval=0.0)
+    try:
+        step(record, 1)
+        wait_for(lambda: len(attempts) == 1, "the failing fdatasync")
+        time.sleep(0.05)  # no retry loop: the thread waits for the next request
+        assert len(attempts) == 1 and record.syncs == 0 and record.durable_lines == 0
+        with pytest.raises(RecordError, match="fdatasync failed: Input/output error"):
+            step(record, 2)  # written to the kernel first, then the error is reported
+        step(record, 3)
+        wait_for(lambda: record.durable_lines == record.lines == 9, "the retry")
+        assert record.syncs == 1
+    finally:
+        record.close()
+    assert [s.step for s in committed_steps(record.directory)] == [1, 2, 3]
 
 
 READY = re.compile(r"fresco-bridge ready: site=(\d+)")

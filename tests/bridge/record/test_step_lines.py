@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.record.export import committed_steps, monitor_lines
+from fresco_bridge.record.writer import PENDING_LIMIT
 from tests.bridge.record.test_lean_record import replay, same, without_t
 from tests.support.recorded_run import raw_lines
 
@@ -164,6 +165,24 @@ def test_a_sites_pending_lines_go_to_the_file_with_its_event_and_at_close(
     assert [(r["site"], r["kind"]) for r in read_record(record.directory)][3:] == [
         ("a", "monitor"), ("b", "trial")]  # at close, site by site
     assert record.lines == 5
+
+
+def test_trials_that_never_commit_go_to_the_file_in_bounded_batches(tmp_path: Path) -> None:
+    record = RunRecord.create(tmp_path, "n", "", {}, fsync="off")
+    for i in range(2000):  # an integrator iterating without end
+        record.trial("s", 1, 0, 0.01, (0.001 * i,), (0.001 * i,))
+        record.measurement("s", 1, 0, (0.001 * i,), (0.01 * i,))
+        assert len(record.pending("s")) <= PENDING_LIMIT + 1
+    written = list(read_record(record.directory))
+    assert len(written) >= 2000 - PENDING_LIMIT - 1 and record.lines == len(written)
+    trials = [r["trial"] for r in written if r["kind"] == "trial"]
+    assert trials == [[0.001 * i] for i in range(len(trials))]  # in order, none lost
+    record.trial("s", 1, 0, 0.01, (5.0,), (5.0,))
+    record.measurement("s", 1, 0, (5.0,), (50.0,))
+    record.commit("s", 1, 1, 0.01)
+    record.close()
+    assert committed_steps(record.directory)[-1].meas_force == (50.0,)
+    assert len(list(read_record(record.directory))) == 4003
 
 
 VALUES = st.sampled_from([0.0, 0.25, -1.5, 1e-300, math.inf, math.nan])
