@@ -32,7 +32,8 @@ lines was the largest cost left on the step path)::
   vector means "unchanged from the previous iteration";
 - ``mon`` (optional): the monitor line of step ``S − 1`` (it is computed after that commit and
   goes to the file with the next one, as in format 2): ``[err, ti, nrms, fei_amp, fei_delay]``,
-  or ``0`` for the values of the previous monitor line;
+  ``[err, ti, nrms]`` when the FEI pair is that of the previous monitor line (it is held
+  between its updates), or ``0`` for all the values of the previous monitor line;
 - ``site``/``session`` as on every line; ``t`` is when the line was written (the commit), and
   the lines it stands for read back with that ``t``.
 
@@ -211,12 +212,16 @@ class LineEncoder:
                 return None
             values = monitor[3]
             last_m = self._monitor.get(site)
-            if last_m is not None and last_m[0] == session and last_m[1][1:] == values:
+            was = last_m[1] if last_m is not None and last_m[0] == session else None
+            if was is not None and was[1:] == values:
                 mon = ',"mon":0'
             else:
                 err, ti, nrms, fei_amp, fei_delay = values
-                mon = (f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},'
-                       f'{opt(fei_delay)}]')
+                if was is not None and was[4:] == values[3:]:  # the FEI is held between updates
+                    mon = f',"mon":[{num(err)},{num(ti)},{opt(nrms)}]'
+                else:
+                    mon = (f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},'
+                           f'{opt(fei_delay)}]')
             i = 1
         if n - i < 2 or (n - i) & 1:
             return None
@@ -317,6 +322,9 @@ def _unfold(obj: dict[str, Any], site: str, session: int, seq: int,
     mon = obj.get("mon")
     if mon is not None:
         values = ([before("monitor")[k] for k in _MONITOR_FLOATS] if mon == 0 else mon)
+        if len(values) == 3:  # fei_amp and fei_delay as on the previous monitor line
+            held = before("monitor")
+            values = [*values, held["fei_amp"], held["fei_delay"]]
         seq += 1
         m = {"seq": seq, "kind": "monitor", **head, "step": step - 1,
              **dict(zip(_MONITOR_FLOATS, values, strict=True))}

@@ -111,7 +111,8 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
 
 def unfold_step(rec: dict[str, Any], seen: dict[tuple[str, int, str], dict[str, Any]]
                 ) -> list[dict[str, Any]]:
-    """A step line: [the monitor line of the step before], a trial and a daq line per entry of
+    """A step line: [the monitor line of the step before: 5 values, 3 with the FEI pair as
+    before, or 0 for all as before], a trial and a daq line per entry of
     ``it`` (0: all as before; else [trial, disp, force(, ctrl)], 0 for an unchanged vector),
     the commit line. ``seq`` follows on from the step line's position."""
     site, session, seq, step = rec["site"], rec["session"], rec["seq"], rec["step"]
@@ -122,6 +123,8 @@ def unfold_step(rec: dict[str, Any], seen: dict[tuple[str, int, str], dict[str, 
         values = rec["mon"]
         if values == 0:
             values = [seen[(site, session, "monitor")][k] for k in names]
+        elif len(values) == 3:
+            values = [*values, *(seen[(site, session, "monitor")][k] for k in names[3:])]
         out.append({**common, "kind": "monitor", "step": step - 1,
                     **dict(zip(names, values, strict=True))})
     trial = seen[(site, session, "trial")]

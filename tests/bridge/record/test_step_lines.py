@@ -58,10 +58,19 @@ def test_a_newton_step_is_one_line_with_the_monitor_of_the_step_before(tmp_path:
     record.measurement("s", 1, 2, (0.5,), (5.0,))
     record.commit("s", 1, 3, 0.03)
     record.monitor("s", 1, 3, 0.125, -1.5, 0.25, 1.01, math.nan)
+    record.trial("s", 1, 3, 0.04, (0.75,), (0.5,))
+    record.measurement("s", 1, 3, (0.5,), (5.0,))
+    record.commit("s", 1, 4, 0.04)
+    record.monitor("s", 1, 4, 0.0625, -1.5, 0.25, 1.01, math.nan)  # the FEI pair held
+    record.trial("s", 1, 4, 0.05, (0.75,), (0.5,))
+    record.measurement("s", 1, 4, (0.5,), (5.0,))
+    record.commit("s", 1, 5, 0.05)
     record.close()
     text = (record.directory / "record.jsonl").read_text().splitlines()
     assert [json.loads(line)["kind"] for line in text] == [
-        "trial", "daq", "commit", "step", "step", "monitor"]
+        "trial", "daq", "commit", "step", "step", "step", "step"]
+    assert '"mon":[0.125,-1.5,0.25,1.01,"nan"]' in text[5]
+    assert '"mon":[0.0625,-1.5,0.25],"it":[0]' in text[6]  # NaN is not == NaN: the same object
     assert text[3].endswith('"kind":"step","step":2,"time":0.02,"mon":[0.0,0.0,0.0,null,null],'
                             '"it":[[[0.25],[0.25],[2.5]],[[0.5],[0.5],[5.0]],0]}')
     assert text[4].endswith('"kind":"step","step":3,"time":0.03,"mon":0,'
@@ -71,14 +80,19 @@ def test_a_newton_step_is_one_line_with_the_monitor_of_the_step_before(tmp_path:
         (1, "trial", 0), (2, "daq", 0), (3, "commit", 1), (4, "monitor", 1),
         (5, "trial", 1), (6, "daq", 1), (7, "trial", 1), (8, "daq", 1), (9, "trial", 1),
         (10, "daq", 1), (11, "commit", 2), (12, "monitor", 2), (13, "trial", 2), (14, "daq", 2),
-        (15, "commit", 3), (16, "monitor", 3)]
+        (15, "commit", 3), (16, "monitor", 3), (17, "trial", 3), (18, "daq", 3),
+        (19, "commit", 4), (20, "monitor", 4), (21, "trial", 4), (22, "daq", 4),
+        (23, "commit", 5)]
     assert lines[8]["trial"] == lines[8]["ctrl"] == [0.5] and lines[9]["force"] == [5.0]
     assert lines[12]["trial"] == [0.75] and lines[12]["ctrl"] == [0.5]
     assert lines[12]["time"] == 0.03 and lines[13]["disp"] == [0.5]
     assert math.isnan(float(lines[15]["fei_delay"])) and lines[15]["fei_amp"] == 1.01
+    assert lines[19]["err"] == 0.0625 and lines[19]["fei_amp"] == 1.01
+    assert math.isnan(float(lines[19]["fei_delay"]))
     assert_same_lines(lines, raw_lines(record.directory))  # the README's rules, decoded apart
     assert [(s.step, s.cmd_disp, s.meas_force) for s in committed_steps(record.directory)] == [
-        (1, (0.0,), (0.0,)), (2, (0.5,), (5.0,)), (3, (0.5,), (5.0,))]
+        (1, (0.0,), (0.0,)), (2, (0.5,), (5.0,)), (3, (0.5,), (5.0,)), (4, (0.5,), (5.0,)),
+        (5, (0.5,), (5.0,))]
 
 
 def test_the_real_format2_run_replayed_in_format3_reads_back_identical(tmp_path: Path) -> None:
