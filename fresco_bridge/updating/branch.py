@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -42,7 +43,16 @@ import numpy.typing as npt
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
-__all__ = ["BranchMemory", "BranchRls", "ReversalBasis", "initial_stiffness"]
+__all__ = [
+    "BasisTwin",
+    "BranchMemory",
+    "BranchRls",
+    "ReversalBasis",
+    "TwinBasis",
+    "WeightedRls",
+    "initial_stiffness",
+    "offline_arrays",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -102,6 +112,67 @@ def initial_stiffness(disp: FloatArray, force: FloatArray) -> float:
     return float(d @ f) / dd if dd > 0.0 else 0.0
 
 
+def offline_arrays(offline: tuple[npt.ArrayLike, npt.ArrayLike], forgetting: float, ridge: float,
+                   gate: float) -> tuple[FloatArray, FloatArray]:
+    """The offline (displacement, force) as checked float arrays, the learning options checked."""
+    disp = np.asarray(offline[0], dtype=np.float64)
+    force = np.asarray(offline[1], dtype=np.float64)
+    if disp.ndim != 1 or disp.shape != force.shape or disp.size < 20:
+        raise UpdaterError(f"online_improved: offline data must be two equal 1-D arrays of "
+                           f">= 20 samples, got shapes {disp.shape} and {force.shape}")
+    if not (np.all(np.isfinite(disp)) and np.all(np.isfinite(force))):
+        raise UpdaterError("online_improved: offline data contain NaN or inf")
+    if not (0.9 <= forgetting <= 1.0 and ridge > 0.0 and gate > 0.0):
+        raise UpdaterError(f"online_improved: need 0.9 <= forgetting <= 1, ridge > 0, "
+                           f"gate > 0 (got {forgetting}, {ridge}, {gate})")  # fmt: skip
+    return disp, force
+
+
+class WeightedRls:
+    """Exponentially weighted least squares, ridge-regularised, with Huber gating.
+
+    Starts from a ridge fit to offline ``rows``/``targets`` that counts as one forgetting
+    horizon (``1 / (1 - forgetting)`` samples). Each update forgets by ``forgetting`` and adds
+    ``(1 - forgetting) * ridge`` back, pulling the weights towards their current value (no
+    covariance wind-up in quiet phases: unexcited directions keep their value) or, with
+    ``shrink``, towards zero. Innovations beyond ``gate`` robust standard deviations get a
+    bounded (Huber) weight: a load-cell spike cannot throw the weights.
+    """
+
+    def __init__(self, rows: FloatArray, targets: FloatArray, *, forgetting: float,
+                 ridge: float, gate: float, noise_floor: float, shrink: bool = False) -> None:
+        n = rows.shape[1]
+        info = rows.T @ rows
+        scale = float(np.trace(info)) / n if rows.size else 1.0
+        self.weights: FloatArray = np.asarray(
+            np.linalg.solve(info + ridge * scale * np.eye(n), rows.T @ targets), dtype=np.float64
+        )
+        horizon = 1.0 / max(1.0 - forgetting, 1e-6)
+        self.forgetting = forgetting
+        self.gate = gate
+        self._ridge = ridge * scale * np.eye(n)
+        self._info = info * (horizon / max(len(targets), 1)) + self._ridge
+        self._rhs = self._info @ self.weights
+        self._shrink = shrink
+        residual = rows @ self.weights - targets
+        self._noise_var = max(float(np.mean(residual**2)), noise_floor)
+
+    def update(self, phi: FloatArray, target: float) -> None:
+        """Learn one sample: ``target ≈ phi @ weights``."""
+        innovation = target - float(phi @ self.weights)
+        sigma = math.sqrt(self._noise_var)
+        z = abs(innovation) / sigma
+        weight = 1.0 if z <= self.gate else self.gate / z  # Huber: bounded influence
+        self._noise_var = 0.99 * self._noise_var + 0.01 * min(innovation**2,
+                                                              (self.gate * sigma) ** 2)
+        lam = self.forgetting
+        self._info = lam * self._info + weight * np.outer(phi, phi) + (1.0 - lam) * self._ridge
+        self._rhs = lam * self._rhs + weight * target * phi
+        if not self._shrink:
+            self._rhs += (1.0 - lam) * (self._ridge @ self.weights)
+        self.weights = np.asarray(np.linalg.solve(self._info, self._rhs), dtype=np.float64)
+
+
 class ReversalBasis:
     """The feature map; ``disp_scale``/``force_scale`` normalise it (from the offline data)."""
 
@@ -133,6 +204,12 @@ class ReversalBasis:
         self._n_g = 4 + self._ranges.size + memory
         self.size = (1 + len(self.SATURATIONS)) * self._n_g
 
+    def virgin(self) -> BranchMemory:
+        return BranchMemory()
+
+    def advanced(self, memory: BranchMemory, d: float, f: float) -> BranchMemory:
+        return memory.advanced(d, f)
+
     def features(self, memory: BranchMemory, d: float) -> tuple[float, float, FloatArray]:
         """(direction, F_r, phi): the force at ``d`` is ``F_r + direction * phi @ w``."""
         direction, d_r, f_r = memory.branch(d)
@@ -159,19 +236,42 @@ class ReversalBasis:
         return direction, f_r, np.outer(psi, g).ravel()
 
 
-class _Twin:
-    """The twin: the shared weights on its own branch memory (material semantics)."""
+class _Memory(Protocol):
+    @property
+    def d(self) -> float: ...
+    @property
+    def f(self) -> float: ...
+
+
+M = TypeVar("M", bound=_Memory)
+
+
+class TwinBasis(Protocol[M]):
+    """What a twin needs of a basis written in reversal coordinates (``ReversalBasis`` and the
+    stop experts' ``play.BranchStopBasis``)."""
+
+    @property
+    def disp_scale(self) -> float: ...
+    def virgin(self) -> M: ...
+    def features(self, memory: M, d: float) -> tuple[float, float, FloatArray]: ...
+    def advanced(self, memory: M, d: float, f: float) -> M: ...
+
+
+class BasisTwin(Generic[M]):
+    """The twin of an expert: the learner's current weights (read at each call) on its own
+    memory of its own history (material semantics)."""
 
     name = "online_improved"
 
-    def __init__(self, owner: BranchRls) -> None:
-        self._owner = owner
-        self._committed = BranchMemory()
+    def __init__(self, basis: TwinBasis[M], learner: WeightedRls) -> None:
+        self._basis = basis
+        self._learner = learner
+        self._committed = basis.virgin()
         self._trial = self._committed
 
-    def _force(self, memory: BranchMemory, d: float) -> float:
-        direction, f_r, phi = self._owner.basis.features(memory, d)
-        return f_r + direction * float(phi @ self._owner.weights)
+    def _force(self, memory: M, d: float) -> float:
+        direction, f_r, phi = self._basis.features(memory, d)
+        return f_r + direction * float(phi @ self._learner.weights)
 
     def set_trial(self, d: float) -> tuple[float, float]:
         if not math.isfinite(d):
@@ -181,10 +281,10 @@ class _Twin:
             self._trial = c
             return c.f, self.initial_tangent
         force = self._force(c, d)
-        h = 1e-6 * self._owner.basis.disp_scale
+        h = 1e-6 * self._basis.disp_scale
         probe = d + h if d > c.d else d - h
         tangent = (self._force(c, probe) - force) / (probe - d)
-        self._trial = c.advanced(d, force)
+        self._trial = self._basis.advanced(c, d, force)
         return force, tangent
 
     def commit(self) -> None:
@@ -194,19 +294,19 @@ class _Twin:
         self._trial = self._committed
 
     def revert_to_start(self) -> None:
-        self._committed = self._trial = BranchMemory()
+        self._committed = self._trial = self._basis.virgin()
 
     @property
     def initial_tangent(self) -> float:
-        h = 1e-6 * self._owner.basis.disp_scale
-        return self._force(BranchMemory(), h) / h
+        h = 1e-6 * self._basis.disp_scale
+        return self._force(self._basis.virgin(), h) / h
 
     @property
     def committed(self) -> tuple[float, float]:
         return self._committed.d, self._committed.f
 
     def clone(self) -> HysteresisModel:
-        twin = _Twin(self._owner)
+        twin = BasisTwin(self._basis, self._learner)
         twin._committed, twin._trial = self._committed, self._trial
         return twin
 
@@ -232,18 +332,7 @@ class BranchRls(OwnsTwin):
         data's; a residual expert passes those of the whole force instead. ``shrink``: the
         ridge pulls the weights towards zero (a residual that is not supported by recent data
         fades) instead of towards their current value."""
-        disp = np.asarray(offline[0], dtype=np.float64)
-        force = np.asarray(offline[1], dtype=np.float64)
-        if disp.ndim != 1 or disp.shape != force.shape or disp.size < 20:
-            raise UpdaterError(f"online_improved: offline data must be two equal 1-D arrays of "
-                               f">= 20 samples, got shapes {disp.shape} and {force.shape}")
-        if not (np.all(np.isfinite(disp)) and np.all(np.isfinite(force))):
-            raise UpdaterError("online_improved: offline data contain NaN or inf")
-        if not (0.9 <= forgetting <= 1.0 and ridge > 0.0 and gate > 0.0):
-            raise UpdaterError(f"online_improved: need 0.9 <= forgetting <= 1, ridge > 0, "
-                               f"gate > 0 (got {forgetting}, {ridge}, {gate})")  # fmt: skip
-        self.forgetting = forgetting
-        self.gate = gate
+        disp, force = offline_arrays(offline, forgetting, ridge, gate)
         if memory_terms and stiffness is None:
             stiffness = initial_stiffness(disp, force)
         self.basis = ReversalBasis(
@@ -251,24 +340,16 @@ class BranchRls(OwnsTwin):
             float(np.max(np.abs(force))) if force_scale is None else force_scale,
             stiffness=stiffness if memory_terms else None,
         )  # fmt: skip
-        n = self.basis.size
         rows, targets = self._offline_rows(disp, force)
-        info = rows.T @ rows
-        scale = float(np.trace(info)) / n if rows.size else 1.0
-        self.weights: FloatArray = np.asarray(
-            np.linalg.solve(info + ridge * scale * np.eye(n), rows.T @ targets), dtype=np.float64
-        )
-        # The offline fit counts as one forgetting horizon, 1 / (1 - forgetting) samples.
-        horizon = 1.0 / max(1.0 - forgetting, 1e-6)
-        self._ridge = ridge * scale * np.eye(n)
-        self._info = info * (horizon / max(len(targets), 1)) + self._ridge
-        self._rhs = self._info @ self.weights
-        self._shrink = shrink
-        residual = rows @ self.weights - targets
-        self._noise_var = max(float(np.mean(residual**2)), 1e-6 * self.basis.force_scale**2)
+        self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
+                               noise_floor=1e-6 * self.basis.force_scale**2, shrink=shrink)
         self._source = BranchMemory()
-        self._twin = _Twin(self)
+        self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
+
+    @property
+    def weights(self) -> FloatArray:
+        return self.rls.weights
 
     def _offline_rows(self, disp: FloatArray, force: FloatArray) -> tuple[FloatArray, FloatArray]:
         memory = BranchMemory()
@@ -295,19 +376,7 @@ class BranchRls(OwnsTwin):
         memory = self._source
         if d != memory.d:
             direction, f_r, phi = self.basis.features(memory, d)
-            target = direction * (force - f_r)
-            innovation = target - float(phi @ self.weights)
-            sigma = math.sqrt(self._noise_var)
-            z = abs(innovation) / sigma
-            weight = 1.0 if z <= self.gate else self.gate / z  # Huber: bounded influence
-            self._noise_var = 0.99 * self._noise_var + 0.01 * min(innovation**2,
-                                                                  (self.gate * sigma) ** 2)
-            lam = self.forgetting
-            self._info = lam * self._info + weight * np.outer(phi, phi) + (1.0 - lam) * self._ridge
-            self._rhs = lam * self._rhs + weight * target * phi
-            if not self._shrink:
-                self._rhs += (1.0 - lam) * (self._ridge @ self.weights)
-            self.weights = np.asarray(np.linalg.solve(self._info, self._rhs), dtype=np.float64)
+            self.rls.update(phi, direction * (force - f_r))
         self._source = memory.advanced(d, force)
         self._last_update = time.perf_counter() - start
 

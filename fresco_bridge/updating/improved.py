@@ -23,9 +23,13 @@ the twin's history.
 
 Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md),
 ``reversal+memory`` (plus the previous-branch and envelope terms), ``bouc-wen+memory`` (the
-fitted law plus the memory basis on its residual, shrunk towards zero). Each learns by its own
-exponentially weighted, ridge-regularised least squares with Huber gating (``forgetting``,
-``ridge``, ``gate``). Cost per step: the experts' updates and shadows, tenths of a millisecond.
+fitted law plus the memory basis on its residual, shrunk towards zero), ``reversal+stops`` (the
+basis plus stop operators scheduled on the element's own plastic deformation, ``play``: a twin
+that is still virgin keeps what the tested element taught while it was virgin). Optional, not
+in the default mixture: ``reversal+memory+stops``. Each learns by its own exponentially
+weighted, ridge-regularised least squares with Huber gating (``forgetting``, ``ridge``,
+``gate``; ``branch.WeightedRls``). Cost per step: the experts' updates and shadows, tenths of
+a millisecond.
 """
 
 from __future__ import annotations
@@ -45,8 +49,11 @@ __all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis
 
 FloatArray = npt.NDArray[np.float64]
 
-EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory")
-"""The experts ``online_improved`` can combine (all of them by default)."""
+EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
+"""The experts ``online_improved`` combines by default."""
+
+OPTIONAL_EXPERTS = ("reversal+memory+stops",)
+"""Experts that can be asked for by name but are not in the default mixture."""
 
 SCORES = ("both", "free-run", "one-step")
 """How an expert is scored on the tested element (module docstring)."""
@@ -133,10 +140,11 @@ class OnlineImproved(OwnsTwin):
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
             tuple(experts))  # fmt: skip
-        unknown = [e for e in names if e not in EXPERTS]
+        unknown = [e for e in names if e not in EXPERTS + OPTIONAL_EXPERTS]
         if not names or unknown or len(set(names)) != len(names):
-            raise UpdaterError(f"online_improved: experts must be distinct names from "
-                               f"{', '.join(EXPERTS)} (got {', '.join(names) or 'none'})")
+            known = ", ".join(EXPERTS + OPTIONAL_EXPERTS)
+            raise UpdaterError(f"online_improved: experts must be distinct names from {known} "
+                               f"(got {', '.join(names) or 'none'})")
         if score not in SCORES:
             raise UpdaterError(f"online_improved: score must be one of {', '.join(SCORES)} "
                                f"(got {score!r})")
@@ -149,6 +157,11 @@ class OnlineImproved(OwnsTwin):
                 from fresco_bridge.updating.physics import PhysicsResidual
 
                 built.append(PhysicsResidual(offline=offline, **rls))
+            elif name in ("reversal+stops", "reversal+memory+stops"):
+                from fresco_bridge.updating.play import BranchStopRls
+
+                built.append(BranchStopRls(offline=offline, memory_terms="memory" in name,
+                                           **rls))
             else:
                 built.append(BranchRls(offline=offline, memory_terms=name != "reversal", **rls))
         self.expert_names = names

@@ -22,7 +22,7 @@ measurement ``(d_i, F_i)`` of the tested element:
    default data division with its validation stop (``divide="dividerand"``: every step 70 %
    of the rows train, 15 % validate, 15 % are held out, the best-validation network is kept)
    and a float32 J^T W J are options, not the default: each changes the fit, and
-   BENCHMARKS.md (part 5) measures by how much and argues why the paper's reading is "all
+   BENCHMARKS.md (part 6) measures by how much and argues why the paper's reading is "all
    700 rows train";
 5. the twin (an :class:`~.ann.AnnTwin` with its own committed recurrence) uses the new network
    from its next trial on.
@@ -62,7 +62,7 @@ DIVIDE_FUNCTIONS = ("none", "dividerand")
 ``dividerand`` (MATLAB ``train``'s default: 70/15/15 % at random every step, validation stop)."""
 
 ONLINE_ANN_DIVIDE = "none"
-"""``online_ann``'s default division (BENCHMARKS.md, part 5, argues the choice)."""
+"""``online_ann``'s default division (BENCHMARKS.md, part 6, argues the choice)."""
 
 PAPER_ONLINE_LM = LmOptions(max_iterations=50, mu=1e-5, momentum=0.1)
 """The paper's online LM (``online_ann``'s default): damping 1e-5, at most 50 iterations,
