@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -39,15 +40,21 @@ from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating import make_updater
 from fresco_bridge.updating.ann import PRETRAIN_LM, AnnModel, pretrain
 from fresco_bridge.updating.base import Updater
+from fresco_bridge.updating.features import feature_rows
 from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "faithful (50 it)": {},
-    "rtol 1e-2": {"rtol": 0.01},
-    "rtol 3e-2": {"rtol": 0.03},
-    "10 it": {"max_iterations": 10},
-    "5 it": {"max_iterations": 5},
+    "faithful (50 it)": {"divide": "none"},
+    "faithful seed 2": {"divide": "none", "seed": 2},  # other random offline rows: the spread
+    "dividerand": {"divide": "dividerand"},
+    "dividerand f32": {"divide": "dividerand", "single_precision_hessian": True},
+    "50 it f32": {"divide": "none", "single_precision_hessian": True},
+    "rtol 1e-2": {"divide": "none", "rtol": 0.01},
+    "rtol 3e-2": {"divide": "none", "rtol": 0.03},
+    "10 it": {"divide": "none", "max_iterations": 10},
+    "8 it f32": {"divide": "none", "max_iterations": 8, "single_precision_hessian": True},
+    "5 it": {"divide": "none", "max_iterations": 5},
 }
 
 
@@ -100,11 +107,20 @@ def _lm(iterations: int) -> Any:
     return replace(PRETRAIN_LM, max_iterations=iterations)
 
 
-def run(updater: Updater, pair: Pair, lag: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(predictions, wall s, cpu s) per step; the replay loop with CPU time around observe."""
+def run(updater: Updater, pair: Pair, lag: bool, iterations: list[int] | None = None,
+        teacher: list[float] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(predictions, wall s, cpu s) per step; the replay loop with CPU time around observe.
+
+    ``iterations`` collects the LM iterations of every update (online_ann); ``teacher`` the
+    network's force at each step from the twin's *true* previous state, after the update
+    (teacher forcing: the fit's own error, free of the recurrence's chaos).
+    """
     twin = updater.twin
     n = len(pair.twin_d)
     pred, wall, cpu = np.empty(n), np.empty(n), np.empty(n)
+    model: AnnModel | None = getattr(updater, "model", None)
+    x_true = None if teacher is None or model is None else \
+        model.scaler.x(feature_rows(pair.twin_d, pair.twin_f)[0])
     for i in range(n):
         if lag:
             pred[i] = twin.set_trial(float(pair.twin_d[i]))[0]
@@ -113,6 +129,11 @@ def run(updater: Updater, pair: Pair, lag: bool) -> tuple[np.ndarray, np.ndarray
         updater.observe(float(pair.src_d[i]), float(pair.src_f[i]))
         cpu[i] = time.thread_time() - c0
         wall[i] = updater.last_update_seconds
+        if iterations is not None:
+            iterations.append(updater.last_fit.iterations)  # type: ignore[attr-defined]
+        if x_true is not None and teacher is not None and model is not None:
+            y = model.net.forward(updater.theta, x_true[i:i + 1])[0]  # type: ignore[attr-defined]
+            teacher.append(float(y) * model.scaler.y_range + model.scaler.y_min)
         if not lag:
             pred[i] = twin.set_trial(float(pair.twin_d[i]))[0]
             twin.commit()
@@ -120,7 +141,7 @@ def run(updater: Updater, pair: Pair, lag: bool) -> tuple[np.ndarray, np.ndarray
 
 
 def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
-             variants: list[str]) -> list[dict[str, Any]]:
+             variants: list[str], lag: bool = True) -> list[dict[str, Any]]:
     rows = []
     for pair in pairs:
         model = models[pair.label.split("/")[0]]
@@ -133,20 +154,30 @@ def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
                      "one_step_rmse": indicators.one_step_rmse(pair.twin_f, base)})
         for name in variants:
             opts = VARIANTS[name]
-            pred, wall, cpu = run(make_updater("online_ann", model=model, seed=1, **opts), pair,
-                                  lag=False)
-            ahead, _, _ = run(make_updater("online_ann", model=model, seed=1, **opts), pair,
-                              lag=True)
+            its: list[int] = []
+            forced: list[float] = []
+            opts = {"seed": 1, **opts}
+            pred, wall, cpu = run(make_updater("online_ann", model=model, **opts), pair,
+                                  lag=False, iterations=its, teacher=forced)
+            one_step = math.nan
+            if lag:
+                ahead, _, _ = run(make_updater("online_ann", model=model, **opts), pair,
+                                  lag=True)
+                one_step = indicators.one_step_rmse(pair.twin_f, ahead)
             row = {"pair": pair.label, "layout": pair.layout, "variant": name,
                    "maeth": indicators.maeth(pair.twin_f, pred),
-                   "one_step_rmse": indicators.one_step_rmse(pair.twin_f, ahead),
+                   "one_step_rmse": one_step,
+                   "teacher_forced_rmse": indicators.one_step_rmse(pair.twin_f, np.array(forced)),
+                   "iterations_mean": float(np.mean(its)),
                    "wall_ms_median": 1e3 * float(np.median(wall)),
                    "wall_ms_p99": 1e3 * float(np.percentile(wall, 99)),
                    "cpu_ms_median": 1e3 * float(np.median(cpu)),
                    "cpu_ms_p99": 1e3 * float(np.percentile(cpu, 99))}
             rows.append(row)
             print(f"  {pair.label} {pair.layout}: {name:<17} MAETH {row['maeth']:7.3f} kN, "
-                  f"one-step RMSE {row['one_step_rmse']:.4f} kN; update wall median "
+                  f"one-step RMSE {row['one_step_rmse']:.4f} kN, teacher-forced RMSE "
+                  f"{row['teacher_forced_rmse']:.4f} kN, LM iterations mean "
+                  f"{row['iterations_mean']:.1f}; update wall median "
                   f"{row['wall_ms_median']:.1f} p99 {row['wall_ms_p99']:.1f} ms, cpu median "
                   f"{row['cpu_ms_median']:.1f} p99 {row['cpu_ms_p99']:.1f} ms", flush=True)
     return rows
@@ -160,17 +191,24 @@ def timing(model: AnnModel, pair: Pair, rounds: int, steps: int,
                  pair.twin_d[:steps], pair.twin_f[:steps])
     for rnd in range(rounds):
         for name in variants:
-            _, wall, cpu = run(make_updater("online_ann", model=model, seed=1,
-                                            **VARIANTS[name]), short, lag=False)
+            its: list[int] = []
+            opts = {"seed": 1, **VARIANTS[name]}
+            _, wall, cpu = run(make_updater("online_ann", model=model, **opts), short,
+                               lag=False, iterations=its)
             rec = out.setdefault(name, {"wall_median": [], "wall_p99": [], "cpu_median": [],
-                                        "cpu_p99": []})
+                                        "cpu_p99": [], "iterations_mean": [],
+                                        "iterations_p99": []})
+            rec["iterations_mean"].append(float(np.mean(its)))
+            rec["iterations_p99"].append(float(np.percentile(its, 99)))
             rec["wall_median"].append(1e3 * float(np.median(wall)))
             rec["wall_p99"].append(1e3 * float(np.percentile(wall, 99)))
             rec["cpu_median"].append(1e3 * float(np.median(cpu)))
             rec["cpu_p99"].append(1e3 * float(np.percentile(cpu, 99)))
-            print(f"  round {rnd + 1}/{rounds} {name:<17} wall median "
+            print(f"  round {rnd + 1}/{rounds} {name:<16} wall median "
                   f"{rec['wall_median'][-1]:.2f} p99 {rec['wall_p99'][-1]:.2f} ms; cpu median "
-                  f"{rec['cpu_median'][-1]:.2f} p99 {rec['cpu_p99'][-1]:.2f} ms", flush=True)
+                  f"{rec['cpu_median'][-1]:.2f} p99 {rec['cpu_p99'][-1]:.2f} ms; LM iterations "
+                  f"mean {rec['iterations_mean'][-1]:.1f} p99 {rec['iterations_p99'][-1]:.0f}",
+                  flush=True)
     return out
 
 
@@ -201,7 +239,8 @@ def pieces(rounds: int) -> dict[str, list[float]]:
     wj = jac * w[:, None]
     js = (jac * np.sqrt(w)[:, None])[-516:].copy()
     hess = js.T @ js + 1e-5 * np.eye(301)
-    js32 = js.astype(np.float32)
+    jsf = np.asfortranarray(js)
+    js32 = np.asfortranarray(js, dtype=np.float32)
     hess_f = np.asfortranarray(hess)
     out: dict[str, list[float]] = {}
     torch_mm: Callable[[], object] | None = None
@@ -230,8 +269,9 @@ def pieces(rounds: int) -> dict[str, list[float]]:
                 ("J^T W J gemm, 700 rows (naive)", lambda: wj.T @ jac),
                 ("J^T W J syrk, 516 rows (numpy A.T @ A)", lambda: js.T @ js),
                 ("J^T W J dsyrk in place, lower only (ours)",
-                 lambda: dsyrk(1.0, js.T, lower=1)),
-                ("J^T W J ssyrk float32 (not used)", lambda: ssyrk(1.0, js32.T, lower=1)),
+                 lambda: dsyrk(1.0, jsf, lower=1, trans=1)),
+                ("J^T W J ssyrk float32 (option)",
+                 lambda: ssyrk(1.0, js32, lower=1, trans=1)),
                 ("dpotrf + dpotrs 301, LAPACK direct (ours)",
                  lambda: dpotrs(dpotrf(hess_f, lower=1, clean=0)[0], js[0], lower=1)),
                 ("cholesky + solve 301", lambda: scipy.linalg.cho_solve(
@@ -257,10 +297,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--layouts", default="paper,generalisation")
     p.add_argument("--variants", default=",".join(VARIANTS),
                    help=f"comma-separated subset of: {', '.join(VARIANTS)}")
-    p.add_argument("--timing-variants", default="faithful (50 it),rtol 1e-2,5 it",
+    p.add_argument("--timing-variants", default="faithful (50 it),50 it f32,dividerand,"
+                                                "dividerand f32,5 it",
                    help="comma-separated variants alternated in the timing section")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-timing", action="store_true")
+    p.add_argument("--no-lag", action="store_true",
+                   help="accuracy without the one-step-ahead replay (half the time)")
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
     info = machine()
@@ -279,7 +322,7 @@ def main(argv: list[str] | None = None) -> None:
                                   args.timing_steps, args.timing_variants.split(","))
     if not args.skip_accuracy:
         print("accuracy:", flush=True)
-        result["accuracy"] = accuracy(models, pairs, args.variants.split(","))
+        result["accuracy"] = accuracy(models, pairs, args.variants.split(","), not args.no_lag)
     result["machine_end"] = machine()
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))

@@ -41,6 +41,8 @@ def _positive_int(text: str) -> int:
 
 def add_study_parser(sub: Any) -> None:
     """``study paper`` and its options."""
+    from fresco_bridge.updating.cli import parse_option  # here: updating imports study.constants
+
     p_study = sub.add_parser("study", help="reproducible studies (the source paper's case study)")
     studies = p_study.add_subparsers(dest="study", required=True)
     p = studies.add_parser(
@@ -70,6 +72,11 @@ def add_study_parser(sub: Any) -> None:
     p.add_argument("--ann-iterations", type=_positive_int, default=None, metavar="N",
                    help="cap online_ann's LM at N iterations per step (default: the paper's 50; "
                         "fewer is cheaper and less faithful, recorded in study.json)")
+    p.add_argument("--ann-option", type=parse_option, action="append", default=[],
+                   metavar="KEY=VALUE",
+                   help="an online_ann option (JSON value), repeatable, e.g. divide=dividerand "
+                        "(MATLAB train's validation stop) or single_precision_hessian=true; "
+                        "recorded in study.json (default: the paper's method)")
     p.add_argument("--pretrain-iterations", type=_positive_int, default=1000, metavar="N",
                    help="LM iterations of the ANN's offline pre-training (default 1000)")
     p.add_argument("--workers", type=_positive_int, default=None,
@@ -90,6 +97,23 @@ def study_command(args: argparse.Namespace) -> int:
     except StudyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+_ANN_RESERVED = ("model", "model_file", "offline", "seed", "pretrain_iterations", "max_iterations")
+"""online_ann options the study sets itself (--seed, --pretrain-iterations, --ann-iterations)."""
+
+
+def _ann_options(pairs: list[tuple[str, Any]]) -> tuple[tuple[str, Any], ...]:
+    """--ann-option pairs checked against what online_ann accepts (a clear error otherwise)."""
+    from fresco_bridge.study.paper import StudyError
+    from fresco_bridge.updating.registry import updater_options
+
+    accepted = [k for k in updater_options("online_ann") if k not in _ANN_RESERVED]
+    for key, _ in pairs:
+        if key not in accepted:
+            raise StudyError(f"--ann-option {key}: not an online_ann option the study passes on; "
+                             f"accepted: {', '.join(accepted)}")
+    return tuple(pairs)
 
 
 def _motions(args: argparse.Namespace, seeds: list[int]) -> list[tuple[str, Any, int]]:
@@ -136,7 +160,7 @@ def _run(args: argparse.Namespace) -> int:
                          f"{', '.join(CASES)}")  # fmt: skip
     runs = [
         RunSpec(label, motion, specimen, noise, seed, args.steps, args.ann_iterations,
-                args.pretrain_iterations)
+                args.pretrain_iterations, _ann_options(args.ann_option))
         for label, motion, seed in _motions(args, seeds)
         for specimen in (args.specimen or ["bwbn"])
         for noise in (args.noise or [0.0])

@@ -68,6 +68,8 @@ class RunSpec:
     """LM iteration cap of ``online_ann`` (None: the paper's 50); a cost knob for quick sweeps."""
     pretrain_iterations: int = 1000
     """LM iterations of the offline pre-training (MATLAB ``trainlm``'s default epochs)."""
+    ann_options: tuple[tuple[str, Any], ...] = ()
+    """Further ``online_ann`` options (``divide``, ``rtol``, …); none: the paper's method."""
 
     @property
     def label(self) -> str:
@@ -113,6 +115,8 @@ def make_case_updater(case: str, prepared: Prepared) -> Updater:
     options: dict[str, Any] = {}
     if case == "online_ann" and prepared.run.ann_iterations is not None:
         options["max_iterations"] = prepared.run.ann_iterations
+    if case == "online_ann":
+        options.update(prepared.run.ann_options)
     return make_updater(case, model=copy.deepcopy(prepared.ann), seed=prepared.run.seed,
                         **options)
 
@@ -217,6 +221,7 @@ def run_study(
                         "paper_bilinear": dict(PAPER_BILINEAR),
                         "pretrain_iterations": p.run.pretrain_iterations},
             "online_ann_max_iterations": p.run.ann_iterations or PAPER_ONLINE_LM.max_iterations,
+            "online_ann_options": dict(p.run.ann_options),
             "layouts": {
                 layout: {
                     "scored_against": "tested damper's measured force" if layout == "paper"

@@ -46,7 +46,8 @@ def _hidden(text: str) -> tuple[int, ...]:
     return sizes
 
 
-def _option(text: str) -> tuple[str, Any]:
+def parse_option(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` (VALUE as JSON, else a bare string) for ``--option`` arguments."""
     key, sep, raw = text.partition("=")
     if not sep or not key:
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
@@ -106,7 +107,7 @@ def add_updater_parser(sub: Any) -> None:
                         "process (instead of --model)")
     r.add_argument("--lag", action="store_true",
                    help="the twin's step i only knows the source through step i-1")
-    r.add_argument("--option", type=_option, action="append", default=[], metavar="KEY=VALUE",
+    r.add_argument("--option", type=parse_option, action="append", default=[], metavar="KEY=VALUE",
                    help="an updater option (JSON value), repeatable, e.g. max_iterations=50")
     r.add_argument("--units", type=_units, default=Units(), metavar="DISP,FORCE",
                    help="units of the CSVs' disp and force, also used for pred.csv "

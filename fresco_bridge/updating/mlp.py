@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -106,12 +107,19 @@ class Mlp:
         acts.append(a @ w.T + b)
         return acts
 
-    def jacobian(self, theta: FloatArray, x: FloatArray, out: FloatArray | None = None,
+    def jacobian(self, theta: FloatArray, x: FloatArray,
+                 out: npt.NDArray[np.floating[Any]] | None = None,
                  acts: list[FloatArray] | None = None,
-                 row_scale: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+                 row_scale: FloatArray | None = None,
+                 ) -> tuple[FloatArray, npt.NDArray[np.floating[Any]]]:
         """(outputs (n,), J (n x n_params)) with J[i, k] = d out_i / d theta_k.
 
+        J is Fortran-ordered (``J.T`` is C-ordered): every block of ``J.T`` (a layer's weights
+        or biases) is then written along contiguous samples, ~0.55x the time of a C-ordered J,
+        and BLAS ``syrk``/``gemv`` read either order in place.
         ``acts`` (from :meth:`activations` at the same theta and x) saves the forward pass.
+        ``out``: a Fortran-ordered (n, n_params) array to fill, float64 or float32 (computed
+        in float64, stored in single precision).
         ``row_scale`` (n,) multiplies row i of J by ``row_scale[i]`` (LM's sqrt of the weights)
         at no extra cost: every block of J is linear in the output's seed delta.
         """
@@ -119,25 +127,27 @@ class Mlp:
         if acts is None:
             acts = self.activations(theta, x)
         n = x.shape[0]
-        jac = np.empty((n, self.n_params)) if out is None else out
-        if jac.shape != (n, self.n_params) or not jac.flags.c_contiguous:
-            raise UpdaterError(f"{self!r}: out must be a C-ordered ({n}, {self.n_params}) array")
+        jac = np.empty((n, self.n_params), order="F") if out is None else out
+        if jac.shape != (n, self.n_params) or not jac.flags.f_contiguous:
+            raise UpdaterError(f"{self!r}: out must be a Fortran-ordered ({n}, {self.n_params}) "
+                               f"array")
+        jac_t = jac.T  # (n_params, n), C-ordered
         if row_scale is None:
-            delta = np.ones((n, 1))
+            delta = np.ones((1, n))
         elif row_scale.shape == (n,):
-            delta = row_scale[:, None].copy()
+            delta = row_scale[None, :].copy()
         else:
             raise UpdaterError(f"{self!r}: row_scale must have shape ({n},), got {row_scale.shape}")
         for layer in range(len(params) - 1, -1, -1):
             s = self._slots[layer]
-            a_prev = acts[layer]
+            a_prev_t = acts[layer].T
             n_out, n_in = s.shape
-            # A column block of a C-ordered J reshapes to (n, out, in) as a view: no copy.
-            np.multiply(delta[:, :, None], a_prev[:, None, :],
-                        out=jac[:, s.w].reshape(n, n_out, n_in))
-            jac[:, s.b] = delta
+            # A row block of the C-ordered J^T reshapes to (out, in, n) as a view: no copy.
+            np.multiply(delta[:, None, :], a_prev_t[None, :, :],
+                        out=jac_t[s.w].reshape(n_out, n_in, n))
+            jac_t[s.b] = delta
             if layer:
-                delta = (delta @ params[layer][0]) * (1.0 - a_prev * a_prev)
+                delta = (params[layer][0].T @ delta) * (1.0 - a_prev_t * a_prev_t)
         return acts[-1][:, 0], jac
 
     def input_gradient(self, theta: FloatArray, x_row: FloatArray) -> tuple[float, FloatArray]:

@@ -188,21 +188,23 @@ def make_online_ann(*, model: Any = None, model_file: str | Path | None = None,
                     offline: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
                     offline_samples: int = 500, window: int = 200, forgetting: float = 0.1,
                     window_share: float | None = None, max_iterations: int | None = None,
-                    rtol: float | None = None, seed: int = 0,
-                    pretrain_iterations: int = 1000) -> Updater:
+                    rtol: float | None = None, divide: str | None = None,
+                    max_fail: int | None = None, single_precision_hessian: bool | None = None,
+                    seed: int = 0, pretrain_iterations: int = 1000) -> Updater:
     """The paper's online ANN, faithful by default: LM up to 50 iterations every step.
 
     ``max_iterations``/``rtol`` override the cap and add a relative-decrease stop (both change
     the method; BENCHMARKS.md measures what they cost). ``seed`` drives both the pre-training
     start (with ``offline``) and the random choice of offline samples.
     """
-    from .updaters import PAPER_ONLINE_LM, OnlineAnnUpdater, online_lm_options
+    from .updaters import ONLINE_ANN_DIVIDE, PAPER_ONLINE_LM, OnlineAnnUpdater, online_lm_options
 
     ann = _ann_model("online_ann", model, model_file, offline, seed, pretrain_iterations)
     return OnlineAnnUpdater(ann, offline_samples=offline_samples, window=window,
                             forgetting=forgetting, window_share=window_share,
-                            lm=online_lm_options(max_iterations, rtol, PAPER_ONLINE_LM),
-                            seed=seed)
+                            lm=online_lm_options(max_iterations, rtol, PAPER_ONLINE_LM, max_fail,
+                                                 single_precision_hessian),
+                            divide=ONLINE_ANN_DIVIDE if divide is None else divide, seed=seed)
 
 
 def make_online_ukf(*, k0: float = 68.0, alpha: float = 0.008, fy: float = 35.0,

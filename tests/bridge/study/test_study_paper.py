@@ -25,6 +25,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     # minutes here (BENCHMARKS.md); the faithful default is exercised in tests/bridge/updating.
     code = main(["study", "paper", "--specimen", "menegotto-pinto", "--steps", str(STEPS),
                  "--noise", "1", "--seed", "3", "--workers", "1", "--ann-iterations", "2",
+                 "--ann-option", "divide=none",
                  "--pretrain-iterations", "100", "-o", str(out)])  # fmt: skip
     assert code == 0
     runs = sorted(p for p in out.iterdir() if p.is_dir())
@@ -52,6 +53,7 @@ def test_json_has_exactly_the_issue_keys_per_case(study: dict[str, object]) -> N
     assert study["steps"] == STEPS + 1
     assert study["noise_pct"] == 1.0 and 0.05 < study["noise_std_kN"] < 0.5
     assert study["online_ann_max_iterations"] == 2
+    assert study["online_ann_options"] == {"divide": "none"}
     assert study["offline"]["pretrain_iterations"] == 100  # type: ignore[index]
 
 
@@ -125,6 +127,17 @@ def test_bad_noise_is_exit_2(noise: str, capsys: pytest.CaptureFixture[str]) -> 
 def test_unknown_case_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["study", "paper", "--cases", "reference,magic", "-o", str(tmp_path)]) == 2
     assert "magic" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", ["magic=1", "seed=3", "divide"])
+def test_bad_ann_option_is_exit_2(option: str, tmp_path: Path,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    try:
+        code = main(["study", "paper", "--ann-option", option, "-o", str(tmp_path)])
+    except SystemExit as exc:  # argparse: not KEY=VALUE
+        code = exc.code  # type: ignore[assignment]
+    assert code == 2
+    assert "--ann-option" in capsys.readouterr().err
 
 
 def test_a_northridge_record_runs(tmp_path: Path, shared_dir: Path) -> None:
