@@ -303,8 +303,9 @@ class RunRecord:
         the buffer) runs as one straight path — fold, encode, one ``write``, a sync request.
         """
         t = _monotonic() - self._t0
-        line = self._enc.fold(t, site, session, step, time_, items) if items else None
-        if line is None or self._buf or self.closed:
+        line = (self._enc.fold(t, site, session, step, time_, items)
+                if items and not self._buf and not self.closed else None)
+        if line is None:
             self._commit_lines(t, site, items, session, step, time_)
             return
         self._seq += len(items) + 1
@@ -321,7 +322,9 @@ class RunRecord:
 
     def _commit_lines(self, t: float, site: str, items: list[Item], session: int, step: int,
                       time_: float) -> None:
-        """A commit whose items do not fold (or a record already closed): format-2 lines."""
+        """The general commit: a step line when the items fold (after whatever the buffer
+        holds), else format-2 lines and a commit line (the fold changes no state when it
+        returns None, so trying it again here is safe)."""
         enc = self._enc
         if items:
             line = enc.fold(t, site, session, step, time_, items)
