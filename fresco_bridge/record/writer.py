@@ -41,7 +41,7 @@ from typing import Literal
 from .lines import DAQ, FORMAT_VERSION, MONITOR, TRIAL, Item, LineEncoder
 
 _monotonic = time.monotonic
-_write = os.write
+_os_write = os.write
 
 RECORD_FILE = "record.jsonl"
 CONFIG_FILE = "config.toml"
@@ -310,13 +310,7 @@ class RunRecord:
             return
         self._seq += len(items) + 1
         items.clear()
-        data = line.encode()
-        try:
-            n = _write(self._fd, data)
-        except OSError as exc:
-            raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
-        if n != len(data):
-            self._write_rest(data, n)
+        self._write(line.encode())
         if self._fsync != "off":
             self._sync(False)
 
@@ -378,21 +372,19 @@ class RunRecord:
         if buf:
             data = (buf[0] if len(buf) == 1 else "".join(buf)).encode()
             buf.clear()
-            try:
-                n = _write(self._fd, data)
-            except OSError as exc:
-                raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
-            if n != len(data):
-                self._write_rest(data, n)
+            self._write(data)
         if sync and self._fsync != "off":
             self._sync(urgent)
 
-    def _write_rest(self, data: bytes, n: int) -> None:
-        """After a short write (a signal, a full disk): the rest of ``data``."""
-        view = memoryview(data)[n:]
+    def _write(self, data: bytes) -> None:
+        """``data`` to the kernel: one ``write`` (the rest after a short one: a signal, a full
+        disk)."""
         try:
-            while view:
-                view = view[_write(self._fd, view):]
+            n = _os_write(self._fd, data)
+            if n != len(data):
+                view = memoryview(data)[n:]
+                while view:
+                    view = view[_os_write(self._fd, view):]
         except OSError as exc:
             raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
 
