@@ -438,7 +438,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-64", action="store_true", help="skip the 64-DOF variants")
     parser.add_argument("--steps-64", type=int, default=STEPS_64)
     parser.add_argument("--compare-tree", type=Path, default=None,
-                        help="add the primary bridge variant served from this checkout")
+                        help="add the primary bridge variant and its record-off one served "
+                        "from this checkout")
     parser.add_argument("--only", default=None,
                         help="comma-separated substrings: run only the matching variants")
     parser.add_argument("--rss-steps", type=int, default=RSS_STEPS)
@@ -453,8 +454,9 @@ def main(argv: list[str] | None = None) -> None:
     variants = [dataclasses.replace(v, steps=args.steps) for v in VARIANTS]
     if args.compare_tree is not None:
         tree = args.compare_tree.resolve()
-        variants.insert(2, dataclasses.replace(BRIDGE, name=f"bridge @ {tree.name}",
-                                               tree=str(tree)))
+        variants[2:2] = [dataclasses.replace(BRIDGE, name=f"bridge @ {tree.name}", tree=str(tree)),
+                         dataclasses.replace(BRIDGE, name=f"bridge @ {tree.name}: record off",
+                                             tree=str(tree), record=False)]
     if not args.no_64:
         variants += [dataclasses.replace(v, steps=args.steps_64) for v in (REF_64, BRIDGE_64)]
     if args.only:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from time import perf_counter
 from typing import Any, Literal, Protocol
 
-from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel
+from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel, TrialReceived
 
 from ..eager import Suspended, start_eager
 from ..sites import Site, SiteError
@@ -99,6 +99,7 @@ class SessionPump:
         self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
+        self._after_trial = False  # the last event handled (at once) was a trial
         self._idle_timeout = idle_timeout = listener.idle_timeout
         self._loop = asyncio.get_running_loop()
         self._activity = self._loop.time()
@@ -127,6 +128,13 @@ class SessionPump:
             if self._held > HELD_BYTES_CAP:
                 self._held_paused = True
                 self._pause(True)
+
+    @property
+    def request_follows(self) -> bool:
+        """The last event was a trial, handled at once, and the pump reads on: the client's
+        next message is a request it sends right away (the transport may read it ahead)."""
+        return (self._after_trial and self._pending is None and not self.closed
+                and not self._write_blocked and not self._held_paused)
 
     # -- deadlines and backpressure ------------------------------------------------------------
     def _idle_check(self) -> None:
@@ -176,6 +184,7 @@ class SessionPump:
     def _run(self) -> None:
         next_event, dispatch = self.session.next_event, self.handler.dispatch
         metrics = self.site.metrics
+        self._after_trial = after_trial = False
         while not self.closed and not self._write_blocked:
             t0 = perf_counter() if metrics is not None else 0.0
             try:
@@ -184,6 +193,7 @@ class SessionPump:
                 self._end(f"protocol error from {self.peer}: {exc}", error=True)
                 return
             if type(ev) is Sentinel:  # NEED_DATA or PAUSED
+                self._after_trial = after_trial
                 return
             try:
                 handling = dispatch(ev)
@@ -207,6 +217,7 @@ class SessionPump:
                 return
             if metrics is not None:
                 metrics.message(ev, perf_counter() - t0)
+            after_trial = type(ev) is TrialReceived
 
     def _resumed(self, task: asyncio.Task[None]) -> None:
         self._pending = None

