@@ -219,10 +219,16 @@ class ElementServerSession:
         """Decode the next event, or NEED_DATA / PAUSED (a reply is owed)."""
         state = self._state
         if state is _READY:
+            # ReceiveBuffer.take_if inlined: this runs twice per message (the second time to
+            # find that nothing more is buffered)
             buffered = self._in
-            start = buffered.take_if(self._vector_bytes)
-            if start >= 0:
-                return self._decode_vector(buffered.data, start)
+            data = buffered.data
+            start = buffered.pos
+            count = self._vector_bytes
+            if len(data) - start >= count:
+                buffered.pos = start + count
+                buffered.consumed += count
+                return self._decode_vector(data, start)
             if buffered.eof:
                 return self._close()
             return NEED_DATA
@@ -407,9 +413,12 @@ class ElementServerSession:
                 self._state = _READY
                 return cached[1]
             if self._reply_full is None:
-                self._reply[: 8 * count] = cached[1]
-            else:
-                self._writable()[: 8 * count] = cached[1]
+                reply = self._reply
+                reply[: 8 * count] = cached[1]
+                self._owed = None  # _finish_reply, inlined
+                self._state = _READY
+                return bytes(reply)
+            self._writable()[: 8 * count] = cached[1]
         else:
             doubles_struct(count).pack_into(self._writable(), 0, *column_major)
         return self._finish_reply()

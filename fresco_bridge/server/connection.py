@@ -114,12 +114,17 @@ class SessionPump:
         else:
             actor = ActorSession(transport=transport)
             self.session, self.handler = actor, ActorHandler(site, actor, send, peer)
+        # bound once: the per-message path calls each of them (``feed``, ``_run``)
+        self._time = self._loop.time
+        self._receive: Callable[[bytes], None] = self.session.receive_data
+        self._next_event: Callable[[], Any] = self.session.next_event
+        self._dispatch: Callable[[Any], Coroutine[Any, Any, None] | None] = self.handler.dispatch
 
     def feed(self, data: bytes) -> None:
         if self.closed:
             return
-        self._activity = self._loop.time()
-        self.session.receive_data(data)
+        self._activity = self._time()
+        self._receive(data)
         if self._pending is None:
             if not self._write_blocked:
                 self._run()
@@ -182,7 +187,7 @@ class SessionPump:
         self.abort(reason)
 
     def _run(self) -> None:
-        next_event, dispatch = self.session.next_event, self.handler.dispatch
+        next_event, dispatch = self._next_event, self._dispatch
         metrics = self.site.metrics
         self._after_trial = after_trial = False
         while not self.closed and not self._write_blocked:

@@ -57,6 +57,7 @@ class ElementHandler:
         self.send = send
         self.peer = peer
         self.introduced = False
+        self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
         matrix several times per step): no controller call, no coroutine."""
@@ -65,9 +66,7 @@ class ElementHandler:
         """Handle ``ev``: at once when it can be (None: done, replies sent), else the coroutine
         that finishes it. The step's requests go to the site's ``*_eager`` methods, so with an
         in-process controller a step runs without one coroutine; the rest goes to ``handle``."""
-        if type(ev) is TrialReceived:
-            return self.site.set_trial_eager(ev.trial)
-        if type(ev) is ReplyRequested:
+        if type(ev) is ReplyRequested:  # 10 of the 14 messages of an OpenSees step
             action = ev.action
             matrix = self._constant.get(action)
             if matrix is not None:
@@ -80,13 +79,14 @@ class ElementHandler:
                 self.send(self.session.send_matrix(k))
                 return None
             if action in _DAQ_ACTIONS:
-                sid = self.session.size_id
-                assert sid is not None
-                out = self.site.out_signals_eager(sid.daq)
+                assert self._daq_sizes is not None
+                out = self.site.out_signals_eager(self._daq_sizes)
                 if not isinstance(out, Signals):
                     return self._send_daq_later(out)
                 self.send(self.session.send_daq(out))
                 return None
+        elif type(ev) is TrialReceived:
+            return self.site.set_trial_eager(ev.trial)
         elif type(ev) is CommitReceived:
             return self.site.commit_eager()
         return self.handle(ev)
@@ -110,6 +110,7 @@ class ElementHandler:
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
                 site.open_session(self.peer)
                 self.introduced = True
+                self._daq_sizes = sid.daq
                 log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
                          self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
             case DieReceived():

@@ -555,14 +555,13 @@ class ExperimentalSite(CommandGate):
     def _out(self, daq: Daq, sizes: SignalSizes) -> Signals:
         if self._stopping():
             return self._nan_signals(sizes)
-        disp = self.setup.out_disp(self.trial.disp, self.target, daq.disp)
-        force = self.setup.basic_force(daq.force)
-        return Signals(
-            disp=disp if sizes.disp else (),
-            vel=self.trial.vel if sizes.vel else (),
-            accel=self.trial.accel if sizes.accel else (),
-            force=force if sizes.force else (),
-            time=(self.time,) if sizes.time else (),
+        trial = self.trial
+        return Signals(  # disp, vel, accel, force, time: each block the client sized
+            self.setup.out_disp(trial.disp, self.target, daq.disp) if sizes.disp else (),
+            trial.vel if sizes.vel else (),
+            trial.accel if sizes.accel else (),
+            self.setup.basic_force(daq.force) if sizes.force else (),
+            (self.time,) if sizes.time else (),
         )
 
     async def tangent(self) -> tuple[float, ...]:
