@@ -70,6 +70,7 @@ class Variant:
     model: str = "bilinear"
     record: bool = True
     fsync: str | None = None  # None: the default durability
+    sync_interval: float | None = None  # None: the default record.sync_interval
     steps: int = STEPS
     tree: str | None = None  # another checkout's fresco_bridge (before/after in one run)
     event_loop: str | None = None  # None: the default ([bridge] event_loop)
@@ -113,6 +114,8 @@ def bridge_config(variant: Variant, run_dir: Path) -> str:
     params = ("{ k = 100.0 }" if variant.model == "elastic"
               else "{ k0 = 100.0, fy = 20.0, alpha = 0.02 }")
     fsync = "" if variant.fsync is None else f'fsync = "{variant.fsync}"\n'
+    if variant.sync_interval is not None:
+        fsync += f"sync_interval = {variant.sync_interval!r}\n"
     loop = "" if variant.event_loop is None else f'event_loop = "{variant.event_loop}"\n'
     return f"""
 [bridge]

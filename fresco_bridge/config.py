@@ -183,9 +183,11 @@ class RecordConfig(_Strict):
     fsync: Literal["background", "inline", "off"] = "background"
     """``background``: group commit (fdatasync off the step loop, at most every
     ``sync_interval``); ``inline``: the step waits for fdatasync at every commit; ``off``."""
-    sync_interval: float = Field(default=0.01, ge=0.0, le=10.0)
+    sync_interval: float = Field(default=0.05, ge=0.0, le=10.0)
     """Group commit (``fsync = "background"``): seconds between two fdatasyncs at most; a
-    power loss can cost the commits of this long plus one fdatasync. Events sync at once."""
+    power loss can cost the commits of this long plus one fdatasync. Events sync at once.
+    50 ms by default: each fdatasync costs the shared CPU a few hundred µs of wake-ups and I/O
+    completions, which at 10 ms was ≈ 3–10 % of a fast step (BENCHMARKS.md issue 8, session 4)."""
 
 
 class TelemetryConfig(_Strict):

@@ -88,10 +88,12 @@ class LineEncoder:
     to it.
     """
 
-    __slots__ = ("_commit", "_ctx", "_daq", "_monitor", "_nums", "_nums_of", "_trial")
+    __slots__ = ("_commit", "_ctx_session", "_ctx_site", "_daq", "_monitor", "_nums",
+                 "_nums_of", "_trial")
 
     def __init__(self) -> None:
-        self._ctx: tuple[str, int] | None = None
+        self._ctx_site: str | None = None  # site and session of the line before
+        self._ctx_session = 0
         self._nums_of: tuple[float, ...] | None = None
         self._nums = ""
         """The last vector formatted and its text: an in-process specimen measures the very
@@ -105,9 +107,9 @@ class LineEncoder:
         self._monitor: dict[str, tuple[Any, ...]] = {}
 
     def line(self, t: float, kind: str, site: str, session: int, body: str) -> str:
-        if self._ctx == (site, session):
+        if self._ctx_site == site and self._ctx_session == session:
             return f'{{"t":{t:.6f},"kind":"{kind}"{body}}}\n'
-        self._ctx = (site, session)
+        self._ctx_site, self._ctx_session = site, session
         return f'{{"t":{t:.6f},"kind":"{kind}","site":"{site}","session":{session}{body}}}\n'
 
     def _vector(self, values: tuple[float, ...]) -> str:
@@ -197,7 +199,13 @@ class LineEncoder:
              items: list[Item]) -> str | None:
         """The step line of committed ``step``: ``items`` (the site's lines since its last
         commit) and the commit in one line; None when they do not have the step line's shape
-        (then they are written as format-2 lines)."""
+        (then they are written as format-2 lines).
+
+        The hot path of the record (once a committed step): each item is unpacked once, a
+        vector is formatted only when it differs from the previous iteration's (and once for
+        the trial and the measurement of an in-process specimen: the same tuple), and the
+        line is one f-string.
+        """
         last_t = self._trial.get(site)
         last_d = self._daq.get(site)
         if last_t is None or last_d is None or last_t[0] != session or last_d[0] != session:
@@ -210,50 +218,57 @@ class LineEncoder:
         if monitor[0] == MONITOR:
             if monitor[1] != session or monitor[2] != prev:
                 return None
-            values = monitor[3]
-            last_m = self._monitor.get(site)
-            was = last_m[1] if last_m is not None and last_m[0] == session else None
-            if was is not None and was[1:] == values:
-                mon = ',"mon":0'
-            else:
-                err, ti, nrms, fei_amp, fei_delay = values
-                if was is not None and was[4:] == values[3:]:  # the FEI is held between updates
-                    mon = f',"mon":[{num(err)},{num(ti)},{opt(nrms)}]'
-                else:
-                    mon = (f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},'
-                           f'{opt(fei_delay)}]')
+            mon = self._fold_monitor(site, session, monitor[3])
             i = 1
         if n - i < 2 or (n - i) & 1:
             return None
-        trial_head = (TRIAL, session, prev, time_)
-        daq_head = (DAQ, session, prev)
-        pt, pc, pd, pf = last_t[3], last_t[4], last_d[2], last_d[3]
+        _, _, _, pt, pc = last_t
+        _, _, pd, pf = last_d
         vector = self._vector
         its = []
-        for j in range(i, n, 2):
-            tr, dq = items[j], items[j + 1]
-            if tr[:4] != trial_head or dq[:3] != daq_head:
-                return None
-            trial, ctrl = tr[4], tr[5]
-            disp, force = dq[3], dq[4]
-            if trial == pt:
-                if ctrl == pc and disp == pd and force == pf:
-                    its.append("0")
-                    continue
-                text = "[0,"
-            else:
-                text = "[" + vector(trial) + ","
-            text += "0," if disp == pd else vector(disp) + ","
-            text += "0" if force == pf else vector(force)
-            its.append(text + "]" if ctrl == trial else text + "," + vector(ctrl) + "]")
-            pt, pc, pd, pf = trial, ctrl, disp, force
+        try:
+            for j in range(i, n, 2):
+                kind, s, st, tm, trial, ctrl = items[j]
+                dkind, ds, dst, disp, force = items[j + 1]
+                if (kind != TRIAL or dkind != DAQ or st != prev or dst != prev or tm != time_
+                        or s != session or ds != session):
+                    return None
+                if trial == pt:
+                    if ctrl == pc and disp == pd and force == pf:
+                        its.append("0")
+                        continue
+                    text = "[0,"
+                else:
+                    text = "[" + vector(trial) + ","
+                text += "0," if disp == pd else vector(disp) + ","
+                text += "0" if force == pf else vector(force)
+                its.append(text + "]" if ctrl == trial else text + "," + vector(ctrl) + "]")
+                pt, pc, pd, pf = trial, ctrl, disp, force
+        except ValueError:  # an item of another kind (another length) where a pair should be
+            return None
         self._trial[site] = (session, prev, time_, pt, pc)
         self._daq[site] = (session, prev, pd, pf)
         self._commit[site] = (session, step, time_)
         if i:
             self._monitor[site] = (session, (prev, *monitor[3]))
-        return self.line(t, "step", site, session,
-                         f',"step":{step},"time":{num(time_)}{mon},"it":[{",".join(its)}]')
+        tt = repr(time_) if time_.__class__ is float and time_ - time_ == 0.0 else num(time_)
+        body = (f',"step":{step},"time":{tt}{mon},"it":[{its[0]}]}}\n' if len(its) == 1 else
+                f',"step":{step},"time":{tt}{mon},"it":[{",".join(its)}]}}\n')
+        if self._ctx_site == site and self._ctx_session == session:
+            return f'{{"t":{t:.6f},"kind":"step"' + body
+        self._ctx_site, self._ctx_session = site, session
+        return f'{{"t":{t:.6f},"kind":"step","site":"{site}","session":{session}' + body
+
+    def _fold_monitor(self, site: str, session: int, values: tuple[Any, ...]) -> str:
+        """The ``mon`` field of a step line: the monitor sample after the step before."""
+        last_m = self._monitor.get(site)
+        was = last_m[1] if last_m is not None and last_m[0] == session else None
+        if was is not None and was[1:] == values:
+            return ',"mon":0'
+        err, ti, nrms, fei_amp, fei_delay = values
+        if was is not None and was[4:] == values[3:]:  # the FEI is held between its updates
+            return f',"mon":[{num(err)},{num(ti)},{opt(nrms)}]'
+        return f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},{opt(fei_delay)}]'
 
 
 _MONITOR_FLOATS = ("err", "ti", "nrms", "fei_amp", "fei_delay")

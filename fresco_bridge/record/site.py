@@ -28,12 +28,13 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_pending", "_record", "measurement", "site", "trial")
+    __slots__ = ("_commit", "_pending", "_record", "measurement", "site", "trial")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
         self.site = site
         self._pending = record.pending(site)
+        self._commit = record.commit_items
         # several times a step: the record's own methods with the site bound (no extra frame)
         self.trial: Callable[[int, int, float, tuple[float, ...], tuple[float, ...]], None] = \
             partial(record.trial, site)
@@ -43,7 +44,7 @@ class SiteRecorder:
         """``measurement(session, step, disp, force)``: what the controller measured."""
 
     def step_committed(self, step: CommittedStep) -> None:
-        self._record.commit(self.site, step.session, step.step, step.time)
+        self._commit(self.site, self._pending, step.session, step.step, step.time)
 
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
         self.event(notice.session, notice.kind, notice.reason, **notice.extra)

@@ -9,9 +9,10 @@ against a power loss:
 
 - ``fsync="background"`` (default): group commit, as databases do. A syncer thread runs one
   ``fdatasync`` for every commit written since the last one, at most once per
-  ``sync_interval`` (default 10 ms); an event (hold, fault, session change) asks for a sync at
+  ``sync_interval`` (default 50 ms); an event (hold, fault, session change) asks for a sync at
   once. A power loss can cost the commits of the last ``sync_interval`` plus the duration of
-  one ``fdatasync`` (typically < 1 ms on a local SSD); the step loop never waits for the disk.
+  one ``fdatasync`` (typically < 1 ms on a local SSD, 2–7 ms measured on a virtio disk): at
+  most ≈ 60 ms of steps; the step loop never waits for the disk.
   ``sync_interval = 0`` syncs after every commit (still off the step loop).
 - ``fsync="inline"``: the bridge waits for ``fdatasync`` at every commit and event.
 - ``fsync="off"``: the kernel writes back when it likes (30 s on Linux by default).
@@ -39,11 +40,17 @@ from typing import Literal
 
 from .lines import DAQ, FORMAT_VERSION, MONITOR, TRIAL, Item, LineEncoder
 
+_monotonic = time.monotonic
+_os_write = os.write
+
 RECORD_FILE = "record.jsonl"
 CONFIG_FILE = "config.toml"
 META_FILE = "run.json"
-DEFAULT_SYNC_INTERVAL = 0.01
-"""Group commit: at most one fdatasync per this many seconds (events sync at once)."""
+DEFAULT_SYNC_INTERVAL = 0.05
+"""Group commit: at most one fdatasync per this many seconds (events sync at once). Why 50 ms,
+not 10: every sync wakes the syncer thread several times (timer, GIL hand-offs, three I/O
+completions on ext4) on the CPU the step loop runs on; at 10 ms that cost ≈ 3–10 % of a
+0.45 ms step, at 50 ms a fifth of it (BENCHMARKS.md issue 8, session 4)."""
 PENDING_LIMIT = 256
 """A site's trials waiting for its commit past this many items are written as format-2 lines
 (an integrator iterating for ever without committing neither grows the bridge's memory nor
@@ -285,9 +292,34 @@ class RunRecord:
         self._pending[site].append((DAQ, session, step, disp, force))
 
     def commit(self, site: str, session: int, step: int, time_: float) -> None:
+        self.commit_items(site, self._pending[site], session, step, time_)
+
+    def commit_items(self, site: str, items: list[Item], session: int, step: int,
+                     time_: float) -> None:
+        """Committed ``step`` of ``site`` whose pending items are ``items`` (``pending``):
+        one step line, written to the kernel before this returns.
+
+        Once a step: the common case (the items fold into a step line, nothing else waits in
+        the buffer) runs as one straight path — fold, encode, one ``write``, a sync request.
+        """
+        t = _monotonic() - self._t0
+        line = (self._enc.fold(t, site, session, step, time_, items)
+                if items and not self._buf and not self.closed else None)
+        if line is None:
+            self._commit_lines(t, site, items, session, step, time_)
+            return
+        self._seq += len(items) + 1
+        items.clear()
+        self._write(line.encode())
+        if self._fsync != "off":
+            self._sync(False)
+
+    def _commit_lines(self, t: float, site: str, items: list[Item], session: int, step: int,
+                      time_: float) -> None:
+        """The general commit: a step line when the items fold (after whatever the buffer
+        holds), else format-2 lines and a commit line (the fold changes no state when it
+        returns None, so trying it again here is safe)."""
         enc = self._enc
-        t = time.monotonic() - self._t0
-        items = self._pending.get(site)
         if items:
             line = enc.fold(t, site, session, step, time_, items)
             if line is None:
@@ -340,16 +372,24 @@ class RunRecord:
         if buf:
             data = (buf[0] if len(buf) == 1 else "".join(buf)).encode()
             buf.clear()
-            try:
-                n = os.write(self._fd, data)
-                if n < len(data):  # a short write (a signal, a full disk): write the rest
-                    view = memoryview(data)[n:]
-                    while view:
-                        view = view[os.write(self._fd, view):]
-            except OSError as exc:
-                raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
-        if not sync or self._fsync == "off":
-            return
+            self._write(data)
+        if sync and self._fsync != "off":
+            self._sync(urgent)
+
+    def _write(self, data: bytes) -> None:
+        """``data`` to the kernel: one ``write`` (the rest after a short one: a signal, a full
+        disk)."""
+        try:
+            n = _os_write(self._fd, data)
+            if n != len(data):
+                view = memoryview(data)[n:]
+                while view:
+                    view = view[_os_write(self._fd, view):]
+        except OSError as exc:
+            raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
+
+    def _sync(self, urgent: bool) -> None:
+        """Everything written so far durable: asked of the syncer, or now (inline)."""
         syncer = self._syncer
         if syncer is not None:
             if syncer.error is not None:

@@ -199,6 +199,37 @@ def test_trials_that_never_commit_go_to_the_file_in_bounded_batches(tmp_path: Pa
     assert len(list(read_record(record.directory))) == 4003
 
 
+@given(st.lists(st.sampled_from(["trial", "daq", "monitor"]), min_size=1, max_size=7))
+@settings(max_examples=40, deadline=None)
+def test_pending_items_of_any_order_read_back_as_recorded(tmp_path_factory: Any,
+                                                          kinds: list[str]) -> None:
+    """Whatever order a site's trials, measurements and monitor samples came in (a measurement
+    with no trial, two trials in a row, a monitor sample between them), the commit writes them
+    as a step line only when they have its shape, and they read back in order."""
+    record = RunRecord.create(tmp_path_factory.mktemp("o"), "o", "", {}, fsync="off")
+    record.trial("s", 1, 0, 0.01, (0.5,), (0.5,))  # the session's first step: format 2
+    record.measurement("s", 1, 0, (0.5,), (5.0,))
+    record.commit("s", 1, 1, 0.01)
+    expected: list[tuple[str, float | None]] = [("trial", 0.5), ("daq", 0.5), ("commit", None)]
+    for i, kind in enumerate(kinds):
+        v = 1.0 + i
+        if kind == "trial":
+            record.trial("s", 1, 1, 0.02, (v,), (v,))
+        elif kind == "daq":
+            record.measurement("s", 1, 1, (v,), (10 * v,))
+        else:
+            record.monitor("s", 1, 1, v, 0.0, None, None, None)
+        expected.append((kind, v))
+    record.commit("s", 1, 2, 0.02)
+    record.close()
+    expected.append(("commit", None))
+    got = [(r["kind"], r["trial"][0] if r["kind"] == "trial" else r["disp"][0]
+            if r["kind"] == "daq" else r["err"] if r["kind"] == "monitor" else None)
+           for r in read_record(record.directory)]
+    assert got == expected
+    assert_same_lines(raw_lines(record.directory), list(read_record(record.directory)))
+
+
 VALUES = st.sampled_from([0.0, 0.25, -1.5, 1e-300, math.inf, math.nan])
 ITERATION = st.tuples(VALUES, st.booleans(), VALUES)  # trial, ctrl clamped, force
 STEP = st.tuples(
