@@ -144,6 +144,7 @@ class ElementServerSession:
     __slots__ = (
         "_closed",
         "_daq_layout",
+        "_data_size",
         "_error",
         "_in",
         "_keep_leftovers",
@@ -179,6 +180,7 @@ class ElementServerSession:
         reply writes part of the buffer."""
         self._zeros = b""
         self._matrix_count = 0
+        self._data_size = 0
         self._packed: dict[int, tuple[tuple[float, ...], bytes]] = {}
         self._owed: Action | None = None
         self._closed: ConnectionClosed | None = None
@@ -210,10 +212,18 @@ class ElementServerSession:
 
         Raises LocalProtocolError for non-empty data after EOF was fed.
         """
-        if self._state is _CLOSED and data and not self._in.eof:
+        buffered = self._in
+        if buffered.pos == len(buffered.data) and type(data) is bytes and data \
+                and self._state is not _CLOSED and not buffered.eof:
+            # ReceiveBuffer.feed's usual case, inlined (once per message): everything before
+            # was read, and an immutable segment is kept as it is
+            buffered.data = data
+            buffered.pos = 0
+            return
+        if self._state is _CLOSED and data and not buffered.eof:
             self.bytes_after_die += len(data)
             return
-        self._in.feed(data)
+        buffered.feed(data)
 
     def next_event(self) -> ElementServerEvent | Literal[Sentinel.NEED_DATA, Sentinel.PAUSED]:
         """Decode the next event, or NEED_DATA / PAUSED (a reply is owed)."""
@@ -269,6 +279,7 @@ class ElementServerSession:
         self._reply = bytearray(self._vector_bytes)
         self._zeros = bytes(self._vector_bytes)
         self._matrix_count = size_id.ctrl.disp * size_id.ctrl.disp
+        self._data_size = data_size
         self._state = _READY
 
     def _decode_vector(self, data: bytes | bytearray, start: int) -> ElementServerEvent:
@@ -386,42 +397,45 @@ class ElementServerSession:
             action = self._require_owed(
                 "send_matrix", _MATRIX_ACTIONS, "use send_daq for 6..11 or send_values"
             )
-        assert self._size_id is not None
         count = self._matrix_count
+        packed: bytes | None = None
+        if type(column_major) is tuple:  # immutable: its packed bytes are kept and reused
+            cached = self._packed.get(id(column_major))
+            if cached is not None and cached[0] is column_major:
+                packed = cached[1]  # its size was checked when it was packed
+        if packed is None:
+            self._check_matrix(column_major, action)
+            if type(column_major) is not tuple:
+                doubles_struct(count).pack_into(self._writable(), 0, *column_major)
+                return self._finish_reply()
+            packed = doubles_struct(count).pack(*column_major)
+            if len(self._packed) >= _PACKED_CACHE:
+                self._packed.clear()
+            self._packed[id(column_major)] = (column_major, packed)
+        self._owed = None  # _finish_reply, inlined (7 matrices a step)
+        self._state = _READY
+        if count == self._data_size:  # the whole reply: no copy at all
+            self._reply_full = packed
+            return packed
+        reply = self._reply if self._reply_full is None else self._writable()
+        reply[: 8 * count] = packed
+        return bytes(reply)
+
+    def _check_matrix(self, column_major: Sequence[float], action: Action | None) -> None:
+        """LocalProtocolError unless ``column_major`` is an n*n matrix that fits dataSize."""
+        sid = self._size_id
+        assert sid is not None and action is not None
+        n, count = sid.ctrl.disp, self._matrix_count
         if len(column_major) != count:
-            assert action is not None
             raise LocalProtocolError(
                 f"send_matrix() got {len(column_major)} values but {action.name} needs "
-                f"n*n = {count} (n = sizeCtrl disp = {self._size_id.ctrl.disp})"
+                f"n*n = {count} (n = sizeCtrl disp = {n})"
             )
-        if count > self._size_id.data_size:
-            n = self._size_id.ctrl.disp
+        if count > sid.data_size:
             raise LocalProtocolError(
                 f"send_matrix(): the {n}x{n} matrix needs {count} slots but dataSize is "
-                f"{self._size_id.data_size}"
+                f"{sid.data_size}"
             )
-        if type(column_major) is tuple:  # immutable: its packed bytes can be reused
-            cached = self._packed.get(id(column_major))
-            if cached is None or cached[0] is not column_major:
-                if len(self._packed) >= _PACKED_CACHE:
-                    self._packed.clear()
-                cached = (column_major, doubles_struct(count).pack(*column_major))
-                self._packed[id(column_major)] = cached
-            if count == self._size_id.data_size:  # the whole reply: no copy at all
-                self._reply_full = cached[1]
-                self._owed = None
-                self._state = _READY
-                return cached[1]
-            if self._reply_full is None:
-                reply = self._reply
-                reply[: 8 * count] = cached[1]
-                self._owed = None  # _finish_reply, inlined
-                self._state = _READY
-                return bytes(reply)
-            self._writable()[: 8 * count] = cached[1]
-        else:
-            doubles_struct(count).pack_into(self._writable(), 0, *column_major)
-        return self._finish_reply()
 
     def send_values(self, values: Sequence[float]) -> bytes:
         """Escape hatch: answer the owed request with raw *values* from slot 0."""

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from time import perf_counter
 from typing import Any, Literal, Protocol
 
-from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel, TrialReceived
+from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel
 
 from ..eager import Suspended, start_eager
 from ..sites import Site, SiteError
@@ -99,7 +99,6 @@ class SessionPump:
         self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
-        self._after_trial = False  # the last event handled (at once) was a trial
         self._idle_timeout = idle_timeout = listener.idle_timeout
         self._loop = asyncio.get_running_loop()
         self._activity = self._loop.time()
@@ -133,13 +132,6 @@ class SessionPump:
             if self._held > HELD_BYTES_CAP:
                 self._held_paused = True
                 self._pause(True)
-
-    @property
-    def request_follows(self) -> bool:
-        """The last event was a trial, handled at once, and the pump reads on: the client's
-        next message is a request it sends right away (the transport may read it ahead)."""
-        return (self._after_trial and self._pending is None and not self.closed
-                and not self._write_blocked and not self._held_paused)
 
     # -- deadlines and backpressure ------------------------------------------------------------
     def _idle_check(self) -> None:
@@ -189,16 +181,16 @@ class SessionPump:
     def _run(self) -> None:
         next_event, dispatch = self._next_event, self._dispatch
         metrics = self.site.metrics
-        self._after_trial = after_trial = False
+        t0 = 0.0
         while not self.closed and not self._write_blocked:
-            t0 = perf_counter() if metrics is not None else 0.0
+            if metrics is not None:
+                t0 = perf_counter()
             try:
                 ev = next_event()
             except ProtocolError as exc:
                 self._end(f"protocol error from {self.peer}: {exc}", error=True)
                 return
             if type(ev) is Sentinel:  # NEED_DATA or PAUSED
-                self._after_trial = after_trial
                 return
             try:
                 handling = dispatch(ev)
@@ -213,7 +205,7 @@ class SessionPump:
                 log.exception("site %s: internal error handling %r", self.site.name, ev)
                 self._end(f"internal error: {exc!r}", error=True)
                 return
-            if isinstance(r, Suspended):
+            if r is not None and isinstance(r, Suspended):
                 self._held = 0
                 self._pending = r.task(name=f"{self.site.name}.request")
                 self._pending.add_done_callback(self._resumed)
@@ -222,7 +214,6 @@ class SessionPump:
                 return
             if metrics is not None:
                 metrics.message(ev, perf_counter() - t0)
-            after_trial = type(ev) is TrialReceived
 
     def _resumed(self, task: asyncio.Task[None]) -> None:
         self._pending = None

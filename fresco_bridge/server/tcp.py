@@ -6,16 +6,6 @@ not answer (a message without a reply, or part of a message) sends that ACK at o
 removes the stall (spec §3.11); a reply carries its ACK itself, so reads that are answered
 need no system call. ``TCP_NODELAY`` keeps our replies from waiting too.
 
-A trial (code 3) is always followed at once by a request (the client then waits for its
-reply), and with Nagle on the client holds that request until our ACK of the trial: the ACK
-that ``TCP_QUICKACK`` sends releases it, so the request is usually in our socket when the
-re-arm returns. The connection then reads it at once (one non-blocking ``recv`` on its own
-descriptor) instead of going back to the event loop to be told so (a loop iteration and an
-``epoll_wait`` saved, twice a step for OpenSees). Nothing else changes: the bytes go through the
-same pump in the same order; a read that finds nothing, EOF or an error leaves the socket to the
-transport, which reads it as before (level-triggered). Never with TLS (the descriptor carries
-ciphertext) nor while the pump waits or is paused.
-
 TCP keepalive probes a silent peer (a lost host, a cut cable) even while the bridge waits on
 the controller or an operator, when the session-idle deadline does not run: a dead peer is
 noticed within ``KEEPALIVE_IDLE + KEEPALIVE_COUNT * KEEPALIVE_INTERVAL`` s. With ``tls = true``
@@ -41,8 +31,6 @@ KEEPALIVE_IDLE = 10
 """Seconds of silence before the first keepalive probe."""
 KEEPALIVE_INTERVAL = 5
 KEEPALIVE_COUNT = 3
-READ_AHEAD_BYTES = 65536
-"""At most this much is read ahead after a trial (a message is at most dataSize doubles)."""
 
 
 def _keepalive(sock: socket.socket) -> None:
@@ -63,7 +51,6 @@ class TcpConnection(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self._quickack: Any = None
         self._ack_sock: socket.socket | None = None
-        self._read_ahead: Any = None  # the request that follows a trial, read at once
         self._handshake: asyncio.Task[None] | None = None
         self._early: list[bytes] = []  # decrypted before the TLS handshake task resumed
         self._replies = 0  # writes to the client so far
@@ -90,8 +77,6 @@ class TcpConnection(asyncio.Protocol):
                 self._ack_sock = socket.socket(sock.family, sock.type, sock.proto,
                                                fileno=os.dup(sock.fileno()))
                 self._quickack = self._ack_sock.setsockopt
-                if self.tls is None:
-                    self._read_ahead = self._ack_sock.recv
         if self.tls is None:
             self._open(transport, peer)
         else:
@@ -156,20 +141,10 @@ class TcpConnection(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         pump = self.pump
         if pump is not None:
-            while True:
-                replies = self._replies
-                pump.feed(data)
-                if self._replies != replies or self._quickack is None or pump.closed:
-                    return
+            replies = self._replies
+            pump.feed(data)
+            if self._replies == replies and self._quickack is not None and not pump.closed:
                 self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)  # nothing carries our ACK
-                if self._read_ahead is None or not pump.request_follows:
-                    return
-                try:  # the request our ACK released is usually here already
-                    data = self._read_ahead(READ_AHEAD_BYTES, socket.MSG_DONTWAIT)
-                except OSError:  # not yet (EAGAIN), or an error the transport reports itself
-                    return
-                if not data:  # EOF: the transport sees it on its own read
-                    return
         elif self._handshake is not None and sum(map(len, self._early)) < HELD_BYTES_CAP:
             self._early.append(data)  # the handshake task has not resumed yet
 
@@ -180,7 +155,7 @@ class TcpConnection(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self._ack_sock is not None:
-            self._quickack = self._read_ahead = None
+            self._quickack = None
             self._ack_sock.close()
             self._ack_sock = None
         pump = self.pump
