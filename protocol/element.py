@@ -326,6 +326,8 @@ class ElementServerSession:
     # -- sending -------------------------------------------------------------------
     def _require_owed(self, method: str, allowed: frozenset[Action], hint: str) -> Action:
         owed = self._owed
+        if owed in allowed and self._state is _MUST_REPLY and self._keep_leftovers:
+            return owed  # the usual case
         if self._state is not _MUST_REPLY or owed is None:
             raise LocalProtocolError(
                 f"{method}() called but no reply is owed (state {self._state.name})"
@@ -360,12 +362,9 @@ class ElementServerSession:
         non-empty block given, each at its packed offset: an ECSimFEAdapter client reads
         its whole daq vector from a code-10 reply (spec §5), genericClient only slot 0..n-1.
         """
-        action = self._owed
-        if (self._state is not _MUST_REPLY or action not in _DAQ_ACTIONS
-                or not self._keep_leftovers):
-            action = self._require_owed(
-                "send_daq", _DAQ_ACTIONS, "use send_matrix for 12..15 or send_values"
-            )
+        action = self._require_owed(
+            "send_daq", _DAQ_ACTIONS, "use send_matrix for 12..15 or send_values"
+        )
         layout = self._daq_layout
         assert layout is not None
         reply = self._writable()
@@ -377,7 +376,6 @@ class ElementServerSession:
             # and every non-empty one is writing them all, in one call
             layout.pack_exact_into(reply, daq)
             return self._finish_reply()
-        assert action is not None
         requested = _DAQ_BLOCK_OF_ACTION[action]
         blocks = daq.as_tuple()
         sizes = layout.sizes.as_tuple()
@@ -391,12 +389,9 @@ class ElementServerSession:
 
     def send_matrix(self, column_major: Sequence[float]) -> bytes:
         """Reply to codes 12..15: n*n values (n = sizeCtrl disp), column-major from slot 0."""
-        action = self._owed
-        if (self._state is not _MUST_REPLY or action not in _MATRIX_ACTIONS
-                or not self._keep_leftovers):
-            action = self._require_owed(
-                "send_matrix", _MATRIX_ACTIONS, "use send_daq for 6..11 or send_values"
-            )
+        action = self._require_owed(
+            "send_matrix", _MATRIX_ACTIONS, "use send_daq for 6..11 or send_values"
+        )
         count = self._matrix_count
         packed: bytes | None = None
         if type(column_major) is tuple:  # immutable: its packed bytes are kept and reused
@@ -421,10 +416,10 @@ class ElementServerSession:
         reply[: 8 * count] = packed
         return bytes(reply)
 
-    def _check_matrix(self, column_major: Sequence[float], action: Action | None) -> None:
+    def _check_matrix(self, column_major: Sequence[float], action: Action) -> None:
         """LocalProtocolError unless ``column_major`` is an n*n matrix that fits dataSize."""
         sid = self._size_id
-        assert sid is not None and action is not None
+        assert sid is not None
         n, count = sid.ctrl.disp, self._matrix_count
         if len(column_major) != count:
             raise LocalProtocolError(
