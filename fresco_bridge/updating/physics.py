@@ -144,6 +144,11 @@ class PhysicsResidual(OwnsTwin):
                                   self.residual.twin)  # fmt: skip
         self._last_update = 0.0
 
+    def source_twin(self) -> HysteresisModel:
+        """A twin on this expert's memory of the tested element now (shadow scoring): the
+        law's state and the residual's memory, both of the tested element."""
+        return _PhysicsTwin(self._source.clone(), self.residual.source_twin())
+
     def predict(self, d: float) -> float:
         """One-step-ahead force of the tested element at ``d`` (nothing committed)."""
         f_law = self._source.set_trial(d)[0]
