@@ -324,6 +324,17 @@ class BasisTwin(Generic[M]):
     def commit(self) -> None:
         self._committed = self._trial
 
+    def advance(self, d: float) -> float:
+        """``set_trial(d)`` and ``commit()`` in one, the force only (no tangent probe): half the
+        cost, for the shadow scorer's free runs (``shadow``)."""
+        c = self._committed
+        if d == c.d:
+            self._trial = c
+            return c.f
+        force = self._force(c, d)
+        self._committed = self._trial = self._basis.advanced(c, d, force)
+        return force
+
     def revert_to_last_commit(self) -> None:
         self._trial = self._committed
 

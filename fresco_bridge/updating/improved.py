@@ -49,7 +49,7 @@ import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, ReversalBasis
-from fresco_bridge.updating.shadow import ShadowScorer
+from fresco_bridge.updating.shadow import ShadowScorer, stepper
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis"]
@@ -191,7 +191,7 @@ class OnlineImproved(OwnsTwin):
         self.scores: FloatArray = np.full(len(built), 1e-4 * force_scale**2)
         """Exponentially weighted mean squared error of each expert on the tested element."""
         self.score = score
-        self._shadows = [e.twin.clone() for e in built]
+        self._shadows = [stepper(e.twin.clone()) for e in built]
         self.shadow = ShadowScorer(len(built)) if shadow else None
         """Shadow scoring (``shadow.py``), or None."""
         self._twin = _MixtureTwin(self, [e.twin for e in built])
@@ -213,8 +213,7 @@ class OnlineImproved(OwnsTwin):
         for k, expert in enumerate(self.experts):
             squared = 0.0
             if self.score != "one-step":
-                free = force - self._shadows[k].set_trial(d)[0]
-                self._shadows[k].commit()
+                free = force - self._shadows[k](d)
                 squared += free * free
             if self.score != "free-run":
                 one = force - expert.predict(d)

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
-from fresco_bridge.updating.branch import BranchRls, initial_stiffness
+from fresco_bridge.updating.branch import BasisTwin, BranchRls, initial_stiffness
 from sim_actuator.models.base import HysteresisModel, ModelInputError, ModelParameterError
 from sim_actuator.models.bouc_wen import BoucWen
 
@@ -96,6 +96,17 @@ class _PhysicsTwin:
     def commit(self) -> None:
         self._law.commit()
         self._residual.commit()
+
+    def advance(self, d: float) -> float:
+        """``set_trial(d)`` and ``commit()`` in one, the force only (shadow scoring)."""
+        force = self._law.set_trial(d)[0]
+        self._law.commit()
+        residual = self._residual
+        if isinstance(residual, BasisTwin):
+            return force + residual.advance(d)
+        force += residual.set_trial(d)[0]
+        residual.commit()
+        return force
 
     def revert_to_last_commit(self) -> None:
         self._law.revert_to_last_commit()

@@ -24,7 +24,8 @@ expert per step, the oldest dropped past ``keep`` steps.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -32,9 +33,30 @@ import numpy.typing as npt
 from fresco_bridge.updating.base import UpdaterError
 from sim_actuator.models.base import HysteresisModel
 
-__all__ = ["ShadowScorer", "element_state", "matched_start"]
+__all__ = ["FreeRun", "ShadowScorer", "element_state", "matched_start", "stepper"]
 
 FloatArray = npt.NDArray[np.float64]
+
+
+@runtime_checkable
+class FreeRun(Protocol):
+    """A twin that can take a step and commit it without computing its tangent."""
+
+    def advance(self, d: float) -> float: ...
+
+
+def stepper(model: HysteresisModel) -> Callable[[float], float]:
+    """A function that moves ``model`` to d, commits and returns the force: ``advance`` where
+    the model has it (no tangent probe), else ``set_trial`` then ``commit``."""
+    if isinstance(model, FreeRun):
+        return model.advance
+
+    def step(d: float) -> float:
+        force = model.set_trial(d)[0]
+        model.commit()
+        return force
+
+    return step
 
 
 def element_state(d: FloatArray, window: int) -> tuple[FloatArray, FloatArray]:
@@ -125,11 +147,10 @@ class ShadowScorer:
         stored = self._starts[t + 1]
         out = np.empty(len(stored))
         for k, twin_k in enumerate(stored):
-            model = twin_k.clone()
+            step = stepper(twin_k.clone())
             total = 0.0
             for i in range(t + 1, t + 1 + self.length):
-                error = f[i] - model.set_trial(float(d[i]))[0]
-                model.commit()
+                error = f[i] - step(float(d[i]))
                 total += error * error
             out[k] = total / self.length
         return out

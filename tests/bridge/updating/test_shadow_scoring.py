@@ -10,7 +10,13 @@ import pytest
 from fresco_bridge.updating.base import UpdaterError, UpdaterInputError
 from fresco_bridge.updating.branch import BranchRls, ReversalBasis, force_hinges
 from fresco_bridge.updating.improved import OnlineImproved
-from fresco_bridge.updating.shadow import ShadowScorer, element_state, matched_start
+from fresco_bridge.updating.shadow import (
+    FreeRun,
+    ShadowScorer,
+    element_state,
+    matched_start,
+    stepper,
+)
 from sim_actuator.models import make_model
 from tests.bridge.updating.test_online_improved import cyclic, drive
 from tests.support.material import assert_material_semantics
@@ -130,3 +136,19 @@ def test_the_hinge_expert_has_material_semantics_and_learns() -> None:
     assert expert.basis.size == ReversalBasis(1.0, 1.0, stiffness=1.0).size + 15
     with pytest.raises(UpdaterError, match="positive stiffness"):
         ReversalBasis(1.0, 1.0, hinge_stiffness=0.0)
+
+
+def test_advance_is_set_trial_then_commit_without_the_tangent() -> None:
+    """The free-run step of every expert's twin gives the force and state of set_trial + commit."""
+    d = cyclic(300, 10.0, 1)
+    f = drive(d)
+    updater = OnlineImproved(offline=(d, f))
+    for x, y in zip(d[:100].tolist(), f[:100].tolist(), strict=True):
+        updater.observe(x, y)
+    for expert in updater.experts:
+        fast, slow = stepper(expert.source_twin()), expert.source_twin()
+        assert isinstance(expert.source_twin(), FreeRun)
+        for x in d[100:200].tolist():
+            force = slow.set_trial(x)[0]
+            slow.commit()
+            assert fast(x) == force
