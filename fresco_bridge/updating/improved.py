@@ -15,7 +15,7 @@ better is visible online without the twin's truth, on the tested element itself,
 ``score="both"`` (default) adds the two squared errors; ``S_k`` is their exponentially weighted
 mean (factor ``mixing`` per step, each step's value clipped at ``gate**2 * S_k`` so one
 load-cell spike cannot flip the choice), and expert k weighs ``1 / S_k**2`` (normalised) —
-or, with ``shadow=True`` (default) once the shadow scores exist, ``1 / (S_k * H_k)``, ``H_k``
+or, with ``shadow=True`` once the shadow scores exist, ``1 / (S_k * H_k)``, ``H_k``
 the expert's error on a stored stretch of the tested element's history whose state matches the
 twin's (``shadow``: the score on the recent past ranks experts as their twins would not when
 the twin is in another state; BENCHMARKS.md, issue 9 part 7). Why
@@ -29,13 +29,15 @@ Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md
 ``reversal+memory`` (plus the previous-branch and envelope terms), ``bouc-wen+memory`` (the
 fitted law plus the memory basis on its residual, shrunk towards zero), ``reversal+stops`` (the
 basis plus stop operators scheduled on the element's own plastic deformation, ``play``: a twin
-that is still virgin keeps what the tested element taught while it was virgin),
-``reversal+memory+hinges`` (``reversal+memory`` plus force hinges: the knee where the elastic
-trial force reaches a force level, ``branch``). Optional, not in the default mixture:
-``reversal+memory+stops``. Each learns by its own exponentially weighted, ridge-regularised
+that is still virgin keeps what the tested element taught while it was virgin). Optional, not
+in the default mixture: ``reversal+memory+stops``, ``reversal+memory+hinges``
+(``reversal+memory`` plus force hinges: the knee where the elastic trial force reaches a force
+level, ``branch``). Design F of BENCHMARKS.md (issue 9 part 7) is the default four plus
+``reversal+memory+hinges`` with ``shadow=True``: better on the design records, ~1.4× the cost
+of a replay, so not the default. Each learns by its own exponentially weighted, ridge-regularised
 least squares with Huber gating (``forgetting``, ``ridge``, ``gate``; ``branch.WeightedRls``).
-Cost per step: the experts' updates and shadows, tenths of a millisecond, plus the shadow
-scoring's free runs every 20 steps.
+Cost per step: the experts' updates and shadows, tenths of a millisecond (with ``shadow``,
+plus free runs every 20 steps).
 """
 
 from __future__ import annotations
@@ -56,11 +58,10 @@ __all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis
 
 FloatArray = npt.NDArray[np.float64]
 
-EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops",
-           "reversal+memory+hinges")
+EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
 """The experts ``online_improved`` combines by default."""
 
-OPTIONAL_EXPERTS = ("reversal+memory+stops",)
+OPTIONAL_EXPERTS = ("reversal+memory+stops", "reversal+memory+hinges")
 """Experts that can be asked for by name but are not in the default mixture."""
 
 SCORES = ("both", "free-run", "one-step")
@@ -154,7 +155,7 @@ class OnlineImproved(OwnsTwin):
         gate: float = 4.0,
         mixing: float = 0.99,
         score: str = "both",
-        shadow: bool = True,
+        shadow: bool = False,
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
             tuple(experts))  # fmt: skip

@@ -57,11 +57,11 @@ UPDATERS: dict[str, UpdaterEntry] = {
     "online_ukf": UpdaterEntry(__name__, "make_online_ukf", "the paper's UKF on the Bilinear "
                                "parameters [k0, alpha, Fy]"),
     "online_improved": UpdaterEntry("fresco_bridge.updating.improved", "OnlineImproved",
-                                    "ours: reversal-basis, force-hinge, stop-operator and "
-                                    "Bouc-Wen-plus-residual experts (RLS with forgetting, "
-                                    "ridge, gating) weighted by their free-run and one-step "
-                                    "errors on the tested element and on a stretch of it "
-                                    "matched to the twin's state (needs offline)"),
+                                    "ours: reversal-basis, stop-operator and Bouc-Wen-plus-"
+                                    "residual experts (RLS with forgetting, ridge, gating) "
+                                    "weighted by their free-run and one-step errors on the "
+                                    "tested element (needs offline; shadow=true also scores "
+                                    "them on a stretch matched to the twin's state)"),
 }
 """Name -> where its factory lives and what it is."""
 
