@@ -13,11 +13,14 @@ _COMPACT_AT = 1 << 16
 class ReceiveBuffer:
     """Bytes fed so far; items are taken by count, segment boundaries mean nothing."""
 
-    __slots__ = ("_buf", "_pos", "consumed", "eof")
+    __slots__ = ("consumed", "data", "eof", "pos")
 
     def __init__(self) -> None:
-        self._buf: bytes | bytearray = bytearray()
-        self._pos = 0
+        self.data: bytes | bytearray = bytearray()
+        """The underlying buffer; valid for offsets from :meth:`take` until the next feed (an
+        attribute, not a property: it is read once per vector)."""
+        self.pos = 0
+        """Offset in :attr:`data` of the next unread byte."""
         self.consumed = 0
         """Stream offset of the next unread byte (for error messages)."""
         self.eof = False
@@ -31,51 +34,46 @@ class ReceiveBuffer:
             raise LocalProtocolError(
                 f"receive_data() got {len(data)} bytes after EOF (b'') was already fed"
             )
-        buf, pos = self._buf, self._pos
+        buf, pos = self.data, self.pos
         if pos == len(buf):  # everything read: the usual case, one request per segment
-            self._pos = 0
+            self.pos = 0
             # immutable bytes are kept as they are (no copy); anything else is copied
-            self._buf = data if type(data) is bytes else bytearray(data)
+            self.data = data if type(data) is bytes else bytearray(data)
             return
         if isinstance(buf, bytes):  # a kept segment with an unread tail: continue in a bytearray
-            buf = self._buf = bytearray(memoryview(buf)[pos:])
-            self._pos = pos = 0
+            buf = self.data = bytearray(memoryview(buf)[pos:])
+            self.pos = pos = 0
         elif pos >= _COMPACT_AT:
             del buf[:pos]
-            self._pos = 0
+            self.pos = 0
         buf += data
 
     @property
     def available(self) -> int:
         """Unread bytes."""
-        return len(self._buf) - self._pos
+        return len(self.data) - self.pos
 
     def take(self, count: int) -> int:
         """Consume *count* bytes; return their start offset in :attr:`data` (read at once)."""
-        start = self._pos
-        self._pos = start + count
+        start = self.pos
+        self.pos = start + count
         self.consumed += count
         return start
 
     def take_if(self, count: int) -> int:
         """Consume *count* bytes if that many are unread: their start offset in :attr:`data`
         (read at once), else -1 and nothing consumed (one call on the per-vector path)."""
-        start = self._pos
-        if len(self._buf) - start < count:
+        start = self.pos
+        if len(self.data) - start < count:
             return -1
-        self._pos = start + count
+        self.pos = start + count
         self.consumed += count
         return start
-
-    @property
-    def data(self) -> bytes | bytearray:
-        """The underlying buffer; valid for offsets from :meth:`take` until the next feed."""
-        return self._buf
 
     def discard(self) -> int:
         """Drop every unread byte; return how many were dropped."""
         dropped = self.available
-        self._buf = bytearray()
-        self._pos = 0
+        self.data = bytearray()
+        self.pos = 0
         self.consumed += dropped
         return dropped

@@ -15,7 +15,7 @@ import functools
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Final, TypeAlias
+from typing import ClassVar, Final, NamedTuple, TypeAlias
 
 from protocol.errors import LocalProtocolError, RemoteProtocolError
 
@@ -124,9 +124,13 @@ class SignalSizes:
 _SIGNAL_SIZES_STRUCT: Final = struct.Struct("<5i")
 
 
-@dataclass(frozen=True, slots=True)
-class Signals:
-    """One set of signal blocks in wire order: trial/ctrl or out/daq values."""
+class Signals(NamedTuple):
+    """One set of signal blocks in wire order: trial/ctrl or out/daq values.
+
+    Immutable, compared by value and matchable by field, as a frozen dataclass would be, but
+    a named tuple: one is made for every trial and every measured reply (6 a step for
+    OpenSees), and a frozen dataclass took 0.74 µs to make where this takes 0.33.
+    """
 
     disp: tuple[float, ...] = ()
     vel: tuple[float, ...] = ()
@@ -254,6 +258,7 @@ class BlockLayout:
         "_block_structs",
         "_bounds",
         "_time_zeros",
+        "counts",
         "data_size",
         "offsets",
         "sizes",
@@ -273,7 +278,8 @@ class BlockLayout:
         self.sizes = sizes
         self.start_slot = start_slot
         self.data_size = data_size
-        counts = sizes.as_tuple()
+        self.counts = counts = sizes.as_tuple()
+        """The five block sizes in wire order (compared at once with a vector's lengths)."""
         used = start_slot + sizes.total
         self.time_missing = False
         if used > data_size:
@@ -321,7 +327,12 @@ class BlockLayout:
             raise LocalProtocolError(
                 f"{role} time block lies past dataSize {self.data_size}: cannot be sent"
             )
-        self.check(signals, role)
+        if tuple(map(len, signals)) != self.counts:
+            self.check(signals, role)  # raises, naming the block
+        self.pack_exact_into(buffer, signals)
+
+    def pack_exact_into(self, buffer: bytearray, signals: Signals) -> None:
+        """``pack_into`` for blocks already known to have exactly their sizes (unchecked)."""
         self._all_struct.pack_into(
             buffer,
             DOUBLE_BYTES * self.start_slot,

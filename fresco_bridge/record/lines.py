@@ -100,11 +100,11 @@ class LineEncoder:
         command tuple it was sent, so its daq disp is formatted once, not twice (~0.5 µs a
         number: 64 DOFs)."""
         # per site: (session, step, time, trial, ctrl); (session, step, disp, force);
-        # (session, step, time); (session, (step, err, ti, nrms, fei_amp, fei_delay))
+        # (session, step, time); (session, step, (err, ti, nrms, fei_amp, fei_delay))
         self._trial: dict[str, tuple[int, int, float, tuple[float, ...], tuple[float, ...]]] = {}
         self._daq: dict[str, tuple[int, int, tuple[float, ...], tuple[float, ...]]] = {}
         self._commit: dict[str, tuple[int, int, float]] = {}
-        self._monitor: dict[str, tuple[Any, ...]] = {}
+        self._monitor: dict[str, tuple[int, int, tuple[Any, ...]]] = {}
 
     def line(self, t: float, kind: str, site: str, session: int, body: str) -> str:
         if self._ctx_site == site and self._ctx_session == session:
@@ -163,15 +163,14 @@ class LineEncoder:
 
     def monitor(self, site: str, session: int, step: int, err: float, ti: float,
                 nrms: float | None, fei_amp: float | None, fei_delay: float | None) -> str:
-        values = (step, err, ti, nrms, fei_amp, fei_delay)
+        values = (err, ti, nrms, fei_amp, fei_delay)
         last = self._monitor.get(site)
-        self._monitor[site] = (session, values)
+        self._monitor[site] = (session, step, values)
         if last is None or last[0] != session:
             return (f',"step":{step},"err":{num(err)},"ti":{num(ti)},"nrms":{opt(nrms)},'
                     f'"fei_amp":{opt(fei_amp)},"fei_delay":{opt(fei_delay)}')
-        old = last[1]
-        body = f',"step":{step}' if step != old[0] else ""
-        for name, v, was in zip(_MONITOR_FLOATS, values[1:], old[1:], strict=True):
+        body = f',"step":{step}' if step != last[1] else ""
+        for name, v, was in zip(_MONITOR_FLOATS, values, last[2], strict=True):
             if v != was:
                 body += f',"{name}":{opt(v)}'
         return body
@@ -224,8 +223,8 @@ class LineEncoder:
             return None
         _, _, _, pt, pc = last_t
         _, _, pd, pf = last_d
-        vector = self._vector
-        its = []
+        known, text = self._nums_of, self._nums  # the last vector formatted and its text
+        its = ""
         try:
             for j in range(i, n, 2):
                 kind, s, st, tm, trial, ctrl = items[j]
@@ -235,38 +234,56 @@ class LineEncoder:
                     return None
                 if trial == pt:
                     if ctrl == pc and disp == pd and force == pf:
-                        its.append("0")
+                        its += ",0"
                         continue
-                    text = "[0,"
+                    its += ",[0,"
                 else:
-                    text = "[" + vector(trial) + ","
-                text += "0," if disp == pd else vector(disp) + ","
-                text += "0" if force == pf else vector(force)
-                its.append(text + "]" if ctrl == trial else text + "," + vector(ctrl) + "]")
+                    if trial is not known:
+                        known, text = trial, nums(trial)
+                    its += ",[" + text + ","
+                if disp == pd:
+                    its += "0,"
+                else:
+                    if disp is not known:
+                        known, text = disp, nums(disp)
+                    its += text + ","
+                if force == pf:
+                    its += "0"
+                else:
+                    if force is not known:
+                        known, text = force, nums(force)
+                    its += text
+                if ctrl == trial:
+                    its += "]"
+                else:
+                    if ctrl is not known:
+                        known, text = ctrl, nums(ctrl)
+                    its += "," + text + "]"
                 pt, pc, pd, pf = trial, ctrl, disp, force
         except ValueError:  # an item of another kind (another length) where a pair should be
             return None
+        self._nums_of, self._nums = known, text
         self._trial[site] = (session, prev, time_, pt, pc)
         self._daq[site] = (session, prev, pd, pf)
         self._commit[site] = (session, step, time_)
         if i:
-            self._monitor[site] = (session, (prev, *monitor[3]))
+            self._monitor[site] = (session, prev, monitor[3])
         tt = repr(time_) if time_.__class__ is float and time_ - time_ == 0.0 else num(time_)
-        body = (f',"step":{step},"time":{tt}{mon},"it":[{its[0]}]}}\n' if len(its) == 1 else
-                f',"step":{step},"time":{tt}{mon},"it":[{",".join(its)}]}}\n')
         if self._ctx_site == site and self._ctx_session == session:
-            return f'{{"t":{t:.6f},"kind":"step"' + body
+            return (f'{{"t":{t:.6f},"kind":"step","step":{step},"time":{tt}{mon},'
+                    f'"it":[{its[1:]}]}}\n')
         self._ctx_site, self._ctx_session = site, session
-        return f'{{"t":{t:.6f},"kind":"step","site":"{site}","session":{session}' + body
+        return (f'{{"t":{t:.6f},"kind":"step","site":"{site}","session":{session},'
+                f'"step":{step},"time":{tt}{mon},"it":[{its[1:]}]}}\n')
 
     def _fold_monitor(self, site: str, session: int, values: tuple[Any, ...]) -> str:
         """The ``mon`` field of a step line: the monitor sample after the step before."""
         last_m = self._monitor.get(site)
-        was = last_m[1] if last_m is not None and last_m[0] == session else None
-        if was is not None and was[1:] == values:
+        was = last_m[2] if last_m is not None and last_m[0] == session else None
+        if was is not None and was == values:
             return ',"mon":0'
         err, ti, nrms, fei_amp, fei_delay = values
-        if was is not None and was[4:] == values[3:]:  # the FEI is held between its updates
+        if was is not None and was[3:] == values[3:]:  # the FEI is held between its updates
             return f',"mon":[{num(err)},{num(ti)},{opt(nrms)}]'
         return f',"mon":[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},{opt(fei_delay)}]'
 

@@ -9,12 +9,10 @@ the site.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from functools import partial
 from typing import TYPE_CHECKING
 
-from .lines import MONITOR
-from .writer import RunRecord
+from .lines import DAQ, MONITOR, TRIAL
+from .writer import PENDING_LIMIT, RunRecord
 
 if TYPE_CHECKING:
     from ..indicators import MonitorSample
@@ -28,20 +26,27 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_commit", "_pending", "_record", "measurement", "site", "trial")
+    __slots__ = ("_commit", "_pending", "_record", "site")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
         self.site = site
         self._pending = record.pending(site)
         self._commit = record.commit_items
-        # several times a step: the record's own methods with the site bound (no extra frame)
-        self.trial: Callable[[int, int, float, tuple[float, ...], tuple[float, ...]], None] = \
-            partial(record.trial, site)
-        """``trial(session, step, time, trial, ctrl)``: a command on its way to the controller."""
-        self.measurement: Callable[[int, int, tuple[float, ...], tuple[float, ...]], None] = \
-            partial(record.measurement, site)
-        """``measurement(session, step, disp, force)``: what the controller measured."""
+
+    def trial(self, session: int, step: int, time_: float, trial: tuple[float, ...],
+              ctrl: tuple[float, ...]) -> None:
+        """A command on its way to the controller (``RunRecord.trial`` without the site's
+        lookup: several times a step)."""
+        items = self._pending
+        items.append((TRIAL, session, step, time_, trial, ctrl))
+        if len(items) > PENDING_LIMIT:
+            self._record.trial_overflow(self.site)
+
+    def measurement(self, session: int, step: int, disp: tuple[float, ...],
+                    force: tuple[float, ...]) -> None:
+        """What the controller measured (``RunRecord.measurement`` without the lookup)."""
+        self._pending.append((DAQ, session, step, disp, force))
 
     def step_committed(self, step: CommittedStep) -> None:
         self._commit(self.site, self._pending, step.session, step.step, step.time)

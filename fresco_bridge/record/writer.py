@@ -282,8 +282,12 @@ class RunRecord:
         items = self._pending[site]
         items.append((TRIAL, session, step, time_, trial, ctrl))
         if len(items) > PENDING_LIMIT:
-            self._write_pending(site, time.monotonic() - self._t0)
-            self.flush()
+            self.trial_overflow(site)
+
+    def trial_overflow(self, site: str) -> None:
+        """``site``'s trials waited past ``PENDING_LIMIT`` for a commit: written as they are."""
+        self._write_pending(site, time.monotonic() - self._t0)
+        self.flush()
 
     def measurement(
         self, site: str, session: int, step: int, disp: tuple[float, ...],
@@ -311,7 +315,10 @@ class RunRecord:
         self._seq += len(items) + 1
         items.clear()
         self._write(line.encode())
-        if self._fsync != "off":
+        syncer = self._syncer
+        if syncer is not None and syncer.error is None:  # the common case, without a frame
+            syncer.request(self._seq, False)
+        elif self._fsync != "off":
             self._sync(False)
 
     def _commit_lines(self, t: float, site: str, items: list[Item], session: int, step: int,

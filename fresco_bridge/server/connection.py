@@ -113,12 +113,17 @@ class SessionPump:
         else:
             actor = ActorSession(transport=transport)
             self.session, self.handler = actor, ActorHandler(site, actor, send, peer)
+        # bound once: the per-message path calls each of them (``feed``, ``_run``)
+        self._time = self._loop.time
+        self._receive: Callable[[bytes], None] = self.session.receive_data
+        self._next_event: Callable[[], Any] = self.session.next_event
+        self._dispatch: Callable[[Any], Coroutine[Any, Any, None] | None] = self.handler.dispatch
 
     def feed(self, data: bytes) -> None:
         if self.closed:
             return
-        self._activity = self._loop.time()
-        self.session.receive_data(data)
+        self._activity = self._time()
+        self._receive(data)
         if self._pending is None:
             if not self._write_blocked:
                 self._run()
@@ -174,10 +179,12 @@ class SessionPump:
         self.abort(reason)
 
     def _run(self) -> None:
-        next_event, dispatch = self.session.next_event, self.handler.dispatch
+        next_event, dispatch = self._next_event, self._dispatch
         metrics = self.site.metrics
+        t0 = 0.0
         while not self.closed and not self._write_blocked:
-            t0 = perf_counter() if metrics is not None else 0.0
+            if metrics is not None:
+                t0 = perf_counter()
             try:
                 ev = next_event()
             except ProtocolError as exc:
@@ -198,7 +205,7 @@ class SessionPump:
                 log.exception("site %s: internal error handling %r", self.site.name, ev)
                 self._end(f"internal error: {exc!r}", error=True)
                 return
-            if isinstance(r, Suspended):
+            if r is not None and isinstance(r, Suspended):
                 self._held = 0
                 self._pending = r.task(name=f"{self.site.name}.request")
                 self._pending.add_done_callback(self._resumed)

@@ -38,6 +38,8 @@ from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
 _DAQ_ACTIONS = frozenset(a for a in Action if Action.GET_DAQ_RESPONSE <= a <= Action.GET_TIME)
+_TANGENT = Action.GET_TANGENT_STIFF  # a module constant: an enum member read off its class
+# costs ≈ 0.1 µs on Python 3.11, on the path of every request
 
 Send = Callable[[bytes], None]
 
@@ -55,6 +57,7 @@ class ElementHandler:
         self.send = send
         self.peer = peer
         self.introduced = False
+        self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
         matrix several times per step): no controller call, no coroutine."""
@@ -63,28 +66,27 @@ class ElementHandler:
         """Handle ``ev``: at once when it can be (None: done, replies sent), else the coroutine
         that finishes it. The step's requests go to the site's ``*_eager`` methods, so with an
         in-process controller a step runs without one coroutine; the rest goes to ``handle``."""
-        if type(ev) is TrialReceived:
-            return self.site.set_trial_eager(ev.trial)
-        if type(ev) is ReplyRequested:
+        if type(ev) is ReplyRequested:  # 10 of the 14 messages of an OpenSees step
             action = ev.action
             matrix = self._constant.get(action)
             if matrix is not None:
                 self.send(self.session.send_matrix(matrix))
                 return None
-            if action is Action.GET_TANGENT_STIFF:
+            if action is _TANGENT:
                 k = self.site.tangent_eager()
                 if not isinstance(k, tuple):
                     return self._send_matrix_later(k)
                 self.send(self.session.send_matrix(k))
                 return None
             if action in _DAQ_ACTIONS:
-                sid = self.session.size_id
-                assert sid is not None
-                out = self.site.out_signals_eager(sid.daq)
+                assert self._daq_sizes is not None
+                out = self.site.out_signals_eager(self._daq_sizes)
                 if not isinstance(out, Signals):
                     return self._send_daq_later(out)
                 self.send(self.session.send_daq(out))
                 return None
+        elif type(ev) is TrialReceived:
+            return self.site.set_trial_eager(ev.trial)
         elif type(ev) is CommitReceived:
             return self.site.commit_eager()
         return self.handle(ev)
@@ -108,6 +110,7 @@ class ElementHandler:
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
                 site.open_session(self.peer)
                 self.introduced = True
+                self._daq_sizes = sid.daq
                 log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
                          self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
             case DieReceived():

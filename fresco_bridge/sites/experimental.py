@@ -76,6 +76,9 @@ class ExperimentalSite(CommandGate):
         self.name = cfg.name
         self.controller = controller
         self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
+        self._plain = self.setup.kind == "NoTransformation"
+        """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
+        setup's calls."""
         if self.setup.n_actuators != controller.n_actuators:
             raise SiteError(
                 f"site {cfg.name}: setup {cfg.setup} needs {self.setup.n_actuators} actuator(s), "
@@ -409,7 +412,7 @@ class ExperimentalSite(CommandGate):
         self.trial = trial
         if trial.time:
             self.time = trial.time[0]
-        target = self.setup.ctrl_disp(trial.disp)
+        target = trial.disp if self._plain else self.setup.ctrl_disp(trial.disp)
         if not math.isfinite(sum(target)):  # finite trials whose transform overflows
             if self.state is not HOLD:
                 self.enter_hold(f"setup {self.setup.kind} turned trial {list(trial.disp)} into "
@@ -419,7 +422,8 @@ class ExperimentalSite(CommandGate):
         if self.state is HOLD:
             return None
         self._daq_valid = False
-        if self.state is RUNNING and self.clear_of_limits(target):  # the hot path
+        if self.state is RUNNING and (self._ctrl_limiter is None
+                                      or self.clear_of_limits(target)):  # the hot path
             self.ctrl = target
             if self.recorder is not None:
                 self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
@@ -553,16 +557,19 @@ class ExperimentalSite(CommandGate):
         return self._out(await daq, sizes)
 
     def _out(self, daq: Daq, sizes: SignalSizes) -> Signals:
-        if self._stopping():
+        # the acquisition may have HOLDed the site: ``_stopping`` decides then (it answers
+        # False whenever this first test does)
+        if (self.stop_reason is not None or self.state is HOLD or self.state is FAULT) \
+                and self._stopping():
             return self._nan_signals(sizes)
-        disp = self.setup.out_disp(self.trial.disp, self.target, daq.disp)
-        force = self.setup.basic_force(daq.force)
-        return Signals(
-            disp=disp if sizes.disp else (),
-            vel=self.trial.vel if sizes.vel else (),
-            accel=self.trial.accel if sizes.accel else (),
-            force=force if sizes.force else (),
-            time=(self.time,) if sizes.time else (),
+        trial, setup, plain = self.trial, self.setup, self._plain
+        return Signals(  # disp, vel, accel, force, time: each block the client sized
+            (daq.disp if plain else setup.out_disp(trial.disp, self.target, daq.disp))
+            if sizes.disp else (),
+            trial.vel if sizes.vel else (),
+            trial.accel if sizes.accel else (),
+            (daq.force if plain else setup.basic_force(daq.force)) if sizes.force else (),
+            (self.time,) if sizes.time else (),
         )
 
     async def tangent(self) -> tuple[float, ...]:
