@@ -100,14 +100,20 @@ def test_a_rejected_measurement_leaves_the_shadow_history_unchanged(
     assert (len(shadowed.shadow._d), len(shadowed.shadow._starts)) == before
 
 
-def test_every_expert_gives_a_twin_on_its_tested_memory() -> None:
-    """The source twin of each expert starts where the tested element is (its committed point)
-    and is a material of its own: moving it leaves the expert unchanged."""
+def _trained(steps: int) -> tuple[OnlineImproved, np.ndarray]:
+    """The default updater after ``steps`` tested steps of a cyclic history (and that history)."""
     d = cyclic(300, 10.0, 1)
     f = drive(d)
     updater = OnlineImproved(offline=(d, f))
-    for x, y in zip(d[:120].tolist(), f[:120].tolist(), strict=True):
+    for x, y in zip(d[:steps].tolist(), f[:steps].tolist(), strict=True):
         updater.observe(x, y)
+    return updater, d
+
+
+def test_every_expert_gives_a_twin_on_its_tested_memory() -> None:
+    """The source twin of each expert starts where the tested element is (its committed point)
+    and is a material of its own: moving it leaves the expert unchanged."""
+    updater, d = _trained(120)
     for expert in updater.experts:
         twin = expert.source_twin()
         assert twin.committed[0] == pytest.approx(d[119])
@@ -140,11 +146,7 @@ def test_the_hinge_expert_has_material_semantics_and_learns() -> None:
 
 def test_advance_is_set_trial_then_commit_without_the_tangent() -> None:
     """The free-run step of every expert's twin gives the force and state of set_trial + commit."""
-    d = cyclic(300, 10.0, 1)
-    f = drive(d)
-    updater = OnlineImproved(offline=(d, f))
-    for x, y in zip(d[:100].tolist(), f[:100].tolist(), strict=True):
-        updater.observe(x, y)
+    updater, d = _trained(100)
     for expert in updater.experts:
         fast, slow = stepper(expert.source_twin()), expert.source_twin()
         assert isinstance(expert.source_twin(), FreeRun)
