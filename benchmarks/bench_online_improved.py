@@ -2,8 +2,9 @@
 one step of the simulated tested damper (BWBN, the baseline), same process, same histories.
 
 The histories are those of a study run (demo frame, synthetic record, generalisation layout,
-the reference twin). Rounds alternate the two variants; per round the median and p99 of the
-per-step wall time are taken; the table gives min / median over rounds.
+the reference twin). Rounds alternate the variants; per round the median and p99 of the
+per-step wall time are taken; the table gives min / median over rounds. ``--design-f`` adds
+design F (BENCHMARKS.md, issue 9 part 7: a fifth expert and shadow scoring) as a third variant.
 ``taskset -c 1 python -m benchmarks.bench_online_improved``.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from typing import Any
 
 import numpy as np
 
@@ -20,9 +22,16 @@ from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating.improved import OnlineImproved
 from fresco_bridge.updating.updaters import FixedModelUpdater
 
+DESIGN_F: dict[str, Any] = {
+    "experts": "reversal,reversal+memory,bouc-wen+memory,reversal+stops,reversal+memory+hinges",
+    "shadow": True,
+}
+"""Design F of ``online_improved`` (an option, not the default)."""
 
-def _improved(tested: np.ndarray, force: np.ndarray, twin: np.ndarray) -> list[float]:
-    updater = OnlineImproved(offline=(tested[:1000], force[:1000]))
+
+def _improved(tested: np.ndarray, force: np.ndarray, twin: np.ndarray,
+              options: dict[str, Any]) -> list[float]:
+    updater = OnlineImproved(offline=(tested[:1000], force[:1000]), **options)
     model = updater.twin
     times = []
     for d, f, dw in zip(tested.tolist(), force.tolist(), twin.tolist(), strict=True):
@@ -48,16 +57,20 @@ def _specimen(tested: np.ndarray) -> list[float]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--design-f", action="store_true",
+                        help="also time design F (a fifth expert, shadow scoring)")
     args = parser.parse_args(argv)
     motion = kanai_tajimi(3.0, duration=20.0, dt=0.01, seed=1)
     run = simulate_case("generalisation", "bwbn",
                         FixedModelUpdater("reference", specimen_model("bwbn")), motion)
     tested, force, twin = run.tested_drift, run.tested_force, run.twin_drift
     rows: dict[str, list[tuple[float, float]]] = {"online_improved": [], "bwbn step": []}
+    if args.design_f:
+        rows["online_improved, design F"] = []
     for _ in range(args.rounds):
         for name in rows:
-            times = _improved(tested, force, twin) if name == "online_improved" else (
-                _specimen(tested))  # fmt: skip
+            times = _specimen(tested) if name == "bwbn step" else _improved(
+                tested, force, twin, DESIGN_F if name.endswith("F") else {})  # fmt: skip
             ms = np.asarray(times, dtype=np.float64) * 1e3
             rows[name].append((float(np.median(ms)), float(np.percentile(ms, 99))))
     print(f"{tested.size} steps, {args.rounds} rounds (min / median over rounds), ms per step")

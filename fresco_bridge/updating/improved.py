@@ -14,7 +14,11 @@ better is visible online without the twin's truth, on the tested element itself,
 
 ``score="both"`` (default) adds the two squared errors; ``S_k`` is their exponentially weighted
 mean (factor ``mixing`` per step, each step's value clipped at ``gate**2 * S_k`` so one
-load-cell spike cannot flip the choice), and expert k weighs ``1 / S_k**2`` (normalised). Why
+load-cell spike cannot flip the choice), and expert k weighs ``1 / S_k**2`` (normalised) —
+or, with ``shadow=True`` once the shadow scores exist, ``1 / (S_k * H_k)``, ``H_k``
+the expert's error on a stored stretch of the tested element's history whose state matches the
+twin's (``shadow``: the score on the recent past ranks experts as their twins would not when
+the twin is in another state; BENCHMARKS.md, issue 9 part 7). Why
 both: the one-step error alone is flattered by the measured reversal force (a Bouc-Wen
 residual expert that scored best by it was the worst twin on a replay pair), the free-run
 error alone lets an expert's old drift linger (worse on Menegotto-Pinto); BENCHMARKS.md has the
@@ -26,10 +30,14 @@ Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md
 fitted law plus the memory basis on its residual, shrunk towards zero), ``reversal+stops`` (the
 basis plus stop operators scheduled on the element's own plastic deformation, ``play``: a twin
 that is still virgin keeps what the tested element taught while it was virgin). Optional, not
-in the default mixture: ``reversal+memory+stops``. Each learns by its own exponentially
-weighted, ridge-regularised least squares with Huber gating (``forgetting``, ``ridge``,
-``gate``; ``branch.WeightedRls``). Cost per step: the experts' updates and shadows, tenths of
-a millisecond.
+in the default mixture: ``reversal+memory+stops``, ``reversal+memory+hinges``
+(``reversal+memory`` plus force hinges: the knee where the elastic trial force reaches a force
+level, ``branch``). Design F of BENCHMARKS.md (issue 9 part 7) is the default four plus
+``reversal+memory+hinges`` with ``shadow=True``: better on the design records, ~1.4× the cost
+of a replay, so not the default. Each learns by its own exponentially weighted, ridge-regularised
+least squares with Huber gating (``forgetting``, ``ridge``, ``gate``; ``branch.WeightedRls``).
+Cost per step: the experts' updates and shadows, tenths of a millisecond (with ``shadow``,
+plus free runs every 20 steps).
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, ReversalBasis
+from fresco_bridge.updating.shadow import ShadowScorer, stepper
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = ["EXPERTS", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis"]
@@ -52,7 +61,7 @@ FloatArray = npt.NDArray[np.float64]
 EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
 """The experts ``online_improved`` combines by default."""
 
-OPTIONAL_EXPERTS = ("reversal+memory+stops",)
+OPTIONAL_EXPERTS = ("reversal+memory+stops", "reversal+memory+hinges")
 """Experts that can be asked for by name but are not in the default mixture."""
 
 SCORES = ("both", "free-run", "one-step")
@@ -62,6 +71,7 @@ SCORES = ("both", "free-run", "one-step")
 class _Expert(Protocol):
     def predict(self, d: float) -> float: ...
     def observe(self, d: float, force: float) -> None: ...
+    def source_twin(self) -> HysteresisModel: ...
     @property
     def twin(self) -> HysteresisModel: ...
 
@@ -71,9 +81,13 @@ class _MixtureTwin:
 
     name = "online_improved"
 
-    def __init__(self, owner: OnlineImproved, parts: list[HysteresisModel]) -> None:
+    def __init__(self, owner: OnlineImproved, parts: list[HysteresisModel],
+                 record: bool = True) -> None:
+        """``record``: tell the owner each commit (the twin's history for shadow scoring);
+        clones do not."""
         self._owner = owner
         self._parts = parts
+        self._record = record
         self._committed = (0.0, 0.0)
         self._trial = self._committed
 
@@ -93,6 +107,8 @@ class _MixtureTwin:
         for part in self._parts:
             part.commit()
         self._committed = self._trial
+        if self._record and self._owner.shadow is not None:
+            self._owner.shadow.twin_committed(self._committed[0])
 
     def revert_to_last_commit(self) -> None:
         for part in self._parts:
@@ -103,6 +119,8 @@ class _MixtureTwin:
         for part in self._parts:
             part.revert_to_start()
         self._committed = self._trial = (0.0, 0.0)
+        if self._record and self._owner.shadow is not None:
+            self._owner.shadow.twin_reset()
 
     @property
     def initial_tangent(self) -> float:
@@ -115,7 +133,7 @@ class _MixtureTwin:
         return self._committed
 
     def clone(self) -> HysteresisModel:
-        twin = _MixtureTwin(self._owner, [part.clone() for part in self._parts])
+        twin = _MixtureTwin(self._owner, [part.clone() for part in self._parts], record=False)
         twin._committed, twin._trial = self._committed, self._trial
         return twin
 
@@ -137,6 +155,7 @@ class OnlineImproved(OwnsTwin):
         gate: float = 4.0,
         mixing: float = 0.99,
         score: str = "both",
+        shadow: bool = False,
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
             tuple(experts))  # fmt: skip
@@ -163,7 +182,8 @@ class OnlineImproved(OwnsTwin):
                 built.append(BranchStopRls(offline=offline, memory_terms="memory" in name,
                                            **rls))
             else:
-                built.append(BranchRls(offline=offline, memory_terms=name != "reversal", **rls))
+                built.append(BranchRls(offline=offline, memory_terms=name != "reversal",
+                                       hinges=name.endswith("hinges"), **rls))
         self.expert_names = names
         self.experts: list[_Expert] = built
         self.mixing = mixing
@@ -172,24 +192,29 @@ class OnlineImproved(OwnsTwin):
         self.scores: FloatArray = np.full(len(built), 1e-4 * force_scale**2)
         """Exponentially weighted mean squared error of each expert on the tested element."""
         self.score = score
-        self._shadows = [e.twin.clone() for e in built]
+        self._shadows = [stepper(e.twin.clone()) for e in built]
+        self.shadow = ShadowScorer(len(built)) if shadow else None
+        """Shadow scoring (``shadow.py``), or None."""
         self._twin = _MixtureTwin(self, [e.twin for e in built])
         self._last_update = 0.0
 
     def mixture_weights(self) -> FloatArray:
         """Current weight of each expert (sums to 1)."""
-        w = 1.0 / np.maximum(self.scores, 1e-300) ** 2
+        scores = np.maximum(self.scores, 1e-300)
+        shadow = None if self.shadow is None else self.shadow.scores
+        w = 1.0 / scores**2 if shadow is None else 1.0 / (scores * np.maximum(shadow, 1e-300))
         return np.asarray(w / w.sum(), dtype=np.float64)
 
     def observe(self, d: float, force: float) -> None:
         d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
+        if self.shadow is not None:
+            self.shadow.before_step([expert.source_twin() for expert in self.experts])
         for k, expert in enumerate(self.experts):
             squared = 0.0
             if self.score != "one-step":
-                free = force - self._shadows[k].set_trial(d)[0]
-                self._shadows[k].commit()
+                free = force - self._shadows[k](d)
                 squared += free * free
             if self.score != "free-run":
                 one = force - expert.predict(d)
@@ -197,4 +222,6 @@ class OnlineImproved(OwnsTwin):
             score = float(self.scores[k])
             self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
             expert.observe(d, force)
+        if self.shadow is not None:
+            self.shadow.after_step(d, force)
         self._last_update = time.perf_counter() - start

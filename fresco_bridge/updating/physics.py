@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
-from fresco_bridge.updating.branch import BranchRls, initial_stiffness
+from fresco_bridge.updating.branch import BasisTwin, BranchRls, initial_stiffness
 from sim_actuator.models.base import HysteresisModel, ModelInputError, ModelParameterError
 from sim_actuator.models.bouc_wen import BoucWen
 
@@ -97,6 +97,17 @@ class _PhysicsTwin:
         self._law.commit()
         self._residual.commit()
 
+    def advance(self, d: float) -> float:
+        """``set_trial(d)`` and ``commit()`` in one, the force only (shadow scoring)."""
+        force = self._law.set_trial(d)[0]
+        self._law.commit()
+        residual = self._residual
+        if isinstance(residual, BasisTwin):
+            return force + residual.advance(d)
+        force += residual.set_trial(d)[0]
+        residual.commit()
+        return force
+
     def revert_to_last_commit(self) -> None:
         self._law.revert_to_last_commit()
         self._residual.revert_to_last_commit()
@@ -143,6 +154,11 @@ class PhysicsResidual(OwnsTwin):
         self._twin = _PhysicsTwin(BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
                                   self.residual.twin)  # fmt: skip
         self._last_update = 0.0
+
+    def source_twin(self) -> HysteresisModel:
+        """A twin on this expert's memory of the tested element now (shadow scoring): the
+        law's state and the residual's memory, both of the tested element."""
+        return _PhysicsTwin(self._source.clone(), self.residual.source_twin())
 
     def predict(self, d: float) -> float:
         """One-step-ahead force of the tested element at ``d`` (nothing committed)."""

@@ -60,7 +60,8 @@ UPDATERS: dict[str, UpdaterEntry] = {
                                     "ours: reversal-basis, stop-operator and Bouc-Wen-plus-"
                                     "residual experts (RLS with forgetting, ridge, gating) "
                                     "weighted by their free-run and one-step errors on the "
-                                    "tested element (needs offline)"),
+                                    "tested element (needs offline; shadow=true also scores "
+                                    "them on a stretch matched to the twin's state)"),
 }
 """Name -> where its factory lives and what it is."""
 

@@ -120,7 +120,8 @@ def test_the_mixture_weights_the_expert_that_predicts_the_tested_element_better(
     """A basis without memory terms against one with them, on a law whose branches depend on
     the previous excursion: weights sum to 1 and follow the one-step innovations."""
     d = cyclic(1500, 10.0, 1)
-    updater = OnlineImproved(offline=(d, drive(d)), experts="reversal,reversal+memory")
+    updater = OnlineImproved(offline=(d, drive(d)), experts="reversal,reversal+memory",
+                             shadow=False)
     w0 = updater.mixture_weights()
     assert w0.sum() == pytest.approx(1.0) and np.allclose(w0, 0.5)
     tested = cyclic(1500, 12.0, 2)
