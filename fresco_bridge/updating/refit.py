@@ -243,7 +243,7 @@ class RefitUpdater(OwnsTwin):
         self.space = family.space(disp, force)
         keep = compress(disp, stride)
         self._offline = (disp[keep], force[keep], float(offline_weight))
-        x = fit_law(family, [self._offline], self.space, max_nfev=offline_nfev)
+        x = fit_law(family, [(disp[keep], force[keep], 1.0)], self.space, max_nfev=offline_nfev)
         self._law = _Law(family, x)
         self._source = self._law.build()
         self._disp: list[float] = []
