@@ -26,10 +26,10 @@ displacement p, back-forces X_1..X_3, memory range q):
 Return mapping: along one step the flow direction is constant, so ``X_i`` and ``R`` have closed
 forms in the plastic increment ``dp`` (``X_i = s C_i/gamma_i + (X_i,c - s C_i/gamma_i)
 exp(-gamma_i dp)``); the consistency condition is one scalar equation in ``dp``, strictly
-decreasing when ``|Q| b + |Qe| be < k0`` (checked), solved by safeguarded Newton to 1e-12 of fy. A step
-is therefore exact whatever its size: a monotonic segment gives the same state in one step or
-many (what lets an online refit run on a compressed history). The tangent is the consistent
-``k0 H / (k0 + H)``, ``H`` the plastic modulus at the end of the step.
+decreasing when ``|Q| b + |Qe| be < k0`` (checked), solved by safeguarded Newton to 1e-12 of
+fy. A step is therefore exact whatever its size: a monotonic segment gives the same state in
+one step or many (what lets an online refit run on a compressed history). The tangent is the
+consistent ``k0 H / (k0 + H)``, ``H`` the plastic modulus at the end of the step.
 
 OpenSees semantics: ``set_trial(d)`` from the last commit, ``commit()``; repeated trials never
 advance the state. There is no OpenSees material with exactly this law (``UVCuniaxial`` has

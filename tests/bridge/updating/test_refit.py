@@ -20,6 +20,7 @@ from fresco_bridge.updating.refit import (
     law_forces,
 )
 from sim_actuator.models import Bilinear, HysteresisModel
+from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 6.0, "fy": 10.0, "alpha": 0.04}
@@ -37,12 +38,7 @@ def _space(disp: np.ndarray, force: np.ndarray) -> FitSpace:
 BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space)
 
 
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+path = ramped_sines
 
 
 def test_compression_keeps_every_reversal_and_the_last_sample() -> None:

@@ -9,18 +9,14 @@ import pytest
 
 from sim_actuator.models import Bilinear, HysteresisModel, ModelInputError, ModelParameterError
 from sim_actuator.models.chaboche import Chaboche
+from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 8.0, "fy": 12.0, "C1": 6.0, "gamma1": 1.5, "C2": 1.0, "gamma2": 0.1, "C3": 0.2,
        "gamma3": 0.01, "kh": 0.2, "Q": -6.0, "b": 0.3, "hm": 0.2}  # fmt: skip
 
 
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+path = ramped_sines
 
 
 def run(model: HysteresisModel, disp: np.ndarray) -> np.ndarray:
