@@ -132,3 +132,23 @@ def test_bad_construction_is_a_clear_error(offline: tuple[np.ndarray, np.ndarray
                                            options: dict[str, float], match: str) -> None:
     with pytest.raises(UpdaterError, match=match):
         RefitUpdater(BILINEAR, offline=offline, **options)  # type: ignore[arg-type]
+
+
+def test_the_chaboche_family_recovers_a_known_law_from_its_own_history() -> None:
+    """The family of BENCHMARKS.md part 8a, from its default start: the law is recovered (the
+    back-forces may come back in another order), so another history is predicted exactly."""
+    from benchmarks.refit_families import CHABOCHE, chaboche_law
+
+    true = {"k0": 8.0, "fy": 10.0, "C1": 6.0, "gamma1": 1.5, "C2": 1.0, "gamma2": 0.2,
+            "C3": 0.1, "gamma3": 0.02, "kh": 0.1, "qr": -0.5, "b": 0.2, "hm": 0.05,
+            "qe": -0.2, "be": 0.5}  # fmt: skip
+    d = path(1500, 9.0, 1)
+    f = law_forces(chaboche_law(true), d)
+    keep = compress(d, 3)
+    x = fit_law(CHABOCHE, [(d[keep], f[keep], 1.0)], CHABOCHE.space(d, f), max_nfev=200)
+    fitted = CHABOCHE.params(x)
+    for name in ("k0", "fy", "kh", "qr", "b", "hm", "qe", "be"):
+        assert fitted[name] == pytest.approx(true[name], rel=1e-4, abs=1e-6)
+    other = path(1500, 7.0, 2)
+    predicted = law_forces(chaboche_law(fitted), other)
+    assert np.allclose(predicted, law_forces(chaboche_law(true), other), rtol=0.0, atol=1e-6)
