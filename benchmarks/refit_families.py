@@ -10,7 +10,10 @@ Why it is outside both specimens: the law's docstring. Factories:
 * ``chaboche_online``: ``RefitUpdater`` on the law alone (options: ``every``, ``stride``,
   ``max_nfev``, ``offline_weight``, ``warmup``);
 * ``chaboche_mixture``: the default ``online_improved`` (design E) with the refitted law as a
-  fifth expert, scored like the others (same options, for the law).
+  fifth expert, scored like the others (same options, for the law);
+* ``chaboche_residual``: the refitted law plus E's memory basis on its residual (the
+  ``bouc-wen+memory`` expert with the law refitted online), ``chaboche_residual_mixture``: that
+  as E's fifth expert.
 
 ``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
 benchmarks.refit_families:chaboche_online [--only menegotto-pinto]``.
@@ -18,16 +21,20 @@ benchmarks.refit_families:chaboche_online [--only menegotto-pinto]``.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.updating.branch import initial_stiffness
+from fresco_bridge.updating.base import OwnsTwin
+from fresco_bridge.updating.branch import BranchRls, initial_stiffness
 from fresco_bridge.updating.improved import OnlineImproved, _MixtureTwin
-from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater
+from fresco_bridge.updating.physics import _PhysicsTwin
+from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater, law_forces
 from fresco_bridge.updating.shadow import stepper
+from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.chaboche import Chaboche
 
 FloatArray = npt.NDArray[np.float64]
@@ -88,11 +95,58 @@ def chaboche_online(disp: FloatArray, force: FloatArray, **options: Any) -> Refi
 
 def chaboche_mixture(disp: FloatArray, force: FloatArray, **options: Any) -> OnlineImproved:
     """Design E with the refitted Chaboche law as a fifth expert."""
-    mixture = OnlineImproved(offline=(disp, force))
-    expert = chaboche_online(disp, force, **options)
+    return _with_expert(OnlineImproved(offline=(disp, force)), "chaboche-refit",
+                        chaboche_online(disp, force, **options))
+
+
+def _with_expert(mixture: OnlineImproved, name: str, expert: Any) -> OnlineImproved:
+    """``mixture`` with one more expert, scored like the others from its first step."""
     mixture.experts.append(expert)
-    mixture.expert_names = (*mixture.expert_names, "chaboche-refit")
+    mixture.expert_names = (*mixture.expert_names, name)
     mixture.scores = np.append(mixture.scores, mixture.scores[0])
     mixture._shadows.append(stepper(expert.twin.clone()))
     mixture._twin = _MixtureTwin(mixture, [e.twin for e in mixture.experts])
     return mixture
+
+
+class RefitResidual(OwnsTwin):
+    """The refitted law plus design E's memory basis learning its residual online (the
+    ``bouc-wen+memory`` expert of ``physics`` with the law refitted instead of fixed)."""
+
+    name = "chaboche+memory"
+
+    def __init__(self, family: LawFamily, *, offline: tuple[FloatArray, FloatArray],
+                 **options: Any) -> None:  # fmt: skip
+        disp, force = offline
+        self.law = RefitUpdater(family, offline=offline, name=self.name, **options)
+        law_force = law_forces(family.build(self.law.parameters), disp)
+        self.residual = BranchRls(offline=(disp, force - law_force), memory_terms=True,
+                                  force_scale=float(np.max(np.abs(force))),
+                                  stiffness=initial_stiffness(disp, force), shrink=True)
+        self._twin = _PhysicsTwin(self.law.twin, self.residual.twin)
+        self._last_update = 0.0
+
+    def source_twin(self) -> HysteresisModel:
+        return _PhysicsTwin(self.law.source_twin(), self.residual.source_twin())
+
+    def predict(self, d: float) -> float:
+        return self.law.predict(d) + self.residual.predict(d)
+
+    def observe(self, d: float, force: float) -> None:
+        start = time.perf_counter()
+        f_law = self.law.predict(d)
+        self.law.observe(d, force)
+        self.residual.observe(d, force - f_law)
+        self._last_update = time.perf_counter() - start
+
+
+def chaboche_residual(disp: FloatArray, force: FloatArray, **options: Any) -> RefitResidual:
+    """The refitted Chaboche law plus the memory basis on its residual."""
+    return RefitResidual(CHABOCHE, offline=(disp, force), **options)
+
+
+def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
+                              **options: Any) -> OnlineImproved:  # fmt: skip
+    """Design E with ``chaboche_residual`` as a fifth expert."""
+    return _with_expert(OnlineImproved(offline=(disp, force)), "chaboche+memory",
+                        chaboche_residual(disp, force, **options))
