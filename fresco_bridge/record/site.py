@@ -55,6 +55,11 @@ class SiteRecorder:
     def step_committed(self, step: CommittedStep) -> None:
         self._commit(self.site, self._pending, step.session, step.step, step.time)
 
+    def step_values(self, session: int, step: int, time_: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        """``step_committed`` without the ``CommittedStep`` (``StepValuesListener``)."""
+        self._commit(self.site, self._pending, session, step, time_)
+
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
         if self.before_event is not None:
             self.before_event()

@@ -135,23 +135,32 @@ class MonitorBatch:
         self._session = 0  # of the pending pairs
         self._first = 0  # committed step of the first pending pair
         self._next = 0  # the step the next pair must have to join them
-        self._since = 0.0  # monotonic time of the first pending pair
+        self._due = 0.0  # monotonic time the pending pairs must be written by (next commit)
         recorder.before_event = self.flush
 
     def step_committed(self, step: CommittedStep) -> None:
-        cmd, meas = step.ctrl[0], step.daq_disp[0]
+        self.step_values(step.session, step.step, step.time, step.ctrl, step.daq_disp)
+
+    def step_values(self, session: int, step: int, time_: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        """Committed ``step``: its pair joins the batch (``StepValuesListener``)."""
+        cmd, meas = ctrl[0], daq_disp[0]
         pairs = self._pairs
-        if pairs and (step.step != self._next or step.session != self._session):
-            self.flush()
+        if step != self._next or session != self._session or not pairs:
+            self._start(session, step)
             pairs = self._pairs
-        if not pairs:
-            self._session, self._first, self._since = step.session, step.step, _monotonic()
         pairs.append((cmd, meas))
-        self._next = step.step + 1
+        self._next = step + 1
         limit = self._limit
-        if (len(pairs) >= self._steps or (limit is not None and abs(meas - cmd) > limit)
-                or _monotonic() - self._since >= self._delay):
+        if (len(pairs) >= self._steps or _monotonic() >= self._due
+                or (limit is not None and abs(meas - cmd) > limit)):
             self.flush()
+
+    def _start(self, session: int, step: int) -> None:
+        """A new batch from committed ``step`` (what is held first: another session's, or steps
+        that are not consecutive)."""
+        self.flush()
+        self._session, self._first, self._due = session, step, _monotonic() + self._delay
 
     def flush(self) -> None:
         """Run the monitor over the pending pairs and write their monitors line (a warning:
