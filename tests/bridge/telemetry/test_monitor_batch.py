@@ -28,7 +28,7 @@ from fresco_bridge.sites.listeners import SiteNotice
 from fresco_bridge.steps import CommittedStep
 from fresco_bridge.telemetry.schema import SiteStatus
 from fresco_bridge.telemetry.taps import MONITOR_BATCH_STEPS, MonitorBatch, SiteTaps
-from tests.support.recorded_run import raw_lines
+from tests.support.recorded_run import LAB_TOML, raw_lines
 
 LIMIT = 0.05
 
@@ -184,24 +184,13 @@ def test_a_monitors_line_relative_to_nothing_is_refused() -> None:
     ("", True), ("monitors = false", False), ("metrics_port = 0", False)])
 def test_the_bridge_batches_only_for_the_record_alone(
         tmp_path: Path, telemetry: str, batched: bool) -> None:
-    text = f"""
-[bridge]
-run_dir = "{tmp_path / 'runs'}"
-[telemetry]
-{telemetry}
-[[sites]]
-name = "spec"
-port = 0
-[sites.controller]
-model = "bilinear"
-params = {{ k0 = 10.0, fy = 8.0, alpha = 0.05 }}
-"""
+    text = LAB_TOML.format(name="batch", telemetry=telemetry)
 
     async def listeners() -> list[str]:
-        bridge = Bridge(parse_config(text), text)
+        bridge = Bridge(parse_config(text), text, run_dir=tmp_path / "runs")
         await bridge.start()
         try:
-            return [type(x).__name__ for x in bridge.sites["spec"]._step_listeners]
+            return [type(x).__name__ for x in bridge.sites["spring"]._step_listeners]
         finally:
             await bridge.close()
 
