@@ -169,16 +169,12 @@ class MonitorBatch:
         if not pairs:
             return
         self._pairs = []  # a warning's event comes back here (``before_event``): nothing left
-        update, warn, recorder = self._monitor.update, self._warn, self._recorder
-        session, first = self._session, self._first
-        step = first
-        samples: list[tuple[float, float, float | None, float | None, float | None]] = []
-        for cmd, meas in pairs:
-            sample = update(cmd, meas)
-            samples.append(sample[:5])
-            if sample.warning and warn is not None:
-                recorder.monitors(session, first, samples)
-                samples, first = [], step + 1
-                warn(sample.warning, step)
-            step += 1
-        recorder.monitors(session, first, samples)
+        values, warnings = self._monitor.update_many(pairs)
+        session, first, done = self._session, self._first, 0
+        warn = self._warn
+        if warn is not None:
+            for index, warning in warnings:
+                self._recorder.monitors(session, first + done, values[done:index + 1])
+                done = index + 1
+                warn(warning, first + index)
+        self._recorder.monitors(session, first + done, values[done:])
