@@ -1,0 +1,178 @@
+"""The design records of ``online_improved`` (issue 9): where candidates are chosen, never on
+the evaluation records (the Northridge records of ``study paper``).
+
+Ten numbers per candidate, MAETH of the twin in kN (generalisation layout: against the twin's
+*true* force), as in BENCHMARKS.md "updating part 7":
+
+* eight closed-loop runs: ``kanai_tajimi(3 m/s², 20 s)`` seeds 1 and 2 × both specimens ×
+  load-cell noise 0 / 1 % (noise seed 1), with the study's own phase 1 (conventional run →
+  offline database of its first 2500 measured steps, calibrated Bilinear) and ``simulate_case``;
+  the calibrated Bilinear's MAETH and the target (10 % of it at 0 %, 20 % at 1 % noise) beside;
+* two replay pairs (bwbn, Menegotto-Pinto): ``kanai_tajimi`` seed 7, 30 s, reference run in the
+  generalisation layout, first 3000 steps (source = tested d and F, twin = twin d and true F);
+  offline database = the first 2500 steps of a conventional run (paper layout, the paper's
+  Bilinear) on seed 8, 30 s; ``updating.replay.replay``.
+
+A candidate is the registry's ``online_improved`` with ``--option KEY=VALUE`` pairs, or any
+``--factory module:function`` called as ``function(offline_disp, offline_force, **options)``
+returning an ``Updater`` (for experiments not yet in the registry). ``--baseline`` also runs the
+default ``online_improved`` and prints the geometric mean of the ratios and the worst ratio.
+``taskset -c 0 python -m benchmarks.updater_design --workers 1 [--option …]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from fresco_bridge import indicators
+from fresco_bridge.integrator import kanai_tajimi
+from fresco_bridge.study.calibrate import calibrate_bilinear
+from fresco_bridge.study.constants import OFFLINE_SAMPLES, PAPER_BILINEAR
+from fresco_bridge.study.simulate import simulate_case, specimen_model
+from fresco_bridge.updating.base import Updater
+from fresco_bridge.updating.cli import parse_option
+from fresco_bridge.updating.registry import make_updater
+from fresco_bridge.updating.replay import replay
+from fresco_bridge.updating.updaters import FixedModelUpdater
+from sim_actuator.models import make_model
+
+SPECIMENS = ("bwbn", "menegotto-pinto")
+CLOSED_LOOP = tuple((seed, spec, noise) for seed in (1, 2) for spec in SPECIMENS
+                    for noise in (0.0, 1.0))  # fmt: skip
+REPLAY = tuple(("replay", spec, 0.0) for spec in SPECIMENS)
+NOISE_SEED = 1
+REPLAY_STEPS = 3000
+
+Factory = Callable[..., Updater]
+
+
+def _factory(spec: str | None) -> Factory:
+    if spec is None:
+        return lambda d, f, **opts: make_updater("online_improved", offline=(d, f), **opts)
+    module, _, name = spec.partition(":")
+    func: Factory = getattr(importlib.import_module(module), name)
+    return func
+
+
+def _conventional(specimen: str, motion: Any, noise_std: float, layout: str = "paper") -> Any:
+    return simulate_case(layout, specimen,
+                         FixedModelUpdater("conventional_paper",
+                                           make_model("bilinear", **PAPER_BILINEAR)),
+                         motion, noise_std=noise_std, noise_seed=NOISE_SEED)  # fmt: skip
+
+
+def _closed_loop(seed: int, specimen: str, noise_pct: float, factory: Factory,
+                 options: dict[str, Any]) -> dict[str, Any]:
+    motion = kanai_tajimi(3.0, 20.0, seed=seed)
+    clean = simulate_case("paper", specimen,
+                          FixedModelUpdater("reference", specimen_model(specimen)), motion)
+    noise_std = noise_pct / 100.0 * float(np.max(np.abs(clean.tested_force)))
+    conv = _conventional(specimen, motion, noise_std)
+    disp = conv.tested_drift[:OFFLINE_SAMPLES].copy()
+    force = conv.tested_force[:OFFLINE_SAMPLES].copy()
+    calibrated = FixedModelUpdater("conventional_calibrated",
+                                   make_model("bilinear", **calibrate_bilinear(disp, force)))
+    base = simulate_case("generalisation", specimen, calibrated, motion, noise_std=noise_std,
+                         noise_seed=NOISE_SEED)  # fmt: skip
+    start = time.process_time()
+    run = simulate_case("generalisation", specimen, factory(disp, force, **options), motion,
+                        noise_std=noise_std, noise_seed=NOISE_SEED)  # fmt: skip
+    seconds = time.process_time() - start
+    conv_cal = indicators.maeth(base.twin_true_force, base.twin_force)
+    maeth = indicators.maeth(run.twin_true_force, run.twin_force)
+    err = np.abs(run.twin_true_force - run.twin_force)
+    return {"record": f"seed {seed}", "specimen": specimen, "noise_pct": noise_pct,
+            "conv_cal": conv_cal, "target": (0.1 if noise_pct == 0 else 0.2) * conv_cal,
+            "maeth": maeth, "reduction_pct": 100.0 * (1.0 - maeth / conv_cal),
+            "worst_step": int(np.argmax(err)), "cpu_s": seconds}  # fmt: skip
+
+
+def _replay_pair(specimen: str, factory: Factory, options: dict[str, Any]) -> dict[str, Any]:
+    ref = simulate_case("generalisation", specimen,
+                        FixedModelUpdater("reference", specimen_model(specimen)),
+                        kanai_tajimi(3.0, 30.0, seed=7))  # fmt: skip
+    conv = _conventional(specimen, kanai_tajimi(3.0, 30.0, seed=8), 0.0)
+    disp = conv.tested_drift[:OFFLINE_SAMPLES].copy()
+    force = conv.tested_force[:OFFLINE_SAMPLES].copy()
+    n = REPLAY_STEPS
+    start = time.process_time()
+    result = replay(factory(disp, force, **options), ref.tested_drift[:n],
+                    ref.tested_force[:n], ref.twin_drift[:n])  # fmt: skip
+    seconds = time.process_time() - start
+    truth = ref.twin_true_force[:n]
+    err = np.abs(truth - result.force_pred)
+    return {"record": "replay", "specimen": specimen, "noise_pct": 0.0, "conv_cal": math.nan,
+            "target": math.nan, "maeth": indicators.maeth(truth, result.force_pred),
+            "reduction_pct": math.nan, "worst_step": int(np.argmax(err)), "cpu_s": seconds}
+
+
+def _one(job: tuple[tuple[Any, str, float], str | None, dict[str, Any]]) -> dict[str, Any]:
+    (record, specimen, noise), factory_spec, options = job
+    factory = _factory(factory_spec)
+    if record == "replay":
+        return _replay_pair(specimen, factory, options)
+    return _closed_loop(int(record), specimen, noise, factory, options)
+
+
+def evaluate(factory_spec: str | None, options: dict[str, Any], workers: int,
+             only: str | None = None) -> list[dict[str, Any]]:
+    """The ten design numbers of one candidate (``only``: a specimen name to run half)."""
+    items = [it for it in (*CLOSED_LOOP, *REPLAY) if only is None or it[1] == only]
+    jobs = [(it, factory_spec, options) for it in items]
+    if workers <= 1:
+        return [_one(j) for j in jobs]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_one, jobs))
+
+
+def _print(rows: list[dict[str, Any]], base: list[dict[str, Any]] | None) -> None:
+    print("| record | specimen | noise % | conv_cal | target | MAETH | reduction % | worst step "
+          "| CPU s |" + (" vs baseline |" if base else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|" if base else ""))
+    ratios = []
+    for i, r in enumerate(rows):
+        line = (f"| {r['record']} | {r['specimen']} | {r['noise_pct']:g} | {r['conv_cal']:.3f} | "
+                f"{r['target']:.3f} | {r['maeth']:.3f} | {r['reduction_pct']:.1f} | "
+                f"{r['worst_step']} | {r['cpu_s']:.1f} |")
+        if base:
+            ratio = r["maeth"] / base[i]["maeth"]
+            ratios.append(ratio)
+            line += f" {ratio:.3f} ({base[i]['maeth']:.3f}) |"
+        print(line)
+    if ratios:
+        geo = math.exp(sum(math.log(x) for x in ratios) / len(ratios))
+        print(f"\ngeometric mean vs baseline {geo:.3f}, worst {max(ratios):.3f}, better on "
+              f"{sum(x < 1 for x in ratios)} of {len(ratios)}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--option", type=parse_option, action="append", default=[])
+    parser.add_argument("--factory", help="module:function building the candidate updater")
+    parser.add_argument("--baseline", action="store_true",
+                        help="also run the default online_improved and compare")
+    parser.add_argument("--only", choices=SPECIMENS, help="one specimen only")
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--json", help="write the rows here")
+    args = parser.parse_args(argv)
+    options = dict(args.option)
+    rows = evaluate(args.factory, options, args.workers, args.only)
+    base = evaluate(None, {}, args.workers, args.only) if args.baseline else None
+    _print(rows, base)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"candidate": rows, "baseline": base}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
