@@ -36,7 +36,7 @@ from .setups import make_setup
 from .sites import ExperimentalSite
 from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
-from .telemetry.taps import SiteTaps
+from .telemetry.taps import MonitorBatch, SiteTaps
 
 log = logging.getLogger("fresco_bridge")
 T = TypeVar("T")
@@ -91,6 +91,7 @@ class Bridge:
         self.metrics_server: MetricsServer | None = None
         self.desk = OperatorDesk(self.sites)
         self.control: ControlServer | None = None
+        self._monitor_batches: list[MonitorBatch] = []
 
     async def start(self) -> None:
         cfg = self.config
@@ -227,6 +228,13 @@ class Bridge:
             monitor = OnlineMonitor(
                 tcfg.monitor_dt, tcfg.monitor_window, warn_tracking_error=tcfg.warn_tracking_error,
             ) if tcfg.monitors else None
+            if self.telemetry is None and site.metrics is None and monitor is not None \
+                    and site.recorder is not None:
+                # the record is the monitors' only consumer: batched (the same samples)
+                batch = MonitorBatch(monitor, site.recorder, site.monitor_warning)
+                self._monitor_batches.append(batch)
+                site.add_listener(batch)
+                continue
             taps = SiteTaps(self.telemetry, site.metrics,
                             site.recorder if tcfg.monitors else None, monitor, site.monitor_warning)
             site.add_listener(taps)
@@ -275,6 +283,8 @@ class Bridge:
                 await asyncio.wait_for(self._telemetry_task, 5.0)
             except (TimeoutError, asyncio.CancelledError):
                 log.warning("telemetry: not drained within 5 s; %s", self.telemetry.stats)
+        for batch in self._monitor_batches:  # after the sessions' ends (they flush too)
+            batch.flush()
         if self.record is not None:
             self.record.close()
 

@@ -39,6 +39,7 @@ force ``pred`` an updatable numerical element predicted:
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -335,10 +336,11 @@ class OnlineMonitor:
             raise IndicatorError(f"OnlineMonitor: fei_every must be >= 1, got {self.fei_every}")
         self.warn_tracking_error = warn_tracking_error
         self.warn_ti_rate = warn_ti_rate
-        # rings as lists: a list store is a few ns, a numpy scalar store ~0.1 µs (once a step)
-        self._cmd = [0.0] * window
-        self._meas = [0.0] * window
-        self._ti_ring = [0.0] * window
+        # rings of C doubles: a store is a few ns (a numpy scalar store ~0.1 µs, once a step),
+        # no float object is kept alive per slot, and the FEI reads them without a copy
+        self._cmd = array("d", bytes(8 * window))
+        self._meas = array("d", bytes(8 * window))
+        self._ti_ring = array("d", bytes(8 * window))
         self._checks = warn_tracking_error is not None or warn_ti_rate is not None
         self._steps = 0
         self._prev: tuple[float, float] | None = None
@@ -381,14 +383,65 @@ class OnlineMonitor:
         fei_a, fei_d = self._fei if self._fei is not None else (None, None)
         return MonitorSample(err, self._ti, nrms, fei_a, fei_d, warning)
 
+    def update_many(self, pairs: Sequence[tuple[float, float]]
+                    ) -> tuple[list[tuple[float, float, float | None, float | None, float | None]],
+                               list[tuple[int, str]]]:
+        """``update`` for each (command, measurement) pair in order, in one loop (a batch:
+        ``telemetry.taps.MonitorBatch``): the same state after it and the same samples — the
+        same arithmetic in the same order —, returned as each sample's values
+        (``tracking_error, ti, nrms, fei_amplitude, fei_delay``) and the warnings as (index
+        in ``pairs``, text). IndicatorError at a non-finite pair, after the pairs before it."""
+        values: list[tuple[float, float, float | None, float | None, float | None]] = []
+        warnings: list[tuple[int, str]] = []
+        window, fei_every, checks = self.window, self.fei_every, self._checks
+        cmd_ring, meas_ring, ti_ring = self._cmd, self._meas, self._ti_ring
+        ti, prev, sum_err2, sum_cmd2 = self._ti, self._prev, self._sum_err2, self._sum_cmd2
+        steps = self._steps
+        fei_a, fei_d = self._fei if self._fei is not None else (None, None)
+        isfinite, sqrt = math.isfinite, math.sqrt
+        try:
+            for index, (cmd, meas) in enumerate(pairs):
+                if not (isfinite(cmd) and isfinite(meas)):
+                    raise IndicatorError(f"OnlineMonitor.update: step {steps}: cmd={cmd!r}, "
+                                         f"meas={meas!r} not finite")
+                err = meas - cmd
+                if prev is not None:
+                    ti += 0.5 * (cmd * prev[1] - prev[0] * meas)
+                prev = (cmd, meas)
+                sum_err2 += err * err
+                sum_cmd2 += cmd * cmd
+                slot = steps % window
+                ti_window_ago = ti_ring[slot]
+                cmd_ring[slot] = cmd
+                meas_ring[slot] = meas
+                ti_ring[slot] = ti
+                steps += 1
+                if steps >= window and (steps - window) % fei_every == 0:
+                    self._steps = steps  # what the window is read with
+                    self._fei = self._window_fei()
+                    fei_a, fei_d = self._fei if self._fei is not None else (None, None)
+                nrms = sqrt(sum_err2 / sum_cmd2) if sum_cmd2 > 0.0 else None
+                if checks:
+                    self._ti, self._steps = ti, steps
+                    warning = self._check(err, ti_window_ago if steps > window else None)
+                    if warning:
+                        warnings.append((index, warning))
+                values.append((err, ti, nrms, fei_a, fei_d))
+        finally:
+            self._ti, self._prev, self._sum_err2, self._sum_cmd2 = ti, prev, sum_err2, sum_cmd2
+            self._steps = steps
+        return values, warnings
+
     def window_arrays(self) -> tuple[FloatArray, FloatArray]:
         """The last ``min(steps, window)`` commands and measurements, oldest first."""
         if self._steps < self.window:
             n = self._steps
-            return np.array(self._cmd[:n]), np.array(self._meas[:n])
+            return (np.frombuffer(self._cmd, count=n).copy(),
+                    np.frombuffer(self._meas, count=n).copy())
         start = self._steps % self.window
-        return (np.array(self._cmd[start:] + self._cmd[:start]),
-                np.array(self._meas[start:] + self._meas[:start]))
+        cmd, meas = np.frombuffer(self._cmd), np.frombuffer(self._meas)
+        return (np.concatenate((cmd[start:], cmd[:start])),
+                np.concatenate((meas[start:], meas[:start])))
 
     def _window_fei(self) -> tuple[float, float] | None:
         cmd, meas = self.window_arrays()

@@ -160,6 +160,7 @@ class ElementServerSession:
         "_vector_bytes",
         "_zeros",
         "bytes_after_die",
+        "drained",
         "vectors_received",
     )
 
@@ -189,6 +190,11 @@ class ElementServerSession:
         """Vectors decoded so far (the ID not counted)."""
         self.bytes_after_die = 0
         """Bytes dropped because they followed a DIE."""
+        self.drained = False
+        """True when the event ``next_event`` last decoded in READY left less than a message
+        buffered and no EOF: handled (and its reply sent), the next ``next_event`` returns
+        NEED_DATA until more bytes are received (a caller may skip that call). False after
+        every other ``next_event`` result."""
 
     # -- introspection -------------------------------------------------------------
     @property
@@ -236,12 +242,15 @@ class ElementServerSession:
             start = buffered.pos
             count = self._vector_bytes
             if len(data) - start >= count:
-                buffered.pos = start + count
+                end = buffered.pos = start + count
                 buffered.consumed += count
+                self.drained = len(data) - end < count and not buffered.eof
                 return self._decode_vector(data, start)
+            self.drained = False
             if buffered.eof:
                 return self._close()
             return NEED_DATA
+        self.drained = False
         if state is _MUST_REPLY:
             return PAUSED
         if state is _AWAIT_ID:

@@ -37,6 +37,18 @@ lines was the largest cost left on the step path)::
 - ``site``/``session`` as on every line; ``t`` is when the line was written (the commit), and
   the lines it stands for read back with that ``t``.
 
+Format 4 (issue 8, session 5) is format 3 plus the **monitors line**, the monitor lines of
+consecutive committed steps of a site in one line, written when the online monitors run for the
+record alone (no MQTT, no metrics: the telemetry taps then batch them, ``telemetry/taps.py``)::
+
+    {"t":…,"kind":"monitors","step":S,"v":[V1,V2,…]}
+
+- ``V1`` is the monitor line of committed step ``S``, ``V2`` of ``S + 1``…, each as ``mon`` on a
+  step line: ``[err, ti, nrms, fei_amp, fei_delay]``, ``[err, ti, nrms]`` when the FEI pair is
+  that of the previous monitor line, or ``0`` for all its values (the first of a session carries
+  all five);
+- step lines then carry no ``mon``; ``site``/``session``/``t`` as on every line.
+
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
 version) back into complete format-1 dicts, in file order (each site's lines in the order it
 recorded them), so every reader (export, report, ``runs``, HDF5, recovery) sees exactly what
@@ -50,7 +62,7 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 INHERITED_KINDS = frozenset(("trial", "daq", "commit", "monitor"))
 """Line kinds whose absent value fields repeat the previous line's (same site, session)."""
 TRIAL, DAQ, MONITOR = 0, 1, 2
@@ -276,6 +288,29 @@ class LineEncoder:
         return (f'{{"t":{t:.6f},"kind":"step","site":"{site}","session":{session},'
                 f'"step":{step},"time":{tt}{mon},"it":[{its[1:]}]}}\n')
 
+    def monitors(self, t: float, site: str, session: int, step: int,
+                 samples: list[tuple[Any, ...]]) -> str:
+        """The monitors line of ``samples``, the monitor values (``err, ti, nrms, fei_amp,
+        fei_delay``) after committed steps ``step``, ``step + 1``… of ``site`` (format 4)."""
+        last_m = self._monitor.get(site)
+        was = last_m[2] if last_m is not None and last_m[0] == session else None
+        parts = []
+        for values in samples:
+            if was is not None and was == values:
+                parts.append("0")
+            elif was is not None and was[3:] == values[3:]:  # the FEI is held between updates
+                parts.append(nums(values[:3]) if values[2] is not None else
+                             f"[{num(values[0])},{num(values[1])},null]")
+            else:
+                err, ti, nrms, fei_amp, fei_delay = values
+                parts.append(f"[{num(err)},{num(ti)},{opt(nrms)},{opt(fei_amp)},"
+                             f"{opt(fei_delay)}]")
+            was = values
+        if was is not None:
+            self._monitor[site] = (session, step + len(samples) - 1, was)
+        return self.line(t, "monitors", site, session,
+                         f',"step":{step},"v":[{",".join(parts)}]')
+
     def _fold_monitor(self, site: str, session: int, values: tuple[Any, ...]) -> str:
         """The ``mon`` field of a step line: the monitor sample after the step before."""
         last_m = self._monitor.get(site)
@@ -312,6 +347,11 @@ def expand(objs: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
         kind = obj.get("kind")
         if kind == "step":
             for line in _unfold(obj, site, session, seq, last):
+                seq = line["seq"]
+                yield line
+            continue
+        if kind == "monitors":
+            for line in _unfold_monitors(obj, site, session, seq, last):
                 seq = line["seq"]
                 yield line
             continue
@@ -384,3 +424,28 @@ def _unfold(obj: dict[str, Any], site: str, session: int, seq: int,
     commit = {"seq": seq + 1, "kind": "commit", **head, "step": step, "time": time_}
     last[(site, "commit")] = commit
     yield commit
+
+
+def _unfold_monitors(obj: dict[str, Any], site: str, session: int, seq: int,
+                     last: dict[tuple[str, str], dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    """The format-1 monitor lines of one monitors line (format 4), steps ``step``, ``step + 1``…"""
+    t, step = obj.get("t", 0.0), int(obj["step"])
+    prev = last.get((site, "monitor"))
+    if prev is not None and prev.get("session") != session:
+        prev = None
+    for n, entry in enumerate(obj["v"]):
+        if entry == 0 or len(entry) == 3:
+            if prev is None:
+                raise RecordFormatError(
+                    f"monitors line after seq {seq} ({site!r} session {session}): an entry "
+                    "relative to a monitor line of that site and session, and none before it")
+            values = ([prev[k] for k in _MONITOR_FLOATS] if entry == 0
+                      else [*entry, prev["fei_amp"], prev["fei_delay"]])
+        else:
+            values = entry
+        seq += 1
+        prev = {"seq": seq, "t": t, "kind": "monitor", "site": site, "session": session,
+                "step": step + n, **dict(zip(_MONITOR_FLOATS, values, strict=True))}
+        yield prev
+    if prev is not None:
+        last[(site, "monitor")] = prev

@@ -9,6 +9,7 @@ the site.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from .lines import DAQ, MONITOR, TRIAL
@@ -26,11 +27,14 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_commit", "_pending", "_record", "site")
+    __slots__ = ("_commit", "_pending", "_record", "before_event", "site")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
         self.site = site
+        self.before_event: Callable[[], None] | None = None
+        """Called before an event of the site is recorded (the monitor batch writes the
+        samples it holds first: ``telemetry.taps.MonitorBatch``)."""
         self._pending = record.pending(site)
         self._commit = record.commit_items
 
@@ -51,11 +55,25 @@ class SiteRecorder:
     def step_committed(self, step: CommittedStep) -> None:
         self._commit(self.site, self._pending, step.session, step.step, step.time)
 
+    def step_values(self, session: int, step: int, time_: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        """``step_committed`` without the ``CommittedStep`` (``StepValuesListener``)."""
+        self._commit(self.site, self._pending, session, step, time_)
+
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
+        if self.before_event is not None:
+            self.before_event()
         self.event(notice.session, notice.kind, notice.reason, **notice.extra)
 
     def event(self, session: int, kind: str, reason: str, **extra: object) -> None:
         self._record.event(self.site, session, kind, reason, **extra)
+
+    def monitors(self, session: int, step: int,
+                 samples: list[tuple[float, float, float | None, float | None, float | None]]
+                 ) -> None:
+        """The monitors after committed steps ``step``, ``step + 1``… (a batch: one line,
+        written at once; ``RunRecord.monitors``)."""
+        self._record.monitors(self.site, session, step, samples)
 
     def monitor(self, session: int, step: int, sample: MonitorSample) -> None:
         """The monitors after committed ``step`` (``RunRecord.monitor`` without its frame:

@@ -360,6 +360,21 @@ class RunRecord:
         self._pending[site].append(
             (MONITOR, session, step, (tracking_error, ti, nrms, fei_amplitude, fei_delay)))
 
+    def monitors(self, site: str, session: int, step: int,
+                 samples: list[tuple[float, float, float | None, float | None, float | None]]
+                 ) -> None:
+        """Online error monitors after committed steps ``step``, ``step + 1``… of ``site``, one
+        tuple ``(tracking_error, ti, nrms, fei_amplitude, fei_delay)`` a step (a batch, see
+        ``telemetry/taps.py``): one monitors line, written to the kernel at once (the site's
+        pending trials and measurements wait for their commit: the line does not refer to
+        them). Derived data: the next commit or event asks for its sync."""
+        if not samples or self.closed:
+            return
+        t = _monotonic() - self._t0
+        self._buf.append(self._enc.monitors(t, site, session, step, samples))
+        self._seq += len(samples)
+        self.flush()
+
     def pending(self, site: str) -> list[Item]:
         """The list ``site``'s pending items wait in (the same list for the record's life)."""
         return self._pending[site]

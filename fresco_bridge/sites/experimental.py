@@ -98,6 +98,9 @@ class ExperimentalSite(CommandGate):
         self.holds = 0
         self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
         self._step_listeners: list[StepListener] = []
+        self._step_values: tuple[Callable[[int, int, float, tuple[float, ...],
+                                           tuple[float, ...]], None], ...] | None = None
+        """Every step listener's ``step_values``, when they all have one (``_committed``)."""
         self._event_listeners: list[EventListener] = []
         self.recorder = None if record is None else SiteRecorder(record, cfg.name)
         """The one writer of this site's lines in the run record (None: recording off)."""
@@ -362,6 +365,8 @@ class ExperimentalSite(CommandGate):
         ``listener`` from now on, after those added before it."""
         if isinstance(listener, StepListener):
             self._step_listeners.append(listener)
+            lean = [getattr(x, "step_values", None) for x in self._step_listeners]
+            self._step_values = None if None in lean else tuple(lean)  # type: ignore[arg-type]
         if isinstance(listener, EventListener):
             self._event_listeners.append(listener)
 
@@ -531,7 +536,13 @@ class ExperimentalSite(CommandGate):
         self.step += 1
         self._uncommitted = False
         self._commit_time = self.time
-        if self._step_listeners:
+        lean = self._step_values
+        if lean is not None:  # the record and its monitor: no CommittedStep to build
+            session, step, time_, ctrl, disp = (self.session, self.step, self.time, self.ctrl,
+                                                self.daq.disp)
+            for listener_values in lean:
+                listener_values(session, step, time_, ctrl, disp)
+        elif self._step_listeners:
             committed = CommittedStep(self.name, self.session, self.step, self.time,
                                       self.trial.disp, self.ctrl, self.daq.disp, self.daq.force,
                                       str(self.state))

@@ -17,7 +17,7 @@ from typing import Protocol, runtime_checkable
 from ..steps import CommittedStep
 from ..telemetry.schema import SiteStatus
 
-__all__ = ["CommittedStep", "EventListener", "SiteNotice", "StepListener"]
+__all__ = ["CommittedStep", "EventListener", "SiteNotice", "StepListener", "StepValuesListener"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,6 +37,21 @@ class SiteNotice:
 @runtime_checkable
 class StepListener(Protocol):
     def step_committed(self, step: CommittedStep) -> None: ...
+
+
+class StepValuesListener(Protocol):
+    """A step listener that also takes a committed step as the values it needs (the run
+    record's writer, the monitor batch): when every step listener of a site has
+    ``step_values``, the site calls it instead of ``step_committed`` and builds no
+    ``CommittedStep`` (once a step, on the step loop)."""
+
+    def step_committed(self, step: CommittedStep) -> None: ...
+
+    def step_values(self, session: int, step: int, time: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        """The same as ``step_committed`` of ``CommittedStep(site, session, step, time, …,
+        ctrl, daq_disp, …)``."""
+        ...
 
 
 @runtime_checkable

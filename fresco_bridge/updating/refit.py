@@ -38,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
+from fresco_bridge.updating.branch import offline_data
 from sim_actuator.models.base import (
     HysteresisModel,
     ModelInputError,
@@ -229,13 +230,7 @@ class RefitUpdater(OwnsTwin):
         """``offline``: (d, F) from the virgin state, fitted first (``offline_nfev``) and kept
         in every refit with weight ``offline_weight`` (0 drops it); ``every``: steps between
         refits, the first after ``warmup`` steps; ``stride``: compression of the histories."""
-        disp = np.asarray(offline[0], dtype=np.float64)
-        force = np.asarray(offline[1], dtype=np.float64)
-        if disp.ndim != 1 or disp.shape != force.shape or disp.size < 20:
-            raise UpdaterError(f"{name}: offline data must be two equal 1-D arrays of >= 20 "
-                               f"samples, got shapes {disp.shape} and {force.shape}")
-        if not (np.all(np.isfinite(disp)) and np.all(np.isfinite(force))):
-            raise UpdaterError(f"{name}: offline data contain NaN or inf")
+        disp, force = offline_data(offline, name)
         if every < 1 or stride < 1 or max_nfev < 1 or offline_nfev < 1 or warmup < 1:
             raise UpdaterError(f"{name}: every, stride, max_nfev, offline_nfev, warmup must be "
                                f">= 1 (got {every}, {stride}, {max_nfev}, {offline_nfev}, "

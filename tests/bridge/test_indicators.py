@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fresco_bridge.indicators import (
     IndicatorError,
@@ -194,3 +196,33 @@ def test_ti_rate_warning_fires_for_lag_and_not_for_lead() -> None:
         assert bool(fired) is should_warn
         if should_warn:
             assert fired[0] == window  # first step with a full window of TI history
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-5, 5), st.floats(-5, 5)), min_size=1, max_size=90),
+       st.integers(1, 40), st.sampled_from([None, 0.5]), st.sampled_from([None, 2.0]))
+def test_update_many_is_update_in_a_loop(pairs: list[tuple[float, float]], cut: int,
+                                         warn_error: float | None,
+                                         warn_rate: float | None) -> None:
+    """The batch form (``MonitorBatch``) gives the very samples, warnings and state of one
+    ``update`` a pair, whatever the batches (cut anywhere), FEI updates and checks included."""
+    one = OnlineMonitor(0.01, window=8, warn_tracking_error=warn_error, warn_ti_rate=warn_rate,
+                        fei_every=3)
+    many = OnlineMonitor(0.01, window=8, warn_tracking_error=warn_error, warn_ti_rate=warn_rate,
+                         fei_every=3)
+    want = [one.update(c, m) for c, m in pairs]
+    got_values, got_warnings = many.update_many(pairs[:cut])
+    rest_values, rest_warnings = many.update_many(pairs[cut:])
+    got_values += rest_values
+    got_warnings += [(cut + i, w) for i, w in rest_warnings]
+    assert repr(got_values) == repr([tuple(s[:5]) for s in want])  # bit for bit, NaN-proof
+    assert got_warnings == [(i, s.warning) for i, s in enumerate(want) if s.warning]
+    assert repr(many.__dict__) == repr(one.__dict__)
+
+
+def test_update_many_stops_at_a_non_finite_pair_after_the_pairs_before_it() -> None:
+    one, many = OnlineMonitor(0.01, window=8), OnlineMonitor(0.01, window=8)
+    one.update(1.0, 1.5)
+    with pytest.raises(IndicatorError, match="step 1: cmd=nan"):
+        many.update_many([(1.0, 1.5), (math.nan, 0.0), (2.0, 2.0)])
+    assert repr(many.__dict__) == repr(one.__dict__)

@@ -85,8 +85,9 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
     format 2 (README "Run record") filled in here by its written rules — a missing ``seq`` is
     the line's position, missing ``site``/``session`` are the previous line's, a missing value
     of a trial/daq/commit/monitor line is that of the previous line of its kind, site and
-    session, a missing ``ctrl`` equals the trial — and format 3's step lines unfolded into the
-    monitor, trial, daq and commit lines they stand for."""
+    session, a missing ``ctrl`` equals the trial — format 3's step lines unfolded into the
+    monitor, trial, daq and commit lines they stand for, and format 4's monitors lines into
+    their monitor lines."""
     text = (run_dir / "record.jsonl").read_text()
     out: list[dict[str, Any]] = []
     seen: dict[tuple[str, int, str], dict[str, Any]] = {}
@@ -98,6 +99,9 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
                    "session": where.get("session"), **rec}
             if rec["kind"] == "step":
                 out += unfold_step(rec, seen)
+                continue
+            if rec["kind"] == "monitors":
+                out += unfold_monitors(rec, seen)
                 continue
             if rec["kind"] != "event":
                 had = "ctrl" in rec
@@ -143,4 +147,27 @@ def unfold_step(rec: dict[str, Any], seen: dict[tuple[str, int, str], dict[str, 
     for n, line in enumerate(out):
         line["seq"] = seq + n
         seen[(site, session, line["kind"])] = line
+    return out
+
+
+def unfold_monitors(rec: dict[str, Any], seen: dict[tuple[str, int, str], dict[str, Any]]
+                    ) -> list[dict[str, Any]]:
+    """A monitors line: the monitor lines of steps ``step``, ``step + 1``…, one per entry of
+    ``v`` (5 values, 3 with the FEI pair as before, or 0 for all as before). ``seq`` follows on
+    from the line's position."""
+    site, session = rec["site"], rec["session"]
+    names = ("err", "ti", "nrms", "fei_amp", "fei_delay")
+    out: list[dict[str, Any]] = []
+    for n, values in enumerate(rec["v"]):
+        before = seen.get((site, session, "monitor"))
+        if values == 0:
+            assert before is not None
+            values = [before[k] for k in names]
+        elif len(values) == 3:
+            assert before is not None
+            values = [*values, before["fei_amp"], before["fei_delay"]]
+        line = {"seq": rec["seq"] + n, "t": rec["t"], "site": site, "session": session,
+                "kind": "monitor", "step": rec["step"] + n, **dict(zip(names, values, strict=True))}
+        seen[(site, session, "monitor")] = line
+        out.append(line)
     return out

@@ -102,7 +102,7 @@ def test_the_real_format2_run_replayed_in_format3_reads_back_identical(tmp_path:
     record = RunRecord.create(tmp_path, "lean", "", {})
     replay(old, record)
     record.close()
-    assert json.loads((record.directory / "run.json").read_text())["format"] == 3
+    assert json.loads((record.directory / "run.json").read_text())["format"] == 4  # its lines: 3
     assert_same_lines(list(read_record(record.directory)), old)
     assert_same_lines(raw_lines(record.directory), old)
     kinds = [r["kind"] for r in file_lines(record.directory)]

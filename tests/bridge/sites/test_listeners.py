@@ -106,3 +106,42 @@ def test_a_site_without_record_or_listeners_still_steps() -> None:
     _step(site, 0.5, 0.01)
     assert site.step == 1 and site.daq.force == (2.0,)
     asyncio.run(asyncio.sleep(0))  # nothing was scheduled on a loop
+
+
+class Values:
+    """A step listener that also takes a committed step as values (``StepValuesListener``)."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[Any, ...]] = []
+
+    def step_committed(self, step: CommittedStep) -> None:
+        self.seen.append(("step", step.session, step.step, step.time, step.ctrl, step.daq_disp))
+
+    def step_values(self, session: int, step: int, time: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        self.seen.append(("values", session, step, time, ctrl, daq_disp))
+
+
+def test_listeners_that_all_take_values_get_no_committed_step(tmp_path: Path) -> None:
+    cfg = parse_config(SITE).sites[0]
+    lean, full = Values(), Values()
+    for values, extra in ((lean, None), (full, StepsOnly())):
+        record = RunRecord.create(tmp_path / str(extra is None), "values", SITE, {}, fsync="off")
+        site = ExperimentalSite(cfg, make_controller(cfg), record, controller_timeout=1.0)
+        site.add_listener(values)
+        if extra is not None:  # a listener that needs the CommittedStep: every one gets it
+            site.add_listener(extra)
+            assert site._step_values is None
+        else:
+            assert site._step_values is not None  # the record's writer takes values too
+        site.open_session("127.0.0.1:1")
+        for i in range(1, 4):
+            _step(site, 0.1 * i, 0.01 * i)
+        record.close()
+        steps = [(r["step"], r["time"]) for r in read_record(record.directory)
+                 if r["kind"] == "commit"]
+        assert steps == [(1, 0.01), (2, 0.02), (3, 0.03)]
+    assert [s[0] for s in lean.seen] == ["values"] * 3
+    assert [s[0] for s in full.seen] == ["step"] * 3
+    assert [s[1:] for s in lean.seen] == [s[1:] for s in full.seen]
+    assert lean.seen[-1][1:] == (1, 3, 0.03, (0.30000000000000004,), (0.30000000000000004,))

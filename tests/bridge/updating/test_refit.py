@@ -20,6 +20,7 @@ from fresco_bridge.updating.refit import (
     law_forces,
 )
 from sim_actuator.models import Bilinear, HysteresisModel
+from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 6.0, "fy": 10.0, "alpha": 0.04}
@@ -37,12 +38,7 @@ def _space(disp: np.ndarray, force: np.ndarray) -> FitSpace:
 BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space)
 
 
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+path = ramped_sines
 
 
 def test_compression_keeps_every_reversal_and_the_last_sample() -> None:
@@ -136,3 +132,23 @@ def test_bad_construction_is_a_clear_error(offline: tuple[np.ndarray, np.ndarray
                                            options: dict[str, float], match: str) -> None:
     with pytest.raises(UpdaterError, match=match):
         RefitUpdater(BILINEAR, offline=offline, **options)  # type: ignore[arg-type]
+
+
+def test_the_chaboche_family_recovers_a_known_law_from_its_own_history() -> None:
+    """The family of BENCHMARKS.md part 8a, from its default start: the law is recovered (the
+    back-forces may come back in another order), so another history is predicted exactly."""
+    from benchmarks.refit_families import CHABOCHE, chaboche_law
+
+    true = {"k0": 8.0, "fy": 10.0, "C1": 6.0, "gamma1": 1.5, "C2": 1.0, "gamma2": 0.2,
+            "C3": 0.1, "gamma3": 0.02, "kh": 0.1, "qr": -0.5, "b": 0.2, "hm": 0.05,
+            "qe": -0.2, "be": 0.5}  # fmt: skip
+    d = path(1500, 9.0, 1)
+    f = law_forces(chaboche_law(true), d)
+    keep = compress(d, 3)
+    x = fit_law(CHABOCHE, [(d[keep], f[keep], 1.0)], CHABOCHE.space(d, f), max_nfev=200)
+    fitted = CHABOCHE.params(x)
+    for name in ("k0", "fy", "kh", "qr", "b", "hm", "qe", "be"):
+        assert fitted[name] == pytest.approx(true[name], rel=1e-4, abs=1e-6)
+    other = path(1500, 7.0, 2)
+    predicted = law_forces(chaboche_law(fitted), other)
+    assert np.allclose(predicted, law_forces(chaboche_law(true), other), rtol=0.0, atol=1e-6)

@@ -9,18 +9,14 @@ import pytest
 
 from sim_actuator.models import Bilinear, HysteresisModel, ModelInputError, ModelParameterError
 from sim_actuator.models.chaboche import Chaboche
+from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 8.0, "fy": 12.0, "C1": 6.0, "gamma1": 1.5, "C2": 1.0, "gamma2": 0.1, "C3": 0.2,
        "gamma3": 0.01, "kh": 0.2, "Q": -6.0, "b": 0.3, "hm": 0.2}  # fmt: skip
 
 
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+path = ramped_sines
 
 
 def run(model: HysteresisModel, disp: np.ndarray) -> np.ndarray:
@@ -111,3 +107,25 @@ def test_non_finite_trials_are_refused() -> None:
     with pytest.raises(ModelInputError, match="finite"):
         model.set_trial(math.inf)
     assert model.committed == (0.0, 0.0)
+
+
+def test_the_elastic_range_follows_the_length_of_the_previous_excursion() -> None:
+    """Qe: the range shrinks along a long excursion and stays shrunk (symmetric about the
+    back-force) for the reversal; after a short one the next branch yields late."""
+
+    def reverse_yield(amplitude: float) -> tuple[float, float]:
+        model = Chaboche(k0=8.0, fy=12.0, Qe=-8.0, be=0.5)  # no hardening: back-force 0
+        run(model, np.array([amplitude]))
+        top = model.committed[1]
+        for d in np.linspace(amplitude, amplitude - 4.0, 4001)[1:].tolist():
+            if model.set_trial(d)[1] < 8.0:
+                return top, top - model.committed[1]
+            model.commit()
+        return top, math.inf
+
+    top, drop = reverse_yield(10.0)
+    p = 10.0 - top / 8.0
+    assert top == pytest.approx(12.0 - 8.0 * (1.0 - math.exp(-0.5 * p)), rel=1e-9)
+    assert drop == pytest.approx(2.0 * top, abs=0.01) and top < 4.2
+    top, drop = reverse_yield(1.6)
+    assert drop == pytest.approx(2.0 * top, abs=0.01) and top > 11.0
