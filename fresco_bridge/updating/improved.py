@@ -33,8 +33,9 @@ that is still virgin keeps what the tested element taught while it was virgin). 
 in the default mixture: ``reversal+memory+stops``, ``reversal+memory+hinges``
 (``reversal+memory`` plus force hinges: the knee where the elastic trial force reaches a force
 level, ``branch``), ``baber-wen`` (a degrading Bouc-Wen law without pinching, refitted online on
-the tested element's whole history, ``degrading``; BENCHMARKS.md, updating part 8b). Design F of BENCHMARKS.md (issue 9 part 7) is the default four plus
-``reversal+memory+hinges`` with ``shadow=True``: better on the design records, ~1.4× the cost
+the tested element's whole history, ``degrading``; BENCHMARKS.md, updating part 8b). Design F
+of BENCHMARKS.md (issue 9 part 7) is the default four plus ``reversal+memory+hinges`` with
+``shadow=True``: better on the design records, ~1.4× the cost
 of a replay, so not the default. Each learns by its own exponentially weighted, ridge-regularised
 least squares with Huber gating (``forgetting``, ``ridge``, ``gate``; ``branch.WeightedRls``).
 Cost per step: the experts' updates and shadows, tenths of a millisecond (with ``shadow``,
