@@ -34,8 +34,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.updating.base import UpdaterError
-from fresco_bridge.updating.branch import initial_stiffness
+from fresco_bridge.updating.physics import data_scales
 from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.bwbn import BoucWenBaberNoori
@@ -85,11 +84,7 @@ def _forces(params: Mapping[str, float], disp: FloatArray) -> FloatArray:
 
 
 def _space(disp: FloatArray, force: FloatArray) -> FitSpace:
-    k_init = initial_stiffness(disp, force)
-    f_peak = float(np.max(np.abs(force)))
-    if not (k_init > 0.0 and f_peak > 0.0):
-        raise UpdaterError(f"baber-wen: cannot fit a law to offline data with first-loading "
-                           f"stiffness {k_init!r} and peak force {f_peak!r}")
+    k_init, f_peak = data_scales(disp, force, "Baber-Wen")
     return FitSpace(start=(k_init, f_peak, 0.05, 2.0, 0.5, 1e-3, 1e-3),
                     lower=(0.1 * k_init, 0.05 * f_peak, 0.0, 1.0, 0.01, 0.0, 0.0),
                     upper=(10.0 * k_init, 5.0 * f_peak, 0.5, N_MAX, 1.0, 0.2, 0.2),

@@ -14,18 +14,11 @@ from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
 from fresco_bridge.updating.degrading import BABER_WEN, baber_wen_refit
 from fresco_bridge.updating.improved import OnlineImproved
 from fresco_bridge.updating.refit import fit_law, law_forces
+from tests.support.histories import ramped_sines as path
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 7.5, "fy": 11.0, "alpha": 0.05, "n": 1.3, "beta": 0.6, "delta_nu": 0.003,
        "delta_eta": 0.005}  # fmt: skip
-
-
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
 
 
 def test_the_fast_drive_is_the_law() -> None:
@@ -86,7 +79,7 @@ def test_non_finite_measurements_are_refused(bad: tuple[float, float]) -> None:
 
 
 def test_offline_data_that_never_load_are_a_clear_error() -> None:
-    with pytest.raises(UpdaterError, match="baber-wen"):
+    with pytest.raises(UpdaterError, match="Baber-Wen"):
         baber_wen_refit((np.zeros(50), np.zeros(50)))
 
 
