@@ -119,16 +119,23 @@ def initial_stiffness(disp: FloatArray, force: FloatArray) -> float:
     return float(d @ f) / dd if dd > 0.0 else 0.0
 
 
-def offline_arrays(offline: tuple[npt.ArrayLike, npt.ArrayLike], forgetting: float, ridge: float,
-                   gate: float) -> tuple[FloatArray, FloatArray]:
-    """The offline (displacement, force) as checked float arrays, the learning options checked."""
+def offline_data(offline: tuple[npt.ArrayLike, npt.ArrayLike],
+                 name: str = "online_improved") -> tuple[FloatArray, FloatArray]:
+    """The offline (displacement, force) as checked float arrays (UpdaterError naming ``name``)."""
     disp = np.asarray(offline[0], dtype=np.float64)
     force = np.asarray(offline[1], dtype=np.float64)
     if disp.ndim != 1 or disp.shape != force.shape or disp.size < 20:
-        raise UpdaterError(f"online_improved: offline data must be two equal 1-D arrays of "
+        raise UpdaterError(f"{name}: offline data must be two equal 1-D arrays of "
                            f">= 20 samples, got shapes {disp.shape} and {force.shape}")
     if not (np.all(np.isfinite(disp)) and np.all(np.isfinite(force))):
-        raise UpdaterError("online_improved: offline data contain NaN or inf")
+        raise UpdaterError(f"{name}: offline data contain NaN or inf")
+    return disp, force
+
+
+def offline_arrays(offline: tuple[npt.ArrayLike, npt.ArrayLike], forgetting: float, ridge: float,
+                   gate: float) -> tuple[FloatArray, FloatArray]:
+    """The offline (displacement, force) as checked float arrays, the learning options checked."""
+    disp, force = offline_data(offline)
     if not (0.9 <= forgetting <= 1.0 and ridge > 0.0 and gate > 0.0):
         raise UpdaterError(f"online_improved: need 0.9 <= forgetting <= 1, ridge > 0, "
                            f"gate > 0 (got {forgetting}, {ridge}, {gate})")  # fmt: skip

@@ -27,10 +27,11 @@ import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BasisTwin, BranchRls, initial_stiffness
-from sim_actuator.models.base import HysteresisModel, ModelInputError, ModelParameterError
+from fresco_bridge.updating.refit import FitSpace, LawFamily, fit_law, law_forces
+from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.bouc_wen import BoucWen
 
-__all__ = ["BOUC_WEN_DZ_MAX", "PhysicsResidual", "bouc_wen_forces", "fit_bouc_wen"]
+__all__ = ["BOUC_WEN", "BOUC_WEN_DZ_MAX", "PhysicsResidual", "bouc_wen_forces", "fit_bouc_wen"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -45,38 +46,33 @@ _PARAMS = ("k0", "fy", "alpha", "n", "beta", "gamma")
 
 def bouc_wen_forces(params: dict[str, float], disp: FloatArray) -> FloatArray:
     """The law's force along a displacement history from the virgin state."""
-    model = BoucWen(**params, dz_max=BOUC_WEN_DZ_MAX)
-    out = np.empty(disp.size)
-    for i, d in enumerate(disp.tolist()):
-        out[i] = model.set_trial(d)[0]
-        model.commit()
-    return out
+    return law_forces(BoucWen(**params, dz_max=BOUC_WEN_DZ_MAX), disp)
 
 
-def fit_bouc_wen(disp: FloatArray, force: FloatArray) -> dict[str, float]:
-    """Bouc-Wen parameters fitted to a (d, F) history (see the module docstring)."""
-    from scipy.optimize import least_squares  # type: ignore[import-untyped]
-
+def _bouc_wen_space(disp: FloatArray, force: FloatArray) -> FitSpace:
     k_init = initial_stiffness(disp, force)
     f_peak = float(np.max(np.abs(force)))
     if not (k_init > 0.0 and f_peak > 0.0):
         raise UpdaterError(f"online_improved: cannot fit a Bouc-Wen law to offline data with "
                            f"first-loading stiffness {k_init!r} and peak force {f_peak!r}")
+    return FitSpace(start=(k_init, f_peak, 0.05, 2.0, 0.5, 0.5),
+                    lower=(0.1 * k_init, 0.05 * f_peak, 0.0, 1.0, 0.01, 0.0),
+                    upper=(10.0 * k_init, 5.0 * f_peak, 0.5, 20.0, 5.0, 5.0),
+                    scale=(k_init, f_peak, 0.01, 1.0, 0.1, 0.1))  # fmt: skip
+
+
+BOUC_WEN = LawFamily("bouc-wen", _PARAMS,
+                     lambda p: BoucWen(**p, dz_max=BOUC_WEN_DZ_MAX), _bouc_wen_space)
+"""The classic Bouc-Wen law, all six parameters free (``refit.LawFamily``)."""
+
+
+def fit_bouc_wen(disp: FloatArray, force: FloatArray) -> dict[str, float]:
+    """Bouc-Wen parameters fitted to a (d, F) history (see the module docstring)."""
+    space = _bouc_wen_space(disp, force)
     d, f = disp[::_FIT_STRIDE], force[::_FIT_STRIDE]
-    start = np.array([k_init, f_peak, 0.05, 2.0, 0.5, 0.5])
-    lower = [0.1 * k_init, 0.05 * f_peak, 0.0, 1.0, 0.01, 0.0]
-    upper = [10.0 * k_init, 5.0 * f_peak, 0.5, 20.0, 5.0, 5.0]
-    bad = np.full(d.size, 10.0 * f_peak)
-
-    def residual(x: FloatArray) -> FloatArray:
-        try:
-            return bouc_wen_forces(dict(zip(_PARAMS, x.tolist(), strict=True)), d) - f
-        except (ModelInputError, ModelParameterError):
-            return bad
-
-    fit: Any = least_squares(residual, start, bounds=(lower, upper), max_nfev=_FIT_EVALUATIONS,
-                             x_scale=[k_init, f_peak, 0.01, 1.0, 0.1, 0.1])  # fmt: skip
-    return dict(zip(_PARAMS, (float(v) for v in fit.x), strict=True))
+    x = fit_law(BOUC_WEN, [(d, f, 1.0)], space, max_nfev=_FIT_EVALUATIONS,
+                penalty=10.0 * float(np.max(np.abs(force))))  # fmt: skip
+    return BOUC_WEN.params(x)
 
 
 class _PhysicsTwin:

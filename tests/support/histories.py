@@ -27,6 +27,15 @@ def disp_history(n: int, seed: int, amp: float = 4.0, dt: float = 0.01) -> np.nd
     return amp * d / np.max(np.abs(d))
 
 
+def ramped_sines(n: int, amplitude: float, seed: int) -> np.ndarray:
+    """Two sines (seeded phase) under a 2 s linear ramp, 0.01 s samples (mm)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    phase = rng.uniform(0.0, 6.0)
+    ramp = np.minimum(1.0, t / 2.0)
+    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+
+
 def force_history(d: np.ndarray, kind: str = "bwbn", params: dict[str, float] | None = None
                   ) -> np.ndarray:
     """Force (kN) of a sim_actuator law driven through ``d`` from the virgin state."""

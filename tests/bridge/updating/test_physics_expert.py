@@ -10,17 +10,13 @@ import pytest
 
 from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
 from fresco_bridge.updating.physics import PhysicsResidual, bouc_wen_forces, fit_bouc_wen
+from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics
 
 LAW = {"k0": 6.0, "fy": 10.0, "alpha": 0.04, "n": 2.0, "beta": 0.6, "gamma": 0.4}
 
 
-def path(n: int, amplitude: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * 0.01
-    phase = rng.uniform(0.0, 6.0)
-    ramp = np.minimum(1.0, t / 2.0)
-    return np.asarray(amplitude * ramp * (np.sin(2.3 * t) + 0.4 * np.sin(5.1 * t + phase)))
+path = ramped_sines
 
 
 def test_the_fit_recovers_a_bouc_wen_law_from_its_own_history() -> None:

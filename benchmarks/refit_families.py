@@ -1,0 +1,152 @@
+"""Law families for ``updating.refit`` tried on the design records (issue 9, BENCHMARKS.md
+"updating part 8a"), as ``benchmarks.updater_design --factory`` functions.
+
+``chaboche`` (``sim_actuator.models.chaboche``): 14 free parameters, the Voce and excursion
+changes of the elastic range as fractions of fy (``qr``, ``qe`` in [-0.999, 1], their sum kept
+above -0.98 and the softening rates below the law's limit, so every point of the box is a
+valid law), bounds and scales from the data (first-loading stiffness k, peak force, k/peak).
+Why it is outside both specimens: the law's docstring. Factories:
+
+* ``chaboche_online``: ``RefitUpdater`` on the law alone (options: ``every``, ``stride``,
+  ``max_nfev``, ``offline_weight``, ``warmup``);
+* ``chaboche_mixture``: the default ``online_improved`` (design E) with the refitted law as a
+  fifth expert, scored like the others (same options, for the law);
+* ``chaboche_residual``: the refitted law plus E's memory basis on its residual (the
+  ``bouc-wen+memory`` expert with the law refitted online), ``chaboche_residual_mixture``: that
+  as E's fifth expert.
+
+``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
+benchmarks.refit_families:chaboche_online [--only menegotto-pinto]``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from fresco_bridge.updating.base import OwnsTwin
+from fresco_bridge.updating.branch import BranchRls, initial_stiffness
+from fresco_bridge.updating.improved import OnlineImproved, _MixtureTwin
+from fresco_bridge.updating.physics import _PhysicsTwin
+from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater, law_forces
+from fresco_bridge.updating.shadow import stepper
+from sim_actuator.models.base import HysteresisModel
+from sim_actuator.models.chaboche import Chaboche
+
+FloatArray = npt.NDArray[np.float64]
+
+CHABOCHE_FREE = ("k0", "fy", "C1", "gamma1", "C2", "gamma2", "C3", "gamma3", "kh", "qr", "b",
+                 "hm", "qe", "be")  # fmt: skip
+
+
+def chaboche_space(disp: FloatArray, force: FloatArray,
+                   free: tuple[str, ...] = CHABOCHE_FREE) -> FitSpace:  # fmt: skip
+    """Start, bounds, scales (see the module docstring)."""
+    k = initial_stiffness(disp, force)
+    fp = float(np.max(np.abs(force)))
+    dref = fp / k
+    table = {  # start, lower, upper, scale
+        "k0": (k, 0.3 * k, 3 * k, k),
+        "fy": (0.7 * fp, 0.05 * fp, 2 * fp, fp),
+        "C1": (0.3 * k, 0.0, 5 * k, k),
+        "gamma1": (1.0 / dref, 0.05 / dref, 50 / dref, 1 / dref),
+        "C2": (0.02 * k, 0.0, 1 * k, 0.1 * k),
+        "gamma2": (0.1 / dref, 0.001 / dref, 5 / dref, 0.1 / dref),
+        "C3": (0.005 * k, 0.0, 0.5 * k, 0.01 * k),
+        "gamma3": (0.01 / dref, 0.0001 / dref, 1 / dref, 0.01 / dref),
+        "kh": (0.02 * k, 0.0, 0.5 * k, 0.01 * k),
+        "qr": (-0.3, -0.999, 1.0, 0.1),
+        "b": (0.2 / dref, 0.005 / dref, 10 / dref, 0.1 / dref),
+        "hm": (0.01 * k, 0.0, 0.5 * k, 0.01 * k),
+        "qe": (-0.3, -0.999, 1.0, 0.1),
+        "be": (1.0 / dref, 0.01 / dref, 50 / dref, 0.1 / dref),
+    }
+    rows = [table[name] for name in free]
+    return FitSpace(*(tuple(row[i] for row in rows) for i in range(4)))
+
+
+def chaboche_law(free: Mapping[str, float]) -> Chaboche:
+    """The law from the fit's parameters (``qr``, ``qe``: fractions of fy, kept valid)."""
+    p = dict(free)
+    qr, qe = p.pop("qr", 0.0), p.pop("qe", 0.0)
+    negative = min(qr, 0.0) + min(qe, 0.0)
+    if negative < -0.98:
+        qr, qe = (x * -0.98 / negative if x < 0.0 else x for x in (qr, qe))
+    p["Q"], p["Qe"] = qr * p["fy"], qe * p["fy"]
+    limit = 0.95 * p["k0"]  # |Q| b + |Qe| be below k0, split evenly
+    if p["Q"] < 0.0:
+        p["b"] = min(p.get("b", 1.0), 0.5 * limit / -p["Q"])
+    if p["Qe"] < 0.0:
+        p["be"] = min(p.get("be", 1.0), 0.5 * limit / -p["Qe"])
+    return Chaboche(**p)
+
+
+CHABOCHE = LawFamily("chaboche", CHABOCHE_FREE, chaboche_law, chaboche_space)
+
+
+def chaboche_online(disp: FloatArray, force: FloatArray, **options: Any) -> RefitUpdater:
+    """The refitted Chaboche law alone."""
+    return RefitUpdater(CHABOCHE, offline=(disp, force), name="chaboche_refit", **options)
+
+
+def chaboche_mixture(disp: FloatArray, force: FloatArray, **options: Any) -> OnlineImproved:
+    """Design E with the refitted Chaboche law as a fifth expert."""
+    return _with_expert(OnlineImproved(offline=(disp, force)), "chaboche-refit",
+                        chaboche_online(disp, force, **options))
+
+
+def _with_expert(mixture: OnlineImproved, name: str, expert: Any) -> OnlineImproved:
+    """``mixture`` with one more expert, scored like the others from its first step."""
+    mixture.experts.append(expert)
+    mixture.expert_names = (*mixture.expert_names, name)
+    mixture.scores = np.append(mixture.scores, mixture.scores[0])
+    mixture._shadows.append(stepper(expert.twin.clone()))
+    mixture._twin = _MixtureTwin(mixture, [e.twin for e in mixture.experts])
+    return mixture
+
+
+class RefitResidual(OwnsTwin):
+    """The refitted law plus design E's memory basis learning its residual online (the
+    ``bouc-wen+memory`` expert of ``physics`` with the law refitted instead of fixed)."""
+
+    name = "chaboche+memory"
+
+    def __init__(self, family: LawFamily, *, offline: tuple[FloatArray, FloatArray],
+                 **options: Any) -> None:  # fmt: skip
+        disp, force = offline
+        self.law = RefitUpdater(family, offline=offline, name=self.name, **options)
+        law_force = law_forces(family.build(self.law.parameters), disp)
+        self.residual = BranchRls(offline=(disp, force - law_force), memory_terms=True,
+                                  force_scale=float(np.max(np.abs(force))),
+                                  stiffness=initial_stiffness(disp, force), shrink=True)
+        self._twin = _PhysicsTwin(self.law.twin, self.residual.twin)
+        self._last_update = 0.0
+
+    def source_twin(self) -> HysteresisModel:
+        return _PhysicsTwin(self.law.source_twin(), self.residual.source_twin())
+
+    def predict(self, d: float) -> float:
+        return self.law.predict(d) + self.residual.predict(d)
+
+    def observe(self, d: float, force: float) -> None:
+        start = time.perf_counter()
+        f_law = self.law.predict(d)
+        self.law.observe(d, force)
+        self.residual.observe(d, force - f_law)
+        self._last_update = time.perf_counter() - start
+
+
+def chaboche_residual(disp: FloatArray, force: FloatArray, **options: Any) -> RefitResidual:
+    """The refitted Chaboche law plus the memory basis on its residual."""
+    return RefitResidual(CHABOCHE, offline=(disp, force), **options)
+
+
+def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
+                              **options: Any) -> OnlineImproved:  # fmt: skip
+    """Design E with ``chaboche_residual`` as a fifth expert."""
+    return _with_expert(OnlineImproved(offline=(disp, force)), "chaboche+memory",
+                        chaboche_residual(disp, force, **options))

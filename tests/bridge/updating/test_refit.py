@@ -1,0 +1,154 @@
+"""The online-refit infrastructure (``updating.refit``): compression keeps a rate-independent
+law's states, the fit recovers a known law, the updater refits on schedule with material
+semantics for its twin and its clones, and bad input changes nothing."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pytest
+
+from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
+from fresco_bridge.updating.refit import (
+    FitSpace,
+    LawFamily,
+    RefitUpdater,
+    compress,
+    fit_law,
+    law_forces,
+)
+from sim_actuator.models import Bilinear, HysteresisModel
+from tests.support.histories import ramped_sines
+from tests.support.material import assert_material_semantics
+
+LAW = {"k0": 6.0, "fy": 10.0, "alpha": 0.04}
+
+
+def _build(p: Mapping[str, float]) -> HysteresisModel:
+    return Bilinear(**p)
+
+
+def _space(disp: np.ndarray, force: np.ndarray) -> FitSpace:
+    return FitSpace(start=(4.0, 6.0, 0.1), lower=(1.0, 1.0, 0.0), upper=(20.0, 30.0, 0.5),
+                    scale=(1.0, 1.0, 0.01))  # fmt: skip
+
+
+BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space)
+
+
+path = ramped_sines
+
+
+def test_compression_keeps_every_reversal_and_the_last_sample() -> None:
+    d = np.array([0.0, 1.0, 2.0, 2.0, 1.0, 0.0, -1.0, 0.5, 0.7, 0.8])
+    keep = compress(d, 4).tolist()
+    assert keep == [0, 3, 4, 6, 8, 9]  # stride 0, 4, 8; reversals at 3 (after a flat step), 6
+    assert compress(np.zeros(0), 3).size == 0
+
+
+def test_a_compressed_history_gives_a_rate_independent_law_the_same_state() -> None:
+    d = path(2000, 5.0, 1)
+    full = law_forces(Bilinear(**LAW), d)
+    keep = compress(d, 7)
+    assert keep.size < d.size / 3
+    assert np.allclose(law_forces(Bilinear(**LAW), d[keep]), full[keep], rtol=0, atol=1e-9)
+
+
+def test_the_fit_recovers_a_known_law_from_its_history() -> None:
+    d = path(800, 8.0, 2)
+    f = law_forces(Bilinear(**LAW), d)
+    x = fit_law(BILINEAR, [(d, f, 1.0)], _space(d, f), max_nfev=100)
+    assert BILINEAR.params(x) == pytest.approx(LAW, rel=1e-3)
+
+
+def test_a_law_that_rejects_a_parameter_set_scores_the_penalty() -> None:
+    d = path(100, 8.0, 2)
+    f = law_forces(Bilinear(**LAW), d)
+    bad = FitSpace(start=(6.0, 10.0, 2.0), lower=(1.0, 1.0, 1.5), upper=(20.0, 30.0, 3.0),
+                   scale=(1.0, 1.0, 0.1))  # fmt: skip
+    x = fit_law(BILINEAR, [(d, f, 1.0)], bad, max_nfev=3, penalty=1e3)
+    assert np.all(np.isfinite(x))  # alpha >= 1 is refused by Bilinear: no crash, a penalty
+
+
+@pytest.fixture()
+def updater() -> RefitUpdater:
+    d = path(300, 8.0, 1)
+    off = {"k0": 5.0, "fy": 8.0, "alpha": 0.1}  # the offline law differs from the online one
+    return RefitUpdater(BILINEAR, offline=(d, law_forces(Bilinear(**off), d)), every=100,
+                        warmup=100, max_nfev=30, offline_weight=0.0)  # fmt: skip
+
+
+def test_the_updater_is_an_updater_and_its_twin_a_material(updater: RefitUpdater) -> None:
+    assert isinstance(updater, Updater)
+    assert_material_semantics(updater.twin)
+
+
+def test_refits_move_the_law_and_the_twin_and_its_clones_follow(updater: RefitUpdater) -> None:
+    assert updater.parameters == pytest.approx({"k0": 5.0, "fy": 8.0, "alpha": 0.1}, rel=1e-2)
+    d_src, d_twin = path(300, 8.0, 3), path(300, 6.0, 4)
+    f_src = law_forces(Bilinear(**LAW), d_src)
+    twin = updater.twin
+    shadow = twin.clone()
+    for i in range(299):
+        updater.observe(float(d_src[i]), float(f_src[i]))
+        twin.set_trial(float(d_twin[i]))
+        twin.set_trial(float(d_twin[i]) + 1.0)  # a second trial advances nothing
+        twin.set_trial(float(d_twin[i]))
+        twin.commit()
+        shadow.set_trial(float(d_twin[i]))
+        shadow.commit()
+    assert updater.refits == 2
+    assert updater.parameters == pytest.approx(LAW, rel=1e-3)
+    truth = law_forces(Bilinear(**LAW), d_twin[:299])
+    assert twin.committed[1] == pytest.approx(truth[-1], abs=1e-6)
+    assert shadow.committed[1] == pytest.approx(truth[-1], abs=1e-6)
+    assert updater.predict(float(d_src[299])) == pytest.approx(f_src[299], abs=1e-6)
+    assert updater.last_update_seconds >= 0.0
+
+
+@pytest.mark.parametrize("bad", [(math.nan, 1.0), (1.0, math.inf)])
+def test_non_finite_measurements_are_refused_and_change_nothing(
+    updater: RefitUpdater, bad: tuple[float, float]
+) -> None:
+    updater.observe(1.0, 5.0)
+    state = updater.source_twin().committed
+    with pytest.raises(UpdaterInputError, match="finite"):
+        updater.observe(*bad)
+    assert updater.source_twin().committed == state
+
+
+@pytest.mark.parametrize(
+    ("offline", "options", "match"),
+    [
+        ((np.zeros(5), np.zeros(5)), {}, "20 samples"),
+        ((np.full(30, math.nan), np.zeros(30)), {}, "NaN"),
+        ((np.zeros(30), np.zeros(30)), {"every": 0}, ">= 1"),
+        ((np.zeros(30), np.zeros(30)), {"offline_weight": -1.0}, "offline_weight"),
+    ],
+)
+def test_bad_construction_is_a_clear_error(offline: tuple[np.ndarray, np.ndarray],
+                                           options: dict[str, float], match: str) -> None:
+    with pytest.raises(UpdaterError, match=match):
+        RefitUpdater(BILINEAR, offline=offline, **options)  # type: ignore[arg-type]
+
+
+def test_the_chaboche_family_recovers_a_known_law_from_its_own_history() -> None:
+    """The family of BENCHMARKS.md part 8a, from its default start: the law is recovered (the
+    back-forces may come back in another order), so another history is predicted exactly."""
+    from benchmarks.refit_families import CHABOCHE, chaboche_law
+
+    true = {"k0": 8.0, "fy": 10.0, "C1": 6.0, "gamma1": 1.5, "C2": 1.0, "gamma2": 0.2,
+            "C3": 0.1, "gamma3": 0.02, "kh": 0.1, "qr": -0.5, "b": 0.2, "hm": 0.05,
+            "qe": -0.2, "be": 0.5}  # fmt: skip
+    d = path(1500, 9.0, 1)
+    f = law_forces(chaboche_law(true), d)
+    keep = compress(d, 3)
+    x = fit_law(CHABOCHE, [(d[keep], f[keep], 1.0)], CHABOCHE.space(d, f), max_nfev=200)
+    fitted = CHABOCHE.params(x)
+    for name in ("k0", "fy", "kh", "qr", "b", "hm", "qe", "be"):
+        assert fitted[name] == pytest.approx(true[name], rel=1e-4, abs=1e-6)
+    other = path(1500, 7.0, 2)
+    predicted = law_forces(chaboche_law(fitted), other)
+    assert np.allclose(predicted, law_forces(chaboche_law(true), other), rtol=0.0, atol=1e-6)
