@@ -150,3 +150,52 @@ def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
     """Design E with ``chaboche_residual`` as a fifth expert."""
     return _with_expert(OnlineImproved(offline=(disp, force)), "chaboche+memory",
                         chaboche_residual(disp, force, **options))
+
+
+def capacity(specimen: str, seed: int, starts: int = 6) -> dict[str, dict[str, float]]:
+    """Step 1 of the spike: the family fitted in hindsight (best of ``starts``, every 3rd sample
+    plus reversals) to (a) the tested element's and (b) the twin's own whole history of the
+    reference case (``kanai_tajimi`` 3 m/s², 20 s, ``seed``, 0 % noise), then the twin free-runs
+    with those parameters in closed loop; MAETH against the twin's true force."""
+    from fresco_bridge import indicators
+    from fresco_bridge.integrator import kanai_tajimi
+    from fresco_bridge.study.simulate import simulate_case, specimen_model
+    from fresco_bridge.updating.refit import compress, fit_law
+    from fresco_bridge.updating.updaters import FixedModelUpdater
+
+    motion = kanai_tajimi(3.0, 20.0, seed=seed)
+    ref = simulate_case("generalisation", specimen,
+                        FixedModelUpdater("reference", specimen_model(specimen)), motion)
+    out = {}
+    for label, d, f in (("tested", ref.tested_drift, ref.tested_force),
+                        ("twin", ref.twin_drift, ref.twin_true_force)):  # fmt: skip
+        space = CHABOCHE.space(d, f)
+        keep = compress(d, 3)
+        rng = np.random.default_rng(0)
+        lower, upper = np.array(space.lower), np.array(space.upper)
+        best: tuple[float, FloatArray] | None = None
+        for i in range(starts):
+            x0 = np.array(space.start)
+            if i:
+                x0 = np.clip(x0 * np.exp(rng.normal(0.0, 1.0, x0.size)), lower, upper)
+                x0[CHABOCHE_FREE.index("qr")] = -rng.uniform(0.3, 0.9)
+                x0[CHABOCHE_FREE.index("qe")] = -rng.uniform(0.1, 0.6)
+            x = fit_law(CHABOCHE, [(d[keep], f[keep], 1.0)], space, start=x0, max_nfev=200)
+            rms = float(np.sqrt(np.mean((law_forces(chaboche_law(CHABOCHE.params(x)), d)
+                                         - f) ** 2)))  # fmt: skip
+            if best is None or rms < best[0]:
+                best = (rms, x)
+        assert best is not None
+        law = chaboche_law(CHABOCHE.params(best[1]))
+        fit_max = float(np.max(np.abs(law_forces(law.clone(), d) - f)))
+        run = simulate_case("generalisation", specimen, FixedModelUpdater("chaboche", law), motion)
+        out[label] = {"fit_rms": best[0], "fit_max": fit_max,
+                      "maeth": indicators.maeth(run.twin_true_force, run.twin_force)}
+    return out
+
+
+if __name__ == "__main__":
+    import sys
+
+    for name, row in capacity(sys.argv[1], int(sys.argv[2])).items():
+        print(sys.argv[1], sys.argv[2], name, {k: round(v, 3) for k, v in row.items()})
