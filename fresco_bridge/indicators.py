@@ -38,6 +38,7 @@ force ``pred`` an updatable numerical element predicted:
 
 from __future__ import annotations
 
+import functools
 import math
 from array import array
 from collections.abc import Sequence
@@ -201,7 +202,7 @@ def fei(
     c = c - c.mean()
     m = m - m.mean()
     if taper:
-        hann = np.hanning(c.size)
+        hann = _hann(c.size)
         c = c * hann
         m = m * hann
     xc = np.fft.rfft(c)[1:]
@@ -219,6 +220,15 @@ def fei(
     amplitude = abs(index)
     delay = -math.atan2(index.imag, index.real) / (2.0 * math.pi * f_eq)
     return amplitude, delay
+
+
+@functools.lru_cache(maxsize=8)
+def _hann(n: int) -> FloatArray:
+    """``np.hanning(n)``, made once per length (read-only): 9 of the 38 µs of a 512-point
+    ``fei`` (the online monitor's, every ``window/4`` steps)."""
+    window = np.hanning(n)
+    window.flags.writeable = False
+    return window
 
 
 def xcorr_delay(cmd: Signal, meas: Signal, dt: float, max_lag: int) -> float:

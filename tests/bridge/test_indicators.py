@@ -226,3 +226,11 @@ def test_update_many_stops_at_a_non_finite_pair_after_the_pairs_before_it() -> N
     with pytest.raises(IndicatorError, match="step 1: cmd=nan"):
         many.update_many([(1.0, 1.5), (math.nan, 0.0), (2.0, 2.0)])
     assert repr(many.__dict__) == repr(one.__dict__)
+
+
+def test_the_taper_is_made_once_per_length_and_cannot_be_changed() -> None:
+    from fresco_bridge.indicators import _hann
+
+    assert np.array_equal(_hann(512), np.hanning(512)) and _hann(512) is _hann(512)
+    with pytest.raises(ValueError, match="read-only"):
+        _hann(512)[0] = 1.0

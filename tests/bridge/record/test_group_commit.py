@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from fresco_bridge.integrator.link import GenericClientLink
-from fresco_bridge.record import RecordError, RunRecord, read_record
+from fresco_bridge.record import RecordError, RunRecord, read_record, writer
 from fresco_bridge.record.export import committed_steps, monitor_lines
 from fresco_bridge.telemetry.taps import MONITOR_BATCH_STEPS
 
@@ -113,6 +113,36 @@ def test_a_failed_fdatasync_is_reported_once_and_retried_on_the_next_commit(
         wait_for(lambda: record.durable_lines == record.lines == 9, "the retry")
         assert record.syncs == 1
     finally:
+        record.close()
+    assert [s.step for s in committed_steps(record.directory)] == [1, 2, 3]
+
+
+def test_a_short_write_is_finished_and_a_failed_one_reported(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A commit's ``write``: a short one is completed before the commit returns, a failed one
+    raises RecordError at once."""
+    real = writer._os_write
+    mode, calls = [""], [0]
+
+    def flaky(fd: int, data: bytes) -> int:
+        calls[0] += 1
+        if calls[0] == 2:  # step 2's line: a signal, a nearly full disk
+            return real(fd, bytes(data[:7]))
+        if mode[0] == "fail":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data)
+
+    monkeypatch.setattr(writer, "_os_write", flaky)
+    record = RunRecord.create(tmp_path, "g", "", {}, fsync="off")
+    try:
+        for n in (1, 2, 3):
+            step(record, n)  # step 2: a step line, written in two parts
+        assert calls[0] == 4
+        mode[0] = "fail"
+        with pytest.raises(RecordError, match="write failed: No space left on device"):
+            step(record, 4)
+    finally:
+        mode[0] = ""
         record.close()
     assert [s.step for s in committed_steps(record.directory)] == [1, 2, 3]
 
