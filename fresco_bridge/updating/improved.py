@@ -32,8 +32,10 @@ basis plus stop operators scheduled on the element's own plastic deformation, ``
 that is still virgin keeps what the tested element taught while it was virgin). Optional, not
 in the default mixture: ``reversal+memory+stops``, ``reversal+memory+hinges``
 (``reversal+memory`` plus force hinges: the knee where the elastic trial force reaches a force
-level, ``branch``). Design F of BENCHMARKS.md (issue 9 part 7) is the default four plus
-``reversal+memory+hinges`` with ``shadow=True``: better on the design records, ~1.4× the cost
+level, ``branch``), ``baber-wen`` (a degrading Bouc-Wen law without pinching, refitted online on
+the tested element's whole history, ``degrading``; BENCHMARKS.md, updating part 8b). Design F
+of BENCHMARKS.md (issue 9 part 7) is the default four plus ``reversal+memory+hinges`` with
+``shadow=True``: better on the design records, ~1.4× the cost
 of a replay, so not the default. Each learns by its own exponentially weighted, ridge-regularised
 least squares with Huber gating (``forgetting``, ``ridge``, ``gate``; ``branch.WeightedRls``).
 Cost per step: the experts' updates and shadows, tenths of a millisecond (with ``shadow``,
@@ -61,7 +63,7 @@ FloatArray = npt.NDArray[np.float64]
 EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
 """The experts ``online_improved`` combines by default."""
 
-OPTIONAL_EXPERTS = ("reversal+memory+stops", "reversal+memory+hinges")
+OPTIONAL_EXPERTS = ("reversal+memory+stops", "reversal+memory+hinges", "baber-wen")
 """Experts that can be asked for by name but are not in the default mixture."""
 
 SCORES = ("both", "free-run", "one-step")
@@ -176,6 +178,10 @@ class OnlineImproved(OwnsTwin):
                 from fresco_bridge.updating.physics import PhysicsResidual
 
                 built.append(PhysicsResidual(offline=offline, **rls))
+            elif name == "baber-wen":
+                from fresco_bridge.updating.degrading import baber_wen_refit
+
+                built.append(baber_wen_refit(offline))
             elif name in ("reversal+stops", "reversal+memory+stops"):
                 from fresco_bridge.updating.play import BranchStopRls
 

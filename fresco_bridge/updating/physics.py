@@ -31,7 +31,14 @@ from fresco_bridge.updating.refit import FitSpace, LawFamily, fit_law, law_force
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.bouc_wen import BoucWen
 
-__all__ = ["BOUC_WEN", "BOUC_WEN_DZ_MAX", "PhysicsResidual", "bouc_wen_forces", "fit_bouc_wen"]
+__all__ = [
+    "BOUC_WEN",
+    "BOUC_WEN_DZ_MAX",
+    "PhysicsResidual",
+    "bouc_wen_forces",
+    "data_scales",
+    "fit_bouc_wen",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -49,12 +56,19 @@ def bouc_wen_forces(params: dict[str, float], disp: FloatArray) -> FloatArray:
     return law_forces(BoucWen(**params, dz_max=BOUC_WEN_DZ_MAX), disp)
 
 
-def _bouc_wen_space(disp: FloatArray, force: FloatArray) -> FitSpace:
+def data_scales(disp: FloatArray, force: FloatArray, law: str) -> tuple[float, float]:
+    """(first-loading stiffness, peak |force|) of a (d, F) history: where a law's fit starts;
+    UpdaterError naming ``law`` when the data never load."""
     k_init = initial_stiffness(disp, force)
     f_peak = float(np.max(np.abs(force)))
     if not (k_init > 0.0 and f_peak > 0.0):
-        raise UpdaterError(f"online_improved: cannot fit a Bouc-Wen law to offline data with "
+        raise UpdaterError(f"online_improved: cannot fit a {law} law to offline data with "
                            f"first-loading stiffness {k_init!r} and peak force {f_peak!r}")
+    return k_init, f_peak
+
+
+def _bouc_wen_space(disp: FloatArray, force: FloatArray) -> FitSpace:
+    k_init, f_peak = data_scales(disp, force, "Bouc-Wen")
     return FitSpace(start=(k_init, f_peak, 0.05, 2.0, 0.5, 0.5),
                     lower=(0.1 * k_init, 0.05 * f_peak, 0.0, 1.0, 0.01, 0.0),
                     upper=(10.0 * k_init, 5.0 * f_peak, 0.5, 20.0, 5.0, 5.0),

@@ -73,6 +73,9 @@ class LawFamily:
     free: tuple[str, ...]
     build: Callable[[Mapping[str, float]], HysteresisModel]
     space: Callable[[FloatArray, FloatArray], FitSpace]
+    forces: Callable[[Mapping[str, float], FloatArray], FloatArray] | None = None
+    """Optional fast form of ``law_forces(build(params), disp)`` for the fit (e.g. a JIT drive
+    of ``sim_actuator.models.paths``, the same algorithm); NaN where the law refuses."""
 
     def params(self, x: Sequence[float] | FloatArray) -> dict[str, float]:
         """The free parameters by name."""
@@ -128,7 +131,9 @@ def fit_law(family: LawFamily, histories: Sequence[tuple[FloatArray, FloatArray,
 
     def residual(x: FloatArray) -> FloatArray:
         try:
-            parts = [r * (law_forces(family.build(family.params(x)), d) - f)
+            params = family.params(x)
+            parts = [r * ((family.forces(params, d) if family.forces is not None
+                           else law_forces(family.build(params), d)) - f)
                      for (d, f, _), r in zip(histories, roots, strict=True)]  # fmt: skip
         except (ModelInputError, ModelParameterError):
             return bad
