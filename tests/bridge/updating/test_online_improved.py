@@ -167,7 +167,8 @@ def test_initial_stiffness_is_the_first_loading_slope() -> None:
 
 
 def test_every_expert_is_available() -> None:
-    assert EXPERTS == ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops")
+    assert EXPERTS == ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops",
+                       "baber-wen")
     d = cyclic(300, 10.0, 1)
     optional = OnlineImproved(offline=(d, drive(d)), experts="reversal+memory+stops")
     assert optional.expert_names == ("reversal+memory+stops",)
