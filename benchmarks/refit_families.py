@@ -15,7 +15,13 @@ Why it is outside both specimens: the law's docstring. Factories:
   ``bouc-wen+memory`` expert with the law refitted online), ``chaboche_residual_mixture``: that
   as E's fifth expert.
 
-``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
+``excursion_bw`` (``sim_actuator.models.excursion_bw``, BENCHMARKS.md "updating part 8c"): Bouc-Wen
+with the exponent scheduled on the previous plastic excursion, isotropic hardening on the range
+and the transition origin ``c`` (0: beta = gamma); 9 free parameters, ``n_min`` clipped to
+``n0``; fitted through the JIT drive. Capacity only (it failed there).
+
+``python -m benchmarks.refit_families <specimen> <seed> [chaboche|excursion-bw]``: step-1
+capacity. ``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
 benchmarks.refit_families:chaboche_online [--only menegotto-pinto]``.
 """
 
@@ -31,11 +37,12 @@ import numpy.typing as npt
 from fresco_bridge.updating.base import OwnsTwin
 from fresco_bridge.updating.branch import BranchRls, initial_stiffness
 from fresco_bridge.updating.improved import OnlineImproved, _MixtureTwin
-from fresco_bridge.updating.physics import _PhysicsTwin
+from fresco_bridge.updating.physics import _PhysicsTwin, data_scales
 from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater, law_forces
 from fresco_bridge.updating.shadow import stepper
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.chaboche import Chaboche
+from sim_actuator.models.excursion_bw import ExcursionBoucWen, drive
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -86,6 +93,36 @@ def chaboche_law(free: Mapping[str, float]) -> Chaboche:
 
 
 CHABOCHE = LawFamily("chaboche", CHABOCHE_FREE, chaboche_law, chaboche_space)
+
+
+EXCURSION_FREE = ("k0", "fy", "alpha", "n0", "n_min", "xi0", "a", "p", "c")
+
+
+def excursion_space(disp: FloatArray, force: FloatArray) -> FitSpace:
+    """Start, bounds, scales from the first-loading stiffness and the peak force."""
+    k, fp = data_scales(disp, force, "excursion Bouc-Wen")
+    return FitSpace(start=(k, fp, 0.03, 10.0, 1.5, 0.5, 0.03, 0.8, 0.8),
+                    lower=(0.25 * k, 0.15 * fp, 0.0, 1.0, 0.5, 0.01, 0.0, 0.1, 0.0),
+                    upper=(4.0 * k, 3.0 * fp, 0.5, 60.0, 60.0, 100.0, 1.0, 2.0, 1.0),
+                    scale=(k, fp, 0.01, 1.0, 0.3, 0.1, 0.01, 0.1, 0.1))  # fmt: skip
+
+
+def _excursion_params(free: Mapping[str, float]) -> dict[str, float]:
+    return {**free, "n_min": min(free["n_min"], free["n0"])}
+
+
+def excursion_law(free: Mapping[str, float]) -> ExcursionBoucWen:
+    """The law from the fit's parameters (``n_min`` clipped to ``n0``)."""
+    return ExcursionBoucWen(**_excursion_params(free))
+
+
+def _excursion_forces(free: Mapping[str, float], disp: FloatArray) -> FloatArray:
+    p = _excursion_params(free)
+    return drive(np.array([p[name] for name in EXCURSION_FREE]), disp)
+
+
+EXCURSION_BW = LawFamily("excursion-bouc-wen", EXCURSION_FREE, excursion_law, excursion_space,
+                         forces=_excursion_forces)  # fmt: skip
 
 
 def chaboche_online(disp: FloatArray, force: FloatArray, **options: Any) -> RefitUpdater:
@@ -152,43 +189,49 @@ def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
                         chaboche_residual(disp, force, **options))
 
 
-def capacity(specimen: str, seed: int, starts: int = 6) -> dict[str, dict[str, float]]:
-    """Step 1 of the spike: the family fitted in hindsight (best of ``starts``, every 3rd sample
-    plus reversals) to (a) the tested element's and (b) the twin's own whole history of the
-    reference case (``kanai_tajimi`` 3 m/s², 20 s, ``seed``, 0 % noise), then the twin free-runs
-    with those parameters in closed loop; MAETH against the twin's true force."""
+def capacity(specimen: str, seed: int, starts: int = 6,
+             family: str = "chaboche") -> dict[str, dict[str, float]]:  # fmt: skip
+    """Step 1 of the spike: the family fitted in hindsight (best of ``starts``; Chaboche on every
+    3rd sample plus reversals, the excursion Bouc-Wen on every sample) to (a) the tested
+    element's and (b) the twin's own whole history of the reference case (``kanai_tajimi``
+    3 m/s², 20 s, ``seed``, 0 % noise), then the twin free-runs in closed loop with those
+    parameters; MAETH against the twin's true force."""
     from fresco_bridge import indicators
     from fresco_bridge.integrator import kanai_tajimi
     from fresco_bridge.study.simulate import simulate_case, specimen_model
     from fresco_bridge.updating.refit import compress, fit_law
     from fresco_bridge.updating.updaters import FixedModelUpdater
 
+    law_family = {"chaboche": CHABOCHE, "excursion-bw": EXCURSION_BW}[family]
     motion = kanai_tajimi(3.0, 20.0, seed=seed)
     ref = simulate_case("generalisation", specimen,
                         FixedModelUpdater("reference", specimen_model(specimen)), motion)
     out = {}
     for label, d, f in (("tested", ref.tested_drift, ref.tested_force),
                         ("twin", ref.twin_drift, ref.twin_true_force)):  # fmt: skip
-        space = CHABOCHE.space(d, f)
-        keep = compress(d, 3)
+        space = law_family.space(d, f)
+        keep = compress(d, 3 if family == "chaboche" else 1)
         rng = np.random.default_rng(0)
         lower, upper = np.array(space.lower), np.array(space.upper)
         best: tuple[float, FloatArray] | None = None
         for i in range(starts):
             x0 = np.array(space.start)
-            if i:
+            if i and family == "chaboche":
                 x0 = np.clip(x0 * np.exp(rng.normal(0.0, 1.0, x0.size)), lower, upper)
                 x0[CHABOCHE_FREE.index("qr")] = -rng.uniform(0.3, 0.9)
                 x0[CHABOCHE_FREE.index("qe")] = -rng.uniform(0.1, 0.6)
-            x = fit_law(CHABOCHE, [(d[keep], f[keep], 1.0)], space, start=x0, max_nfev=200)
-            rms = float(np.sqrt(np.mean((law_forces(chaboche_law(CHABOCHE.params(x)), d)
-                                         - f) ** 2)))  # fmt: skip
+            elif i:
+                x0 = np.clip(x0 * np.exp(rng.normal(0.0, 0.5, x0.size)), lower, upper)
+                x0[EXCURSION_FREE.index("c")] = rng.uniform(0.0, 1.0)
+            x = fit_law(law_family, [(d[keep], f[keep], 1.0)], space, start=x0, max_nfev=200)
+            model = law_family.build(law_family.params(x))
+            rms = float(np.sqrt(np.mean((law_forces(model, d) - f) ** 2)))
             if best is None or rms < best[0]:
                 best = (rms, x)
         assert best is not None
-        law = chaboche_law(CHABOCHE.params(best[1]))
+        law = law_family.build(law_family.params(best[1]))
         fit_max = float(np.max(np.abs(law_forces(law.clone(), d) - f)))
-        run = simulate_case("generalisation", specimen, FixedModelUpdater("chaboche", law), motion)
+        run = simulate_case("generalisation", specimen, FixedModelUpdater(family, law), motion)
         out[label] = {"fit_rms": best[0], "fit_max": fit_max,
                       "maeth": indicators.maeth(run.twin_true_force, run.twin_force)}
     return out
@@ -197,5 +240,6 @@ def capacity(specimen: str, seed: int, starts: int = 6) -> dict[str, dict[str, f
 if __name__ == "__main__":
     import sys
 
-    for name, row in capacity(sys.argv[1], int(sys.argv[2])).items():
-        print(sys.argv[1], sys.argv[2], name, {k: round(v, 3) for k, v in row.items()})
+    kind = sys.argv[3] if len(sys.argv) > 3 else "chaboche"
+    for name, row in capacity(sys.argv[1], int(sys.argv[2]), family=kind).items():
+        print(sys.argv[1], sys.argv[2], kind, name, {k: round(v, 3) for k, v in row.items()})

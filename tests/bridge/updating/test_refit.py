@@ -152,3 +152,24 @@ def test_the_chaboche_family_recovers_a_known_law_from_its_own_history() -> None
     other = path(1500, 7.0, 2)
     predicted = law_forces(chaboche_law(fitted), other)
     assert np.allclose(predicted, law_forces(chaboche_law(true), other), rtol=0.0, atol=1e-6)
+
+
+def test_the_excursion_bouc_wen_family_recovers_a_known_law_from_its_own_history() -> None:
+    """The family of BENCHMARKS.md part 8c through its JIT drive, from a start near the truth:
+    the fit reproduces the history and predicts another one."""
+    from benchmarks.refit_families import EXCURSION_BW, excursion_law
+
+    true = {"k0": 8.0, "fy": 12.0, "alpha": 0.03, "n0": 8.0, "n_min": 1.5, "xi0": 0.5,
+            "a": 0.03, "p": 0.8, "c": 0.7}  # fmt: skip
+    d = path(1500, 9.0, 1)
+    f = law_forces(excursion_law(true), d)
+    assert np.allclose(EXCURSION_BW.forces(true, d), f, rtol=0.0, atol=1e-12)  # type: ignore[misc]
+    space = EXCURSION_BW.space(d, f)
+    start = [1.1 * true[name] for name in EXCURSION_BW.free]
+    x = fit_law(EXCURSION_BW, [(d, f, 1.0)], space, start=start, max_nfev=200)
+    fitted = EXCURSION_BW.params(x)
+    for name in ("k0", "fy", "alpha", "c"):
+        assert fitted[name] == pytest.approx(true[name], rel=1e-3, abs=1e-4)
+    other = path(1500, 7.0, 2)
+    predicted = law_forces(excursion_law(fitted), other)
+    assert np.allclose(predicted, law_forces(excursion_law(true), other), rtol=0.0, atol=1e-3)
