@@ -23,12 +23,18 @@ and bound them from data. Everything else is generic:
   history with the new parameters. The twin and every clone of it (shadow copies) see a new
   parameter set at their next ``set_trial``: parameters are shared, states are each element's.
 
+After every fit (the offline one included) :attr:`RefitUpdater.misfit` is the rms force error of
+the new parameters over the samples fitted (the compressed histories, each weighted as in the
+fit) and :attr:`RefitUpdater.force_peak` their peak |force|: how well one parameter set explains
+the element's *whole* history (``improved``'s ``law_trust`` reads it).
+
 Cost: a refit is ``max_nfev × (free + 1)`` law evaluations over the compressed history (finite
 differences), a spike every ``every`` steps; an ordinary step is one law step per element.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -245,6 +251,11 @@ class RefitUpdater(OwnsTwin):
         self._offline = (disp[keep], force[keep], float(offline_weight))
         x = fit_law(family, [(disp[keep], force[keep], 1.0)], self.space, max_nfev=offline_nfev)
         self._law = _Law(family, x)
+        self.force_peak = float(np.max(np.abs(force))) if force.size else 0.0
+        """Peak |force| of the histories fitted (offline and online so far)."""
+        self.misfit = 0.0
+        """Rms force error of the latest parameters over the samples fitted (module docstring)."""
+        self._measure([(disp[keep], force[keep], 1.0)], None)
         self._source = self._law.build()
         self._disp: list[float] = []
         self._force: list[float] = []
@@ -291,5 +302,25 @@ class RefitUpdater(OwnsTwin):
                     max_nfev=self.max_nfev)  # fmt: skip
         self._law.update(x)
         self._source = self._law.build()
-        law_forces(self._source, disp[keep])
+        self._measure(histories, law_forces(self._source, disp[keep]))
         self.refits += 1
+
+    def _measure(self, histories: Sequence[tuple[FloatArray, FloatArray, float]],
+                 first: FloatArray | None) -> None:
+        """``misfit`` and ``force_peak`` of the latest parameters over ``histories`` (``first``:
+        the law's forces along the first one, when already computed)."""
+        params = self._law.family.params(self._law.x)
+        total = weight = 0.0
+        for i, (d, f, w) in enumerate(histories):
+            if i == 0 and first is not None:
+                pred = first
+            elif self.family.forces is not None:
+                pred = self.family.forces(params, d)
+            else:
+                pred = law_forces(self._law.build(), d)
+            total += w * float(np.sum((pred - f) ** 2))
+            weight += w * d.size
+            self.force_peak = max(self.force_peak, float(np.max(np.abs(f))) if f.size else 0.0)
+        self.misfit = math.sqrt(total / weight) if weight > 0.0 else 0.0
+        if not math.isfinite(self.misfit):
+            self.misfit = math.inf
