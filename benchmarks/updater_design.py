@@ -16,7 +16,9 @@ Ten numbers per candidate, MAETH of the twin in kN (generalisation layout: again
 A candidate is the registry's ``online_improved`` with ``--option KEY=VALUE`` pairs, or any
 ``--factory module:function`` called as ``function(offline_disp, offline_force, **options)``
 returning an ``Updater`` (for experiments not yet in the registry). ``--baseline`` also runs the
-default ``online_improved`` and prints the geometric mean of the ratios and the worst ratio.
+default ``online_improved`` (``--baseline-option KEY=VALUE``: with these options) and prints the
+geometric mean of the ratios and the worst ratio. ``--seeds 3,4,5,6`` runs the closed-loop set on
+other record seeds (more design runs, no replay pairs; never the evaluation records).
 ``taskset -c 0 python -m benchmarks.updater_design --workers 1 [--option …]``.
 """
 
@@ -124,9 +126,13 @@ def _one(job: tuple[tuple[Any, str, float], str | None, dict[str, Any]]) -> dict
 
 
 def evaluate(factory_spec: str | None, options: dict[str, Any], workers: int,
-             only: str | None = None) -> list[dict[str, Any]]:
-    """The ten design numbers of one candidate (``only``: a specimen name to run half)."""
-    items = [it for it in (*CLOSED_LOOP, *REPLAY) if only is None or it[1] == only]
+             only: str | None = None, seeds: tuple[int, ...] | None = None
+             ) -> list[dict[str, Any]]:
+    """The ten design numbers of one candidate (``only``: a specimen name to run half;
+    ``seeds``: closed-loop runs on these record seeds instead, no replay pairs)."""
+    design = (*CLOSED_LOOP, *REPLAY) if seeds is None else tuple(
+        (seed, spec, noise) for seed in seeds for spec in SPECIMENS for noise in (0.0, 1.0))
+    items = [it for it in design if only is None or it[1] == only]
     jobs = [(it, factory_spec, options) for it in items]
     if workers <= 1:
         return [_one(j) for j in jobs]
@@ -161,13 +167,20 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--factory", help="module:function building the candidate updater")
     parser.add_argument("--baseline", action="store_true",
                         help="also run the default online_improved and compare")
+    parser.add_argument("--baseline-option", type=parse_option, action="append", default=[],
+                        help="an option of the baseline online_improved (implies --baseline)")
+    parser.add_argument("--seeds", type=lambda t: tuple(int(x) for x in t.split(",")),
+                        help="closed-loop record seeds instead of the design set (e.g. 3,4,5,6: "
+                             "more design runs; no replay pairs)")
     parser.add_argument("--only", choices=SPECIMENS, help="one specimen only")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--json", help="write the rows here")
     args = parser.parse_args(argv)
     options = dict(args.option)
-    rows = evaluate(args.factory, options, args.workers, args.only)
-    base = evaluate(None, {}, args.workers, args.only) if args.baseline else None
+    rows = evaluate(args.factory, options, args.workers, args.only, args.seeds)
+    base_options = dict(args.baseline_option)
+    base = (evaluate(None, base_options, args.workers, args.only, args.seeds)
+            if args.baseline or base_options else None)
     _print(rows, base)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
