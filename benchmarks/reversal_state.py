@@ -7,7 +7,8 @@ design runs' offline database is the first ``OFFLINE_SAMPLES`` of the convention
 run of the same record (``updater_design``). The law is fitted (an ensemble of ``members``
 networks from seeded starts, ``iterations`` LM iterations each) to ``train`` — any of
 ``tested``, ``offline``, ``twin`` joined by ``+`` (``twin``: the twin's own true history, the
-upper bound on capacity, not available online) — then the twin free-runs in closed loop with
+upper bound on capacity, not available online; ``tested@K``, ``twin@K``: those of record seed
+K, a data-coverage diagnostic) — then the twin free-runs in closed loop with
 it (``FixedModelUpdater``). Printed per run: the fit's rms (teacher-forced, on the training
 histories), the teacher-forced and free-run rms along the twin's history, the twin's MAETH, its
 largest error before and after step ``EARLY`` (where the errors sit), the peak |twin force|
@@ -60,6 +61,17 @@ def fit_ensemble(histories: list[tuple[FloatArray, FloatArray, float]], sc: rs.S
     return net, np.array(thetas), float(np.mean(rms))
 
 
+def _other(specimen: str, token: str) -> tuple[FloatArray, FloatArray]:
+    """``tested@K`` / ``twin@K``: that element's history in the reference case of record seed
+    K (a data-coverage diagnostic: more elements' histories than an online law ever sees)."""
+    name, _, seed = token.partition("@")
+    ref = simulate_case("generalisation", specimen,
+                        FixedModelUpdater("reference", specimen_model(specimen)),
+                        kanai_tajimi(3.0, 20.0, seed=int(seed)))  # fmt: skip
+    return ((ref.tested_drift, ref.tested_force) if name == "tested" else
+            (ref.twin_drift, ref.twin_true_force))
+
+
 def capacity(specimen: str, seed: int, train: str = "tested+offline",
              hidden: tuple[int, ...] = (16, 16), members: int = 5, iterations: int = 100,
              variables: str = "absolute", drop: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -78,7 +90,8 @@ def capacity(specimen: str, seed: int, train: str = "tested+offline",
     conv_cal = indicators.maeth(base.twin_true_force, base.twin_force)
     pool = {"tested": (ref.tested_drift, ref.tested_force), "offline": (off_d, off_f),
             "twin": (ref.twin_drift, ref.twin_true_force)}
-    histories = [(*pool[name], 1.0) for name in train.split("+")]
+    histories = [(*(pool[name] if "@" not in name else _other(specimen, name)), 1.0)
+                 for name in train.split("+")]
     sc = rs.scales(histories[0][0], histories[0][1], variables, drop)
     start = time.process_time()
     net, thetas, fit_rms = fit_ensemble(histories, sc, hidden, members, iterations)

@@ -31,8 +31,8 @@ is continuous at every reversal by construction, and a bounded ``g`` (tanh layer
 output) keeps every branch's force within ``|F_r| + |d - d_r| k_init max|g|``. That bounds one
 branch, not the recurrence: ``F_r`` is the previous branch's end, so a ``g`` that extrapolates
 badly can pump the force up reversal after reversal. Measured (BENCHMARKS.md, updating part
-10): with every variable the twins stayed bounded; without the envelope and energy variables a
-twin reached 1347 kN.
+10): with every variable the twins stayed within 16.3 kN; without the envelope and energy
+variables a twin reached 1347 kN.
 
 Material semantics: ``set_trial(d)`` starts from the last committed state and never advances
 it; a reversal is taken at the committed point when a trial moves against ``s``.
@@ -45,9 +45,9 @@ ensemble: the law's ``g`` is their mean).
 
 Verdict (BENCHMARKS.md, updating part 10): the learned law *can* represent Menegotto-Pinto (fitted
 to the twin's own history, its twin free-runs within 0.23–0.31 kN), but fitted to the tested
-element it transfers to the twin no better than 1.1–2.0 kN (targets 0.45/0.58): the twin's early,
-barely-yielded states are never visited by the tested element. Not an expert of
-``online_improved``.
+element (and the offline database) it transfers to the twin no better than 1.10–2.92 kN
+(targets 0.45/0.58): the twin's early, barely-yielded states are never visited by the tested
+element. Not an expert of ``online_improved``.
 """
 
 from __future__ import annotations
