@@ -43,11 +43,11 @@ with the memory variables computed along a measured history with the *measured* 
 (teacher forcing). Several networks fitted from different starts can be averaged (an
 ensemble: the law's ``g`` is their mean).
 
-Verdict (BENCHMARKS.md, updating part 10): the learned law *can* represent Menegotto-Pinto (fitted
-to the twin's own history, its twin free-runs within 0.23–0.31 kN), but fitted to the tested
-element (and the offline database) it transfers to the twin no better than 1.10–2.92 kN
-(targets 0.45/0.58): the twin's early, barely-yielded states are never visited by the tested
-element. Not an expert of ``online_improved``.
+Verdict (BENCHMARKS.md, updating part 10): the learned law *can* represent Menegotto-Pinto
+(fitted to the twin's own history, its twin free-runs within 0.23/0.30 kN), but fitted to the
+tested element (and the offline database) it transfers to the twin no better than 1.10–2.92 kN
+(targets 0.45/0.58); the errors sit in the twin's early, barely-yielded states, and other
+records' histories do not close seed 1's gap. Not an expert of ``online_improved``.
 """
 
 from __future__ import annotations
