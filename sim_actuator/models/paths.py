@@ -34,12 +34,15 @@ from sim_actuator.models.bouc_wen import DEFAULT_DZ_MAX, MAX_SUBSTEPS
 from sim_actuator.models.menegotto_pinto import MenegottoPinto
 
 __all__ = [
+    "BOUC_WEN_PARAMETERS",
     "BWBN_PARAMETERS",
     "LAW_BILINEAR",
+    "LAW_BOUC_WEN",
     "LAW_BWBN",
     "LAW_MENEGOTTO_PINTO",
     "MENEGOTTO_PINTO_PARAMETERS",
     "STATE_SIZE",
+    "bouc_wen_vector",
     "bwbn_vector",
     "drive",
     "drive_many",
@@ -54,6 +57,11 @@ LAW_BWBN = 1
 """``params`` = :data:`BWBN_PARAMETERS` in that order (Bouc-Wen: A0 = A, the rest zero)."""
 LAW_MENEGOTTO_PINTO = 2
 """``params`` = :data:`MENEGOTTO_PINTO_PARAMETERS` in that order (Steel02)."""
+LAW_BOUC_WEN = 3
+"""``params`` = :data:`BOUC_WEN_PARAMETERS` in that order: the classic ``bouc_wen`` object's
+own algorithm (its Simpson split at z = 0), bit for bit; ``LAW_BWBN`` with the classic
+parameters is the same law to rounding, not to the bit."""
+BOUC_WEN_PARAMETERS = ("k0", "fy", "alpha", "n", "beta", "gamma", "A")
 MENEGOTTO_PINTO_PARAMETERS = ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1", "a2", "a3", "a4")
 
 BWBN_PARAMETERS = (
@@ -71,6 +79,13 @@ def bwbn_vector(params: Mapping[str, float]) -> FloatArray:
     for name, value in params.items():
         values["A0" if name == "A" else name] = float(value)
     return np.array([values[name] for name in BWBN_PARAMETERS], dtype=np.float64)
+
+
+def bouc_wen_vector(params: Mapping[str, float]) -> FloatArray:
+    """The ``LAW_BOUC_WEN`` parameter vector from a ``bouc-wen`` parameter dict (A = 1 unless
+    given)."""
+    return np.array([float(params[name]) if name in params else 1.0
+                     for name in BOUC_WEN_PARAMETERS], dtype=np.float64)  # fmt: skip
 
 
 def law_vector(kind: str, params: Mapping[str, float]) -> tuple[int, FloatArray]:
@@ -185,6 +200,66 @@ def _bwbn_trial(prm: FloatArray, d_c: float, z_c: float, e_c: float, f_c: float,
     return force, z, e, True
 
 
+# -- classic Bouc-Wen (bouc_wen.py, line by line) -----------------------------------------------
+@njit(cache=True)
+def _bw_slope(prm: FloatArray, z: float, direction: float) -> float:
+    if z == 0.0:
+        return prm[6]
+    beta, gamma = prm[4], prm[5]
+    coef = beta + gamma if (z > 0.0) == (direction > 0.0) else gamma - beta
+    power = abs(z) ** prm[3]
+    return prm[6] - power * coef
+
+
+@njit(cache=True)
+def _bw_rk4(prm: FloatArray, z: float, h: float, direction: float) -> float:
+    k1 = _bw_slope(prm, z, direction)
+    k2 = _bw_slope(prm, z + 0.5 * h * k1, direction)
+    k3 = _bw_slope(prm, z + 0.5 * h * k2, direction)
+    k4 = _bw_slope(prm, z + h * k3, direction)
+    return z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+@njit(cache=True)
+def _bw_substep(prm: FloatArray, z: float, h: float, direction: float) -> float:
+    z_end = _bw_rk4(prm, z, h, direction)
+    if z * z_end >= 0.0:
+        return z_end
+    s1 = _bw_slope(prm, z, direction)
+    s2 = _bw_slope(prm, 0.5 * z, direction)
+    if s1 <= 0.0 or s2 <= 0.0:
+        return z_end
+    to_zero = -z / 6.0 * (1.0 / s1 + 4.0 / s2 + 1.0 / prm[6])
+    fraction = to_zero / h
+    if not 0.0 < fraction < 1.0:
+        return z_end
+    return _bw_rk4(prm, 0.0, h - to_zero, direction)
+
+
+@njit(cache=True)
+def _bw_trial(prm: FloatArray, d_c: float, z_c: float, f_c: float, d: float,
+              dz_max: float) -> tuple[float, float, bool]:
+    """(force, z, ok) of a trial to ``d`` from the committed (d_c, z_c, f_c)."""
+    k0, fy, alpha, n, beta, gamma, a = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6]
+    du = (d - d_c) / (fy / k0)
+    if not math.isfinite(du):
+        return math.nan, z_c, False
+    if du == 0.0:
+        return f_c, z_c, True
+    direction = 1.0 if du > 0.0 else -1.0
+    z_ultimate = (a / (beta + gamma)) ** (1.0 / n)
+    bound = a + n * (beta + abs(gamma)) * max(abs(z_c), z_ultimate) ** n
+    count = int(abs(du) * bound / dz_max) + 1
+    if count > MAX_SUBSTEPS:
+        return math.nan, z_c, False
+    h = du / count
+    z = z_c
+    for _ in range(count):
+        z = _bw_substep(prm, z, h, direction)
+    force = alpha * k0 * d + (1.0 - alpha) * fy * z
+    return force, z, True
+
+
 # -- Steel01 without isotropic hardening (bilinear.py) -----------------------------------------
 @njit(cache=True)
 def _bilinear_trial(prm: FloatArray, d_c: float, f_c: float, d: float) -> float:
@@ -291,6 +366,10 @@ def _trial(law: int, prm: FloatArray, state: FloatArray, d: float, dz_max: float
         f = _bilinear_trial(prm, state[0], state[1], d)
         out[0], out[1] = d, f
         return math.isfinite(f)
+    if law == LAW_BOUC_WEN:
+        f, z, ok = _bw_trial(prm, state[0], state[2], state[1], d, dz_max)
+        out[0], out[1], out[2] = d, f, z
+        return ok
     f, z, e, ok = _bwbn_trial(prm, state[0], state[2], state[3], state[1], d, dz_max)
     out[0], out[1], out[2], out[3] = d, f, z, e
     return ok

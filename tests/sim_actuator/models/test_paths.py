@@ -7,7 +7,8 @@ import pytest
 
 from sim_actuator.effects import LoadPath
 from sim_actuator.models import ModelInputError, make_model
-from sim_actuator.models.paths import drive, drive_many, law_vector
+from sim_actuator.models.bouc_wen import BoucWen
+from sim_actuator.models.paths import LAW_BOUC_WEN, bouc_wen_vector, drive, drive_many, law_vector
 
 CASES = [
     ("bilinear", {"k0": 10.0, "fy": 5.0, "alpha": 0.05}),
@@ -101,3 +102,19 @@ def test_menegotto_pinto_from_rest_and_with_an_overflowing_curve() -> None:
         expected.append(force)
     law, vec = law_vector("menegotto-pinto", params)
     np.testing.assert_allclose(drive(law, vec, d), expected, rtol=0.0, atol=1e-12 * 5.0)
+
+
+@pytest.mark.parametrize("params", [CASES[1][1], CASES[2][1],
+                                    {"k0": 10.0, "fy": 5.0, "alpha": 0.2, "n": 9.0, "beta": 2.0,
+                                     "gamma": 0.1}])  # fmt: skip
+@pytest.mark.parametrize("dz_max", [0.01, 0.2])
+def test_the_classic_bouc_wen_drive_is_the_object_bit_for_bit(params: dict[str, float],
+                                                              dz_max: float) -> None:
+    d = _history(7, 400, 9.0)
+    model = BoucWen(**params, dz_max=dz_max)
+    expected = []
+    for x in d:
+        expected.append(model.set_trial(float(x))[0])
+        model.commit()
+    got = drive(LAW_BOUC_WEN, bouc_wen_vector(params), d, 0.0, dz_max)
+    assert np.array_equal(got, np.array(expected))  # the same operations: not merely close
