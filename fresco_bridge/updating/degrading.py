@@ -23,7 +23,8 @@ Fit: ``refit.fit_law`` through the JIT drive of ``sim_actuator.models.paths`` (t
 algorithm, ~7x faster than stepping the object; a Baber-Wen evaluation costs RK4 substeps in
 proportion to the travel in yield displacements, not to the number of samples, so compressing
 the history saves less than it does for a closed-form law). Fit and twin use the same
-``BABER_WEN_DZ_MAX``.
+``BABER_WEN_DZ_MAX``; the law objects step through the same kernel (``stepped``: the same
+bits; the refitted law's state replays after each refit were Python RK4).
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ import numpy.typing as npt
 from fresco_bridge.updating.physics import data_scales
 from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater
 from sim_actuator.models.base import HysteresisModel
-from sim_actuator.models.bwbn import BoucWenBaberNoori
 from sim_actuator.models.paths import LAW_BWBN, bwbn_vector, drive
+from sim_actuator.models.stepped import SteppedBaberNoori
 
 __all__ = ["BABER_WEN", "BABER_WEN_DZ_MAX", "N_MAX", "REFIT_SCHEDULE", "baber_wen_refit"]
 
@@ -76,7 +77,7 @@ def _law(params: Mapping[str, float]) -> dict[str, float]:
 
 
 def _build(params: Mapping[str, float]) -> HysteresisModel:
-    return BoucWenBaberNoori(**_law(params), dz_max=BABER_WEN_DZ_MAX)
+    return SteppedBaberNoori(**_law(params), dz_max=BABER_WEN_DZ_MAX)
 
 
 def _forces(params: Mapping[str, float], disp: FloatArray) -> FloatArray:

@@ -16,7 +16,8 @@ stay fixed online; only the residual basis learns (the fit costs seconds, an onl
 not), and its ridge pulls it towards zero, so the expert falls back on the law where recent
 data do not support a residual. Its law evaluations run through the JIT drive of
 ``sim_actuator.models.paths`` (``LAW_BOUC_WEN``: the object's algorithm, bit for bit; ~15x
-faster than stepping the object, which cost ~3 s of every ``online_improved`` build).
+faster than stepping the object, which cost ~3 s of every ``online_improved`` build), and the
+online law steps through the same kernel (``stepped``: the same bits).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from fresco_bridge.updating.refit import FitSpace, LawFamily, fit_law, law_force
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.bouc_wen import BoucWen
 from sim_actuator.models.paths import LAW_BOUC_WEN, bouc_wen_vector, drive
+from sim_actuator.models.stepped import SteppedBoucWen
 
 __all__ = [
     "BOUC_WEN",
@@ -175,8 +177,8 @@ class PhysicsResidual(OwnsTwin):
                                   force_scale=float(np.max(np.abs(force))),
                                   stiffness=initial_stiffness(disp, force), shrink=shrink,
                                   **rls)  # fmt: skip
-        self._source = BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX)
-        self._twin = _PhysicsTwin(BoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
+        self._source = SteppedBoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX)
+        self._twin = _PhysicsTwin(SteppedBoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
                                   self.residual.twin)  # fmt: skip
         self._last_update = 0.0
 

@@ -42,7 +42,9 @@ __all__ = [
     "LAW_MENEGOTTO_PINTO",
     "MENEGOTTO_PINTO_PARAMETERS",
     "STATE_SIZE",
+    "bouc_wen_trial",
     "bouc_wen_vector",
+    "bwbn_trial",
     "bwbn_vector",
     "drive",
     "drive_many",
@@ -258,6 +260,12 @@ def _bw_trial(prm: FloatArray, d_c: float, z_c: float, f_c: float, d: float,
         z = _bw_substep(prm, z, h, direction)
     force = alpha * k0 * d + (1.0 - alpha) * fy * z
     return force, z, True
+
+
+bouc_wen_trial = _bw_trial
+"""One trial of the classic Bouc-Wen object (``stepped.SteppedBoucWen``)."""
+bwbn_trial = _bwbn_trial
+"""One trial of the BWBN object (``stepped.SteppedBaberNoori``)."""
 
 
 # -- Steel01 without isotropic hardening (bilinear.py) -----------------------------------------
