@@ -399,6 +399,7 @@ class BranchRls(OwnsTwin):
         self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
                                noise_floor=1e-6 * self.basis.force_scale**2, shrink=shrink)
         self._source = BranchMemory()
+        self._kept: tuple[BranchMemory, float, tuple[float, float, FloatArray]] | None = None
         self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
@@ -421,12 +422,22 @@ class BranchRls(OwnsTwin):
         """A twin on this expert's memory of the tested element now (shadow scoring)."""
         return BasisTwin(self.basis, self.rls, self._source)
 
+    def _source_features(self, memory: BranchMemory, d: float) -> tuple[float, float, FloatArray]:
+        """``basis.features(memory, d)``, kept for the ``observe`` that follows a ``predict`` at
+        the same point (``online_improved`` asks both: one computation, not two)."""
+        kept = self._kept
+        if kept is not None and kept[0] is memory and kept[1] == d:
+            return kept[2]
+        out = self.basis.features(memory, d)
+        self._kept = (memory, d, out)
+        return out
+
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""
         memory = self._source
         if d == memory.d:
             return memory.f
-        direction, f_r, phi = self.basis.features(memory, d)
+        direction, f_r, phi = self._source_features(memory, d)
         return f_r + direction * float(phi @ self.weights)
 
     def observe(self, d: float, force: float) -> None:
@@ -434,7 +445,7 @@ class BranchRls(OwnsTwin):
         start = time.perf_counter()
         memory = self._source
         if d != memory.d:
-            direction, f_r, phi = self.basis.features(memory, d)
+            direction, f_r, phi = self._source_features(memory, d)
             self.rls.update(phi, direction * (force - f_r))
         self._source = memory.advanced(d, force)
         self._last_update = time.perf_counter() - start

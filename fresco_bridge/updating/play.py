@@ -208,6 +208,7 @@ class BranchStopRls(OwnsTwin):
         self.rls = WeightedRls(np.array(rows), np.array(targets), forgetting=forgetting,
                                ridge=ridge, gate=gate, noise_floor=1e-6 * force_scale**2)
         self._source = self.basis.virgin()
+        self._kept: tuple[DualMemory, float, tuple[float, float, FloatArray]] | None = None
         self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
@@ -219,12 +220,22 @@ class BranchStopRls(OwnsTwin):
         """A twin on this expert's memory of the tested element now (shadow scoring)."""
         return BasisTwin(self.basis, self.rls, self._source)
 
+    def _source_features(self, memory: DualMemory, d: float) -> tuple[float, float, FloatArray]:
+        """``basis.features(memory, d)``, kept for the ``observe`` that follows a ``predict`` at
+        the same point (as ``branch.BranchRls``)."""
+        kept = self._kept
+        if kept is not None and kept[0] is memory and kept[1] == d:
+            return kept[2]
+        out = self.basis.features(memory, d)
+        self._kept = (memory, d, out)
+        return out
+
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""
         memory = self._source
         if d == memory.branch.d:
             return memory.branch.f
-        direction, f_r, phi = self.basis.features(memory, d)
+        direction, f_r, phi = self._source_features(memory, d)
         return f_r + direction * float(phi @ self.rls.weights)
 
     def observe(self, d: float, force: float) -> None:
@@ -232,7 +243,7 @@ class BranchStopRls(OwnsTwin):
         start = time.perf_counter()
         memory = self._source
         if d != memory.branch.d:
-            direction, f_r, phi = self.basis.features(memory, d)
+            direction, f_r, phi = self._source_features(memory, d)
             self.rls.update(phi, direction * (force - f_r))
         self._source = self.basis.advanced(memory, d, force)
         self._last_update = time.perf_counter() - start
