@@ -103,6 +103,7 @@ class StopBasis:
                                f"scale and yield displacement (got {disp_scale!r}, "
                                f"{yield_disp!r})")
         self.r = disp_scale * np.array(self.THRESHOLDS)
+        self._lower = -self.r
         self.r_y = float(yield_disp)
         self.nodes = self.r_y * np.array(self.NODES)
         self.size = (self.r.size + 1) * self.nodes.size
@@ -113,7 +114,8 @@ class StopBasis:
     def advanced(self, memory: StopMemory, step: float) -> StopMemory:
         """The memory after a displacement step ``step``."""
         stops = memory.stops.copy()
-        stops[:-1] = np.clip(stops[:-1] + step, -self.r, self.r)
+        # np.clip's arithmetic (min(max(x, -r), r)) without its Python wrappers: per step
+        np.minimum(np.maximum(stops[:-1] + step, self._lower), self.r, out=stops[:-1])
         s_y = min(max(stops[-1] + step, -self.r_y), self.r_y)
         q = memory.q + abs(step - (s_y - stops[-1]))
         stops[-1] = s_y
