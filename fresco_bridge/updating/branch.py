@@ -166,6 +166,7 @@ class WeightedRls:
         self.gate = gate
         self._ridge = ridge * scale * np.eye(n)
         self._info = info * (horizon / max(len(targets), 1)) + self._ridge
+        self._ridge_step = (1.0 - forgetting) * self._ridge
         self._rhs = self._info @ self.weights
         self._shrink = shrink
         residual = rows @ self.weights - targets
@@ -180,11 +181,16 @@ class WeightedRls:
         self._noise_var = 0.99 * self._noise_var + 0.01 * min(innovation**2,
                                                               (self.gate * sigma) ** 2)
         lam = self.forgetting
-        self._info = lam * self._info + weight * np.outer(phi, phi) + (1.0 - lam) * self._ridge
+        # the same operations in the same order as lam * info + w * phi phi' + (1 - lam) * ridge,
+        # in place, the constant term computed once
+        info = self._info
+        info *= lam
+        info += np.multiply(np.outer(phi, phi), weight)
+        info += self._ridge_step
         self._rhs = lam * self._rhs + weight * target * phi
         if not self._shrink:
             self._rhs += (1.0 - lam) * (self._ridge @ self.weights)
-        self.weights = np.asarray(np.linalg.solve(self._info, self._rhs), dtype=np.float64)
+        self.weights = np.asarray(np.linalg.solve(info, self._rhs), dtype=np.float64)
 
 
 class ReversalBasis:
