@@ -67,6 +67,7 @@ from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measuremen
 from fresco_bridge.updating.branch import initial_stiffness, offline_data
 from fresco_bridge.updating.lm import LmOptions, levenberg_marquardt
 from fresco_bridge.updating.mlp import Mlp
+from fresco_bridge.updating.refit import MeasuredHistory
 from sim_actuator.models.base import trial_input_error
 
 __all__ = ["FEATURES", "RELATIVE_FEATURES", "VARIABLES", "Memory", "ReversalStateLaw",
@@ -316,11 +317,10 @@ class ReversalStateUpdater(OwnsTwin):
                           [self._offline], self.scales, options)[0] for seed in range(members)]
         self._twin = ReversalStateLaw(self.net, np.array(thetas), self.scales)
         self.params = self._twin.params
-        self.every, self.refit_iterations, self.warmup = every, refit_iterations, warmup
+        self.refit_iterations = refit_iterations
         self.refits = 0
         self._memory = Memory()
-        self._disp: list[float] = []
-        self._force: list[float] = []
+        self._history = MeasuredHistory(every, warmup)
         self._last_update = 0.0
 
     def source_twin(self) -> ReversalStateLaw:
@@ -339,16 +339,13 @@ class ReversalStateUpdater(OwnsTwin):
         d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         self._memory = self._memory.branch(d).committed_at(d, force)
-        self._disp.append(d)
-        self._force.append(force)
-        n = len(self._disp)
-        if n >= self.warmup and (n - self.warmup) % self.every == 0:
+        if self._history.append(d, force):
             self.refit()
         self._last_update = time.perf_counter() - start
 
     def refit(self) -> None:
         """Refit every member now, warm-started, on the offline database and the history."""
-        histories = [self._offline, (np.array(self._disp), np.array(self._force), 1.0)]
+        histories = [self._offline, (*self._history.arrays(), 1.0)]
         options = LmOptions(max_iterations=self.refit_iterations, mu=1e-3)
         self.params.thetas = np.array([fit_law(self.net, theta, histories, self.scales,
                                                options)[0] for theta in self.params.thetas])
