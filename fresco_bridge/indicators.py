@@ -235,7 +235,7 @@ def _hann(n: int) -> FloatArray:
 def _rfft_freqs(n: int, dt: float) -> FloatArray:
     """``np.fft.rfftfreq(n, d=dt)[1:]`` (no DC bin), made once per length and step
     (read-only)."""
-    freqs = np.fft.rfftfreq(n, d=dt)[1:]
+    freqs: FloatArray = np.fft.rfftfreq(n, d=dt)[1:].astype(np.float64, copy=False)
     freqs.flags.writeable = False
     return freqs
 
