@@ -152,10 +152,12 @@ class ElementServerSession:
         "_max_data_size",
         "_owed",
         "_packed",
+        "_replies",
         "_reply",
         "_reply_full",
         "_size_id",
         "_state",
+        "_tail_daq",
         "_trial_layout",
         "_vector_bytes",
         "_zeros",
@@ -183,6 +185,15 @@ class ElementServerSession:
         self._matrix_count = 0
         self._data_size = 0
         self._packed: dict[int, tuple[tuple[float, ...], bytes]] = {}
+        self._replies: dict[bytes, bytes] = {}
+        """Whole replies to a packed matrix that fills part of the reply, by the matrix's
+        bytes: every entry's slots past the matrix are what the reply buffer holds now (a
+        reply that writes there empties the dict; without left-overs they are zeros in every
+        entry), so a matrix answered again with the same left-overs is the same bytes, not a
+        new copy of the reply (genericClient asks for the damping matrix several times a
+        step, ``dataSize`` doubles each)."""
+        self._tail_daq = False
+        """A daq reply can write slots past the matrix (then it empties ``_replies``)."""
         self._owed: Action | None = None
         self._closed: ConnectionClosed | None = None
         self._error = ""
@@ -288,6 +299,8 @@ class ElementServerSession:
         self._reply = bytearray(self._vector_bytes)
         self._zeros = bytes(self._vector_bytes)
         self._matrix_count = size_id.ctrl.disp * size_id.ctrl.disp
+        self._replies = {}
+        self._tail_daq = size_id.daq.total > self._matrix_count
         self._data_size = data_size
         self._state = _READY
 
@@ -347,7 +360,7 @@ class ElementServerSession:
             )
         if not self._keep_leftovers:
             self._reply_full = None
-            self._reply[:] = self._zeros
+            self._reply[:] = self._zeros  # past the matrix: zeros, as in every entry
         return owed
 
     def _writable(self) -> bytearray:
@@ -377,6 +390,8 @@ class ElementServerSession:
         layout = self._daq_layout
         assert layout is not None
         reply = self._writable()
+        if self._tail_daq:
+            self._replies.clear()
         if action is _DAQ_ACTION:
             layout.pack_into(reply, daq, "daq")
             return self._finish_reply()
@@ -423,7 +438,13 @@ class ElementServerSession:
             return packed
         reply = self._reply if self._reply_full is None else self._writable()
         reply[: 8 * count] = packed
-        return bytes(reply)
+        replies = self._replies
+        whole = replies.get(packed)
+        if whole is None:
+            if len(replies) >= _PACKED_CACHE:
+                replies.clear()
+            whole = replies[packed] = bytes(reply)
+        return whole
 
     def _check_matrix(self, column_major: Sequence[float], action: Action) -> None:
         """LocalProtocolError unless ``column_major`` is an n*n matrix that fits dataSize."""
@@ -450,4 +471,6 @@ class ElementServerSession:
                 f"send_values() got {len(values)} values but dataSize is {self._size_id.data_size}"
             )
         doubles_struct(len(values)).pack_into(self._writable(), 0, *values)
+        if len(values) > self._matrix_count:
+            self._replies.clear()
         return self._finish_reply()

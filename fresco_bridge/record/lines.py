@@ -244,33 +244,45 @@ class LineEncoder:
                 if (kind != TRIAL or dkind != DAQ or st != prev or dst != prev or tm != time_
                         or s != session or ds != session):
                     return None
+                # each vector "0" (as the previous iteration's) or its text, a 1-DOF vector's
+                # made in one f-string (``nums`` for the rest: non-finite, other lengths), and
+                # the iteration one f-string
                 if trial == pt:
                     if ctrl == pc and disp == pd and force == pf:
                         its += ",0"
                         continue
-                    its += ",[0,"
+                    a = "0"
+                elif trial is known:
+                    a = text
                 else:
-                    if trial is not known:
-                        known, text = trial, nums(trial)
-                    its += ",[" + text + ","
+                    a = f"[{trial[0]!r}]" if len(trial) == 1 else "[]"
+                    if "n" in a or len(a) == 2:
+                        a = nums(trial)
+                    known, text = trial, a
                 if disp == pd:
-                    its += "0,"
+                    b = "0"
+                elif disp is known:
+                    b = text
                 else:
-                    if disp is not known:
-                        known, text = disp, nums(disp)
-                    its += text + ","
+                    b = f"[{disp[0]!r}]" if len(disp) == 1 else "[]"
+                    if "n" in b or len(b) == 2:
+                        b = nums(disp)
+                    known, text = disp, b
                 if force == pf:
-                    its += "0"
+                    c = "0"
+                elif force is known:
+                    c = text
                 else:
-                    if force is not known:
-                        known, text = force, nums(force)
-                    its += text
+                    c = f"[{force[0]!r}]" if len(force) == 1 else "[]"
+                    if "n" in c or len(c) == 2:
+                        c = nums(force)
+                    known, text = force, c
                 if ctrl == trial:
-                    its += "]"
+                    its += f",[{a},{b},{c}]"
                 else:
                     if ctrl is not known:
                         known, text = ctrl, nums(ctrl)
-                    its += "," + text + "]"
+                    its += f",[{a},{b},{c},{text}]"
                 pt, pc, pd, pf = trial, ctrl, disp, force
         except ValueError:  # an item of another kind (another length) where a pair should be
             return None

@@ -234,3 +234,25 @@ def test_the_taper_is_made_once_per_length_and_cannot_be_changed() -> None:
     assert np.array_equal(_hann(512), np.hanning(512)) and _hann(512) is _hann(512)
     with pytest.raises(ValueError, match="read-only"):
         _hann(512)[0] = 1.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(8, 80), st.sampled_from([0.01, 0.003, 0.5]), st.integers(0, 200),
+       st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(0.5, 1.5)), min_size=80,
+                max_size=300), st.booleans())
+def test_the_monitors_fei_is_fei_of_its_window_bit_for_bit(
+        window: int, dt: float, shift: int, samples: list[tuple[float, float]],
+        constant: bool) -> None:
+    """``OnlineMonitor``'s own FEI (both signals in one array, one rfft) gives exactly what
+    ``fei`` gives for the window it holds, wherever the ring starts, and None where ``fei``
+    finds no content."""
+    monitor = OnlineMonitor(dt, window=window)
+    for cmd, gain in samples[: window + shift]:
+        cmd = 2.5 if constant else cmd
+        monitor.update(cmd, cmd * gain)
+    cmd_window, meas_window = monitor.window_arrays()
+    try:
+        want: tuple[float, float] | None = fei(cmd_window, meas_window, dt, taper=True)
+    except IndicatorError:
+        want = None
+    assert repr(monitor._window_fei()) == repr(want)

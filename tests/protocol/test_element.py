@@ -8,6 +8,8 @@ import struct
 from typing import Any
 
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from protocol import (
     NEED_DATA,
@@ -401,6 +403,45 @@ def test_a_reused_matrix_reply_equals_a_fresh_one_with_the_same_leftovers(
         else:
             assert cached.send_matrix(matrix) == fresh.send_matrix(list(matrix))
         stiff[0] += 1.0  # a list changed in place is never answered from a stale copy
+
+
+REPLY = st.sampled_from(["damp", "stiff", "daq6", "daq10", "values"])
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 3), st.sampled_from([SignalSizes(0, 0, 0, 1, 0), SignalSizes(1, 1, 1, 1, 1)]),
+       st.integers(0, 6), st.booleans(), st.lists(st.tuples(REPLY, st.integers(0, 2)),
+                                                   max_size=30))
+@example(2, SignalSizes(1, 1, 1, 1, 1), 0, True, [("damp", 0), ("daq10", 1), ("damp", 0)])
+@example(1, SignalSizes(0, 0, 0, 1, 0), 3, True, [("damp", 0), ("values", 2), ("damp", 0)])
+def test_a_matrix_answered_again_is_the_reply_packing_it_again_gives(
+        n: int, daq_unit: SignalSizes, extra: int, keep: bool,
+        replies: list[tuple[str, int]]) -> None:
+    """A tuple matrix answered again is the same reply bytes while nothing past it changed
+    (``_replies``): byte for byte what a session packing a list every time sends, whatever
+    wrote the slots past the matrix before (daq blocks longer than it, raw values, zeroed
+    left-overs)."""
+    daq = SignalSizes(*(k * n for k in daq_unit.as_tuple()))
+    ctrl = SignalSizes(n, n, n, 0, 1)
+    size_id = SizeID(ctrl, daq, max(n * n, 1 + ctrl.total, daq.total) + extra)
+    ds = size_id.data_size
+    cached = server_with(size_id, keep_reply_leftovers=keep)
+    fresh = server_with(size_id, keep_reply_leftovers=keep)
+    matrices = [tuple(float(10 * k + i) for i in range(n * n)) for k in range(4)]
+    for kind, k in replies:
+        code = {"damp": 14, "stiff": 13, "daq6": 6, "daq10": 10, "values": 13}[kind]
+        for server in (cached, fresh):
+            server.receive_data(vector(code, ds))
+            assert server.next_event() == ReplyRequested(Action(code))
+        if kind in ("damp", "stiff"):
+            assert cached.send_matrix(matrices[k]) == fresh.send_matrix(list(matrices[k]))
+        elif kind == "values":
+            values = [float(-k - i - 1) for i in range(min(ds, n * n + k))]
+            assert cached.send_values(values) == fresh.send_values(values)
+        else:
+            signals = Signals(*(tuple(float(100 * k + i + 1) for i in range(size))
+                                for size in daq.as_tuple()))
+            assert cached.send_daq(signals) == fresh.send_daq(signals)
 
 
 # -- bad input ----------------------------------------------------------------------
