@@ -53,6 +53,7 @@ __all__ = [
     "BasisTwin",
     "BranchMemory",
     "BranchRls",
+    "KeptFeatures",
     "ReversalBasis",
     "TwinBasis",
     "WeightedRls",
@@ -302,6 +303,24 @@ class TwinBasis(Protocol[M]):
     def advanced(self, memory: M, d: float, f: float) -> M: ...
 
 
+class KeptFeatures(Generic[M]):
+    """``basis.features(memory, d)``, the last one kept: the ``observe`` that follows a
+    ``predict`` at the same point reuses it (``online_improved`` asks both every step: one
+    computation, not two)."""
+
+    def __init__(self, basis: TwinBasis[M]) -> None:
+        self._basis = basis
+        self._kept: tuple[M, float, tuple[float, float, FloatArray]] | None = None
+
+    def __call__(self, memory: M, d: float) -> tuple[float, float, FloatArray]:
+        kept = self._kept
+        if kept is not None and kept[0] is memory and kept[1] == d:
+            return kept[2]
+        out = self._basis.features(memory, d)
+        self._kept = (memory, d, out)
+        return out
+
+
 class BasisTwin(Generic[M]):
     """The twin of an expert: the learner's current weights (read at each call) on its own
     memory of its own history (material semantics)."""
@@ -405,7 +424,7 @@ class BranchRls(OwnsTwin):
         self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
                                noise_floor=1e-6 * self.basis.force_scale**2, shrink=shrink)
         self._source = BranchMemory()
-        self._kept: tuple[BranchMemory, float, tuple[float, float, FloatArray]] | None = None
+        self._source_features = KeptFeatures(self.basis)
         self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
@@ -427,16 +446,6 @@ class BranchRls(OwnsTwin):
     def source_twin(self) -> HysteresisModel:
         """A twin on this expert's memory of the tested element now (shadow scoring)."""
         return BasisTwin(self.basis, self.rls, self._source)
-
-    def _source_features(self, memory: BranchMemory, d: float) -> tuple[float, float, FloatArray]:
-        """``basis.features(memory, d)``, kept for the ``observe`` that follows a ``predict`` at
-        the same point (``online_improved`` asks both: one computation, not two)."""
-        kept = self._kept
-        if kept is not None and kept[0] is memory and kept[1] == d:
-            return kept[2]
-        out = self.basis.features(memory, d)
-        self._kept = (memory, d, out)
-        return out
 
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""

@@ -37,6 +37,7 @@ from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measuremen
 from fresco_bridge.updating.branch import (
     BasisTwin,
     BranchMemory,
+    KeptFeatures,
     ReversalBasis,
     WeightedRls,
     initial_stiffness,
@@ -210,7 +211,7 @@ class BranchStopRls(OwnsTwin):
         self.rls = WeightedRls(np.array(rows), np.array(targets), forgetting=forgetting,
                                ridge=ridge, gate=gate, noise_floor=1e-6 * force_scale**2)
         self._source = self.basis.virgin()
-        self._kept: tuple[DualMemory, float, tuple[float, float, FloatArray]] | None = None
+        self._source_features = KeptFeatures(self.basis)
         self._twin = BasisTwin(self.basis, self.rls)
         self._last_update = 0.0
 
@@ -221,16 +222,6 @@ class BranchStopRls(OwnsTwin):
     def source_twin(self) -> BasisTwin[DualMemory]:
         """A twin on this expert's memory of the tested element now (shadow scoring)."""
         return BasisTwin(self.basis, self.rls, self._source)
-
-    def _source_features(self, memory: DualMemory, d: float) -> tuple[float, float, FloatArray]:
-        """``basis.features(memory, d)``, kept for the ``observe`` that follows a ``predict`` at
-        the same point (as ``branch.BranchRls``)."""
-        kept = self._kept
-        if kept is not None and kept[0] is memory and kept[1] == d:
-            return kept[2]
-        out = self.basis.features(memory, d)
-        self._kept = (memory, d, out)
-        return out
 
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""

@@ -42,9 +42,9 @@ __all__ = [
     "LAW_MENEGOTTO_PINTO",
     "MENEGOTTO_PINTO_PARAMETERS",
     "STATE_SIZE",
-    "bouc_wen_trial",
+    "bouc_wen_advance",
     "bouc_wen_vector",
-    "bwbn_trial",
+    "bwbn_advance",
     "bwbn_vector",
     "drive",
     "drive_many",
@@ -176,26 +176,37 @@ def _substep(prm: FloatArray, z: float, e: float, h: float,
 
 
 @njit(cache=True)
+def _bwbn_advance(prm: FloatArray, z: float, e: float, du: float,
+                  dz_max: float) -> tuple[float, float, bool]:
+    """(z, e, ok) after ``du`` yield displacements from (z, e): ``bwbn._advance``; not ok where
+    it needs more than ``MAX_SUBSTEPS``."""
+    n = prm[3]
+    direction = 1.0 if du > 0.0 else -1.0
+    nu = 1.0 + prm[8] * e
+    z_scale = max(abs(z), (prm[6] / (nu * (prm[4] + prm[5]))) ** (1.0 / n))
+    bound = (prm[6] + n * nu * (prm[4] + abs(prm[5])) * z_scale**n) / (1.0 + prm[9] * e)
+    count = int(abs(du) * bound / dz_max) + 1
+    if count > MAX_SUBSTEPS:
+        return z, e, False
+    h = du / count
+    for _ in range(count):
+        z, e = _substep(prm, z, e, h, direction)
+    return z, e, True
+
+
+@njit(cache=True)
 def _bwbn_trial(prm: FloatArray, d_c: float, z_c: float, e_c: float, f_c: float, d: float,
                 dz_max: float) -> tuple[float, float, float, bool]:
     """(force, z, e, ok) of a trial to ``d`` from the committed (d_c, z_c, e_c, f_c)."""
-    k0, fy, alpha, n = prm[0], prm[1], prm[2], prm[3]
+    k0, fy, alpha = prm[0], prm[1], prm[2]
     du = (d - d_c) / (fy / k0)
     if not math.isfinite(du):
         return math.nan, z_c, e_c, False
     if du == 0.0:
         return f_c, z_c, e_c, True
-    direction = 1.0 if du > 0.0 else -1.0
-    nu = 1.0 + prm[8] * e_c
-    z_scale = max(abs(z_c), (prm[6] / (nu * (prm[4] + prm[5]))) ** (1.0 / n))
-    bound = (prm[6] + n * nu * (prm[4] + abs(prm[5])) * z_scale**n) / (1.0 + prm[9] * e_c)
-    count = int(abs(du) * bound / dz_max) + 1
-    if count > MAX_SUBSTEPS:
+    z, e, ok = _bwbn_advance(prm, z_c, e_c, du, dz_max)
+    if not ok:
         return math.nan, z_c, e_c, False
-    h = du / count
-    z, e = z_c, e_c
-    for _ in range(count):
-        z, e = _substep(prm, z, e, h, direction)
     if prm[6] - prm[7] * e <= 0.0:
         return math.nan, z, e, False
     force = alpha * k0 * d + (1.0 - alpha) * fy * z
@@ -239,33 +250,43 @@ def _bw_substep(prm: FloatArray, z: float, h: float, direction: float) -> float:
 
 
 @njit(cache=True)
+def _bw_advance(prm: FloatArray, z: float, du: float, dz_max: float) -> tuple[float, bool]:
+    """(z, ok) after ``du`` yield displacements from z: ``bouc_wen._advance``; not ok where it
+    needs more than ``MAX_SUBSTEPS``."""
+    n, beta, gamma, a = prm[3], prm[4], prm[5], prm[6]
+    direction = 1.0 if du > 0.0 else -1.0
+    z_ultimate = (a / (beta + gamma)) ** (1.0 / n)
+    bound = a + n * (beta + abs(gamma)) * max(abs(z), z_ultimate) ** n
+    count = int(abs(du) * bound / dz_max) + 1
+    if count > MAX_SUBSTEPS:
+        return z, False
+    h = du / count
+    for _ in range(count):
+        z = _bw_substep(prm, z, h, direction)
+    return z, True
+
+
+@njit(cache=True)
 def _bw_trial(prm: FloatArray, d_c: float, z_c: float, f_c: float, d: float,
               dz_max: float) -> tuple[float, float, bool]:
     """(force, z, ok) of a trial to ``d`` from the committed (d_c, z_c, f_c)."""
-    k0, fy, alpha, n, beta, gamma, a = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6]
+    k0, fy, alpha = prm[0], prm[1], prm[2]
     du = (d - d_c) / (fy / k0)
     if not math.isfinite(du):
         return math.nan, z_c, False
     if du == 0.0:
         return f_c, z_c, True
-    direction = 1.0 if du > 0.0 else -1.0
-    z_ultimate = (a / (beta + gamma)) ** (1.0 / n)
-    bound = a + n * (beta + abs(gamma)) * max(abs(z_c), z_ultimate) ** n
-    count = int(abs(du) * bound / dz_max) + 1
-    if count > MAX_SUBSTEPS:
+    z, ok = _bw_advance(prm, z_c, du, dz_max)
+    if not ok:
         return math.nan, z_c, False
-    h = du / count
-    z = z_c
-    for _ in range(count):
-        z = _bw_substep(prm, z, h, direction)
     force = alpha * k0 * d + (1.0 - alpha) * fy * z
     return force, z, True
 
 
-bouc_wen_trial = _bw_trial
-"""One trial of the classic Bouc-Wen object (``stepped.SteppedBoucWen``)."""
-bwbn_trial = _bwbn_trial
-"""One trial of the BWBN object (``stepped.SteppedBaberNoori``)."""
+bouc_wen_advance = _bw_advance
+"""The classic Bouc-Wen object's ``_advance`` (``stepped.SteppedBoucWen``)."""
+bwbn_advance = _bwbn_advance
+"""The BWBN object's ``_advance`` (``stepped.SteppedBaberNoori``)."""
 
 
 # -- Steel01 without isotropic hardening (bilinear.py) -----------------------------------------

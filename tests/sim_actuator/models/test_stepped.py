@@ -55,3 +55,10 @@ def test_a_refused_trial_raises_the_objects_error() -> None:
         for d in _history(2, 400, 40.0):
             model.set_trial(d)
             model.commit()
+
+
+def test_a_step_past_the_substep_limit_raises_the_objects_error() -> None:
+    model = SteppedBoucWen(**BW)
+    with pytest.raises(ModelInputError, match="substeps"):
+        model.set_trial(1e9)
+    assert model.set_trial(0.5) == BoucWen(**BW).set_trial(0.5)  # nothing was committed
