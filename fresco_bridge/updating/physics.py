@@ -15,9 +15,10 @@ along the offline displacement history, every second sample, from a start taken 
 stay fixed online; only the residual basis learns (the fit costs seconds, an online step does
 not), and its ridge pulls it towards zero, so the expert falls back on the law where recent
 data do not support a residual. Its law evaluations run through the JIT drive of
-``sim_actuator.models.paths`` (``LAW_BOUC_WEN``: the object's algorithm, bit for bit; ~15x
-faster than stepping the object, which cost ~3 s of every ``online_improved`` build), and the
-online law steps through the same kernel (``stepped``: the same bits).
+``sim_actuator.models.paths`` (``LAW_BOUC_WEN``: the object's algorithm, bit for bit; stepping
+the object cost ~3 s of every ``online_improved`` build, the kernel leaves ~1.2 s for the whole
+build, BENCHMARKS.md updating part 11), and the online law steps through the same kernel
+(``stepped``: the same bits).
 """
 
 from __future__ import annotations
