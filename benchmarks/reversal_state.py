@@ -18,6 +18,12 @@ of it).
 ``taskset -c 0 python -m benchmarks.reversal_state [--specimen menegotto-pinto] [--seed 1]
 [--train tested+offline] [--hidden 16,16] [--members 5] [--variables absolute] [--drop energy]``
 (~10 s per run on one core).
+
+Online (a probe run although step 1 failed; BENCHMARKS.md part 10), ``benchmarks.updater_design
+--factory`` functions: ``online`` (``ReversalStateUpdater`` alone) and ``mixture`` (design H, the
+default ``online_improved``, with it as a sixth expert scored like the others; options go to
+the law): ``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
+benchmarks.reversal_state:mixture --baseline``.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from fresco_bridge.study.calibrate import calibrate_bilinear
 from fresco_bridge.study.constants import OFFLINE_SAMPLES, PAPER_BILINEAR
 from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating import reversal_state as rs
+from fresco_bridge.updating.improved import OnlineImproved
 from fresco_bridge.updating.lm import LmOptions
 from fresco_bridge.updating.mlp import Mlp
 from fresco_bridge.updating.refit import law_forces
@@ -59,6 +66,19 @@ def fit_ensemble(histories: list[tuple[FloatArray, FloatArray, float]], sc: rs.S
         thetas.append(theta)
         rms.append(r)
     return net, np.array(thetas), float(np.mean(rms))
+
+
+def online(disp: FloatArray, force: FloatArray, **options: Any) -> rs.ReversalStateUpdater:
+    """The learned law alone, refitted online."""
+    return rs.ReversalStateUpdater(offline=(disp, force), **options)
+
+
+def mixture(disp: FloatArray, force: FloatArray, **options: Any) -> OnlineImproved:
+    """Design H with the learned law as a sixth expert."""
+    from benchmarks.refit_families import _with_expert
+
+    return _with_expert(OnlineImproved(offline=(disp, force)), "reversal-state",
+                        online(disp, force, **options))
 
 
 def _other(specimen: str, token: str) -> tuple[FloatArray, FloatArray]:

@@ -52,7 +52,8 @@ from sim_actuator.models.base import (
     trial_input_error,
 )
 
-__all__ = ["FitSpace", "LawFamily", "RefitUpdater", "compress", "fit_law", "law_forces"]
+__all__ = ["FitSpace", "LawFamily", "MeasuredHistory", "RefitUpdater", "compress", "fit_law",
+           "law_forces"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -149,6 +150,27 @@ def fit_law(family: LawFamily, histories: Sequence[tuple[FloatArray, FloatArray,
     fit: Any = least_squares(residual, x0, bounds=(lower, upper), max_nfev=max_nfev,
                              x_scale=np.array(space.scale))  # fmt: skip
     return np.asarray(fit.x, dtype=np.float64)
+
+
+class MeasuredHistory:
+    """The tested element's whole measured history and when an online refit is due: after
+    ``warmup`` measurements, then every ``every`` (shared by the refitting updaters)."""
+
+    def __init__(self, every: int, warmup: int) -> None:
+        self.every, self.warmup = every, warmup
+        self._disp: list[float] = []
+        self._force: list[float] = []
+
+    def append(self, d: float, force: float) -> bool:
+        """Keep one measurement; True when a refit is due now."""
+        self._disp.append(d)
+        self._force.append(force)
+        n = len(self._disp)
+        return n >= self.warmup and (n - self.warmup) % self.every == 0
+
+    def arrays(self) -> tuple[FloatArray, FloatArray]:
+        """(displacements, forces) so far."""
+        return (np.array(self._disp, dtype=np.float64), np.array(self._force, dtype=np.float64))
 
 
 class _Law:
@@ -257,8 +279,7 @@ class RefitUpdater(OwnsTwin):
         """Rms force error of the latest parameters over the samples fitted (module docstring)."""
         self._measure([(disp[keep], force[keep], 1.0)], None)
         self._source = self._law.build()
-        self._disp: list[float] = []
-        self._force: list[float] = []
+        self._history = MeasuredHistory(every, warmup)
         self._twin = _RefitTwin(self._law, name, stride)
         self._last_update = 0.0
         self.refits = 0
@@ -283,17 +304,13 @@ class RefitUpdater(OwnsTwin):
         start = time.perf_counter()
         self._source.set_trial(d)
         self._source.commit()
-        self._disp.append(d)
-        self._force.append(force)
-        n = len(self._disp)
-        if n >= self.warmup and (n - self.warmup) % self.every == 0:
+        if self._history.append(d, force):
             self.refit()
         self._last_update = time.perf_counter() - start
 
     def refit(self) -> None:
         """Refit now on the history so far (warm start) and move the law to the new state."""
-        disp = np.array(self._disp, dtype=np.float64)
-        force = np.array(self._force, dtype=np.float64)
+        disp, force = self._history.arrays()
         keep = compress(disp, self.stride)
         histories = [(disp[keep], force[keep], 1.0)]
         if self._offline[2] > 0.0:
