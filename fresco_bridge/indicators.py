@@ -199,27 +199,34 @@ def fei(
     step = _positive(dt, "dt", "fei")
     if l < 1:
         raise IndicatorError(f"fei: weight exponent l must be >= 1, got {l}")
-    c = c - c.mean()
-    m = m - m.mean()
+    both = np.stack((c, m))
+    result = _fei_of_rows(both, step, l, taper=taper)
+    if result is None:
+        raise IndicatorError("fei: the command has no non-DC spectral content, FEI is undefined")
+    return result
+
+
+def _fei_of_rows(both: FloatArray, step: float, l: int, *, taper: bool  # noqa: E741
+                 ) -> tuple[float, float] | None:
+    """FEI's arithmetic on a (2, n) array of (command, measurement), overwritten in place
+    (means removed, tapered), checks left to the caller; None when the command has no non-DC
+    content. One home for ``fei`` and the online monitor (which fills the array from its rings
+    and skips the checks: they hold finite values only)."""
+    both -= both.mean(axis=1, keepdims=True)
     if taper:
-        hann = _hann(c.size)
-        c = c * hann
-        m = m * hann
-    xc = np.fft.rfft(c)[1:]
-    xm = np.fft.rfft(m)[1:]
-    freqs = np.fft.rfftfreq(c.size, d=step)[1:]
+        both *= _hann(both.shape[1])
+    spectra = np.fft.rfft(both)
+    xc, xm = spectra[0, 1:], spectra[1, 1:]
     mag = np.abs(xc)
     weight = mag**l
     total = float(weight.sum())
     if not (math.isfinite(total) and total > 0.0):
-        raise IndicatorError("fei: the command has no non-DC spectral content, FEI is undefined")
+        return None
     # (X_m / X_c)·|X_c|^l written without the division, so empty bins contribute 0.
     safe = np.where(mag > 0.0, mag, 1.0)
     index = complex(np.sum(xm * np.conj(xc) * (weight / (safe * safe)))) / total
-    f_eq = float(np.dot(weight, freqs)) / total
-    amplitude = abs(index)
-    delay = -math.atan2(index.imag, index.real) / (2.0 * math.pi * f_eq)
-    return amplitude, delay
+    f_eq = float(np.dot(weight, _rfft_freqs(both.shape[1], step))) / total
+    return abs(index), -math.atan2(index.imag, index.real) / (2.0 * math.pi * f_eq)
 
 
 @functools.lru_cache(maxsize=8)
@@ -464,10 +471,9 @@ class OnlineMonitor:
 
     def _window_fei(self) -> tuple[float, float] | None:
         """``fei(*self.window_arrays(), self.dt, taper=True)`` of the full window, or None
-        when the command has no content (HOLD, a quasi-static plateau): the same arithmetic
-        on both signals at once (one (2, window) array, one rfft call, the frequencies made
-        once), without ``fei``'s checks — the rings hold only finite values (``update``
-        refuses the others) — so the same numbers bit for bit in half the time."""
+        when the command has no content (HOLD, a quasi-static plateau): ``fei``'s own core
+        (``_fei_of_rows``) on the window read straight from the rings, without ``fei``'s
+        checks — the rings hold only finite values (``update`` refuses the others)."""
         n = self.window
         start = self._steps % n
         both = np.empty((2, n))
@@ -475,19 +481,7 @@ class OnlineMonitor:
             values = np.frombuffer(ring)
             both[row, : n - start] = values[start:]
             both[row, n - start:] = values[:start]
-        both -= both.mean(axis=1, keepdims=True)
-        both *= _hann(n)
-        spectra = np.fft.rfft(both)
-        xc, xm = spectra[0, 1:], spectra[1, 1:]
-        mag = np.abs(xc)
-        weight = mag**2
-        total = float(weight.sum())
-        if not (math.isfinite(total) and total > 0.0):
-            return None
-        safe = np.where(mag > 0.0, mag, 1.0)
-        index = complex(np.sum(xm * np.conj(xc) * (weight / (safe * safe)))) / total
-        f_eq = float(np.dot(weight, _rfft_freqs(n, self.dt))) / total
-        return abs(index), -math.atan2(index.imag, index.real) / (2.0 * math.pi * f_eq)
+        return _fei_of_rows(both, self.dt, 2, taper=True)
 
     def _check(self, err: float, ti_window_ago: float | None) -> str | None:
         messages: list[str] = []
