@@ -188,15 +188,21 @@ def _size_id_problem(values: Sequence[int], max_data_size: int | None) -> tuple[
     )
 
 
+class _SizeIDBytes:
+    """``SizeID.SIZE_BYTES``: a ClassVar in a base class, not in the frozen dataclass itself,
+    which mypyc compiles as a slot that ``__init__`` then fails to set (setup.py)."""
+
+    __slots__ = ()
+    SIZE_BYTES: ClassVar[int] = 44
+
+
 @dataclass(frozen=True, slots=True)
-class SizeID:
+class SizeID(_SizeIDBytes):
     """The 11 x int32 size ID that opens an element-protocol connection (spec §3.3)."""
 
     ctrl: SignalSizes
     daq: SignalSizes
     data_size: int
-
-    SIZE_BYTES: ClassVar[int] = 44
 
     def __post_init__(self) -> None:
         problem, _ = _size_id_problem(self._entries(), None)

@@ -28,17 +28,18 @@ from __future__ import annotations
 
 import fcntl
 import json
-import math
 import os
 import socket
-import threading
 import time
 from collections import defaultdict
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Literal
 
+from mypy_extensions import mypyc_attr
+
 from .lines import DAQ, FORMAT_VERSION, MONITOR, TRIAL, Item, LineEncoder
+from .syncer import Syncer
 
 _monotonic = time.monotonic
 _os_write = os.write
@@ -57,6 +58,7 @@ PENDING_LIMIT = 256
 keeps its trials out of the file)."""
 
 
+@mypyc_attr(native_class=False)  # mypyc: a native class cannot derive from OSError
 class RecordError(OSError):
     """The run record could not be created or written."""
 
@@ -70,7 +72,8 @@ def write_private(path: Path, text: str) -> None:
         data = text.encode("utf-8")
         view = memoryview(data)
         while view:
-            view = view[os.write(fd, view):]
+            written = os.write(fd, view)  # not inside the slice: mypyc evaluates it twice
+            view = view[written:]
         os.fsync(fd)
     finally:
         os.close(fd)
@@ -89,84 +92,6 @@ def update_meta(directory: Path, **changes: object) -> dict[str, object]:
     meta.update(changes)
     write_private(path, json.dumps(meta, indent=2))
     return meta
-
-
-class _Syncer(threading.Thread):
-    """Group commit: one fdatasync covers every line written before it starts.
-
-    Syncs at most once per ``interval``; a request while the last sync is younger than that
-    waits out the rest of the interval, unless it is urgent (an event). Requests that arrive
-    during a sync or a wait are coalesced into the next sync.
-
-    Why a bare lock and flags rather than ``threading.Event``: a commit's request is then two
-    attribute stores on the step loop (the thread is woken only when it is idle or for an
-    event), and the thread itself wakes once per sync, not once per request; both sides run
-    next to no Python code (an ``Event`` runs a ``Condition`` in Python on every call).
-    """
-
-    def __init__(self, fd: int, interval: float) -> None:
-        super().__init__(name="fresco-record-sync", daemon=True)
-        self._fd = fd
-        self._interval = interval
-        self._kick = threading.Lock()
-        self._kick.acquire()  # released to wake the thread (a binary semaphore)
-        self._kicked = False  # a release is pending: do not release twice
-        self._idle = True  # the thread waits for a request, not for the interval to pass
-        self._urgent = False
-        self._stopping = False
-        self._requested = 0  # lines written to the kernel when the last request came
-        self.durable = 0  # lines covered by the last completed fdatasync
-        self.syncs = 0
-        self.error: OSError | None = None
-
-    def _wake(self) -> None:
-        if not self._kicked:
-            self._kicked = True
-            self._kick.release()
-
-    def request(self, lines: int, urgent: bool) -> None:
-        self._requested = lines
-        if urgent:
-            self._urgent = True
-            self._wake()
-        elif self._idle:  # else the thread's own timer covers these lines
-            self._wake()
-
-    def _wait(self, timeout: float = -1) -> None:
-        if self._kick.acquire(timeout=timeout):
-            self._kicked = False
-
-    def run(self) -> None:
-        last = -math.inf
-        attempted = 0  # lines the last fdatasync was for (a failed one is retried on request)
-        while True:
-            # idle until a line is waiting for a sync (the flag is set before the check, the
-            # request is stored before the flag is read: no request can be missed)
-            self._idle = True
-            if self._requested == attempted and not (self._urgent or self._stopping):
-                self._wait()
-            self._idle = False
-            while not (self._urgent or self._stopping):  # at most one sync per interval
-                wait = last + self._interval - time.monotonic()
-                if wait <= 0.0:
-                    break
-                self._wait(wait)
-            if self._stopping:
-                return
-            self._urgent = False
-            attempted = self._requested
-            last = time.monotonic()
-            try:
-                os.fdatasync(self._fd)
-                self.durable = attempted
-                self.syncs += 1
-            except OSError as exc:  # reported on the next flush; retried on the next request
-                self.error = exc
-
-    def stop(self) -> None:
-        self._stopping = True
-        self._wake()
-        self.join(timeout=5.0)
 
 
 class RunRecord:
@@ -196,9 +121,9 @@ class RunRecord:
             os.close(self._fd)
             raise RecordError(f"{path}: the run is in use by another running bridge") from None
         os.fchmod(self._fd, 0o600)
-        self._syncer: _Syncer | None = None
+        self._syncer: Syncer | None = None
         if fsync == "background":
-            self._syncer = _Syncer(self._fd, sync_interval)
+            self._syncer = Syncer(self._fd, sync_interval)
             self._syncer.start()
         self.closed = False
 
@@ -406,7 +331,8 @@ class RunRecord:
             if n != len(data):
                 view = memoryview(data)[n:]
                 while view:
-                    view = view[_os_write(self._fd, view):]
+                    written = _os_write(self._fd, view)  # not in the slice (mypyc: twice)
+                    view = view[written:]
         except OSError as exc:
             raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
 

@@ -53,14 +53,19 @@ class CommandGate:
     _commit_time: float
     _wake: asyncio.Event | None
 
-    if TYPE_CHECKING:  # the site's own, used here
-        def enter_hold(self, reason: str) -> None: ...
+    # The site's own, used here (ExperimentalSite defines them; real methods, not a
+    # TYPE_CHECKING block, so that mypyc can compile the class).
+    def enter_hold(self, reason: str) -> None:
+        raise NotImplementedError
 
-        def event(self, kind: str, reason: str, **extra: object) -> None: ...
+    def event(self, kind: str, reason: str, **extra: object) -> None:
+        raise NotImplementedError
 
-        def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState: ...
+    def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
+        raise NotImplementedError
 
-        async def _send(self, command: tuple[float, ...]) -> bool: ...
+    async def _send(self, command: tuple[float, ...]) -> bool:
+        raise NotImplementedError
 
     def clear_of_limits(self, target: tuple[float, ...]) -> bool:
         """No ctrl limit, or an in-process controller and a verdict that lets ``target`` go

@@ -258,14 +258,15 @@ class ControllerGuard:
                             attempts, last, remaining)
             attempts += 1
             probe = loop.create_task(self.controller.get_daq(), name=f"{site.name}.probe")
+            # what a ``finally`` would do, without an ``await`` in one: mypyc (2.4.1) lets an
+            # exception raised by an await inside a ``finally`` past the handlers there
             try:
                 await asyncio.wait((probe, waker), timeout=min(self.timeout, remaining),
                                    return_when=asyncio.FIRST_COMPLETED)
-            finally:
-                if not probe.done():
-                    probe.cancel()  # a read: cancelling it is harmless (the link is dropped)
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await probe
+            except BaseException:
+                await _drop(probe)
+                raise
+            await _drop(probe)
             if self._wake is not None and self._wake.is_set():  # an operator acted: abort
                 return f"recovery ended by the operator: the site is {site.state}"
             try:
@@ -283,3 +284,12 @@ class ControllerGuard:
                 async with asyncio.timeout(min(backoff.wait_time(),
                                                max(0.0, deadline - loop.time()))):
                     await asyncio.shield(waker)
+
+
+async def _drop(probe: asyncio.Task[Daq]) -> None:
+    """A probe still running is cancelled and awaited (a read: cancelling it is harmless, the
+    link is dropped)."""
+    if not probe.done():
+        probe.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await probe

@@ -167,7 +167,9 @@ def test_the_eager_path_runs_without_a_coroutine_per_request() -> None:
             pump.feed(data)
             assert not pump.busy
         assert site.set_trial_eager(site.trial) is None  # done at once: no coroutine
-        assert start_eager(site.tangent()) == site.tangent_eager()
+        # NaN here (the site holds): compared by value, not by float identity (the compiled
+        # step path makes a new NaN object where the pure one may share one)
+        assert list(map(repr, start_eager(site.tangent()))) == list(map(repr, site.tangent_eager()))
         return len(replies)
 
     assert asyncio.run(go()) > 50
