@@ -137,6 +137,21 @@ params = {params}
 """
 
 
+def code_origin(tree: str | None) -> str:
+    """Which step-path code a bridge server of this tree runs: compiled or pure, and from where
+    (a ``--compare-tree`` serves its own pure sources only if they come first on the path)."""
+    env = opensees_env()
+    if tree is not None:
+        env["PYTHONPATH"] = f"{tree}:{env['PYTHONPATH']}"
+    code = ("import fresco_bridge.cli, protocol.element as e, fresco_bridge.sites.experimental "
+            "as x; print(e.__file__, x.__file__)")
+    with tempfile.TemporaryDirectory() as work:
+        out = subprocess.run([sys.executable, "-c", code], cwd=work, env=env, text=True,
+                             capture_output=True, check=True).stdout.split()
+    kind = "pure" if all(f.endswith(".py") for f in out) else "compiled"
+    return f"{kind}: {', '.join(out)}"
+
+
 def _await_line(proc: subprocess.Popen[str], prefix: str) -> str:
     assert proc.stdout is not None
     for line in proc.stdout:
@@ -474,6 +489,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.only:
         keys = args.only.split(",")
         variants = [v for v in variants if any(k in v.name for k in keys)]
+    for tree in sorted({v.tree or "" for v in variants}):
+        print(f"code of the bridge{' @ ' + tree if tree else ''}: {code_origin(tree or None)}",
+              flush=True)
     reports = []
     if args.rounds:
         reports.append(summarize(run_rounds(variants, args.rounds, pin=True)))

@@ -9,6 +9,7 @@ import signal
 import sys
 from pathlib import Path
 
+from . import _compiled
 from .config import ConfigError, load_config
 from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
@@ -53,6 +54,13 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
     finally:
         await bridge.close()
     return 0
+
+
+def _warn_if_stale() -> None:
+    """Loudly, at every start: a compiled module older than its source runs the old code."""
+    stale = _compiled.stale()
+    if stale:
+        print(f"fresco-bridge: WARNING: {_compiled.stale_message(stale)}", file=sys.stderr)
 
 
 def _serve_on_its_loop(config_path: Path | None, resume: Path | None) -> int:
@@ -104,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     add_diagnosis_parsers(sub)  # diagnose, diagnose-bench
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
+    _warn_if_stale()
     try:
         if args.command == "serve":
             resume = None

@@ -6,6 +6,11 @@ The helpers behind them are plain modules in ``tests/support/`` (import them as
 ``net`` (ports), ``lab`` (``fresco-bridge lab up``), ``controller`` (``sim-actuator serve``
 processes), ``recorded_run`` (real run directories), ``spied_bridge`` (a bridge on an elastic
 specimen with limits and a spy on its controller).
+
+The step path runs compiled (mypyc, as installed); ``FRESCO_BRIDGE_PURE=1`` runs the pure
+sources of the same modules instead (``fresco_bridge/__init__.py`` installs the finder before
+anything else of ours is imported; subprocesses inherit it). ``make test`` runs the protocol,
+record and server tests in both modes; the header of the report says which.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from fresco_bridge import _compiled
 from fresco_bridge.daemon import BridgeThread
 from tests.support.bridge import RunningBridge
 from tests.support.broker import SYSTEM_PORT, OwnBroker, broker_up
@@ -28,6 +34,13 @@ from tests.support.paths import OPENFRESCO_CAPTURES, SHARED
 # has its own deadline in the test itself.
 settings.register_profile("fresco-bridge", deadline=None)
 settings.load_profile("fresco-bridge")
+
+
+def pytest_report_header() -> str:
+    compiled = _compiled.compiled_modules()
+    mode = ("pure sources (FRESCO_BRIDGE_PURE=1)" if _compiled.pure_requested()
+            else f"compiled ({sum(compiled.values())} of {len(compiled)} modules)")
+    return f"fresco-bridge step path: {mode}"
 
 
 @pytest.fixture(scope="session")

@@ -203,6 +203,6 @@ def test_the_image_gets_everything_the_package_build_needs() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())
     packages = project["tool"]["setuptools"]["packages"]["find"]["include"]
     top_level = {p.rstrip("*") for p in packages}
-    assert top_level | {"pyproject.toml", project["project"]["readme"]} == copied
+    assert top_level | {"pyproject.toml", "setup.py", project["project"]["readme"]} == copied
     assert set(project["project"]["scripts"]) == {"fresco-bridge", "sim-actuator"}
     assert "FROM python:3.11-slim" in dockerfile and "pip install --no-cache-dir ." in dockerfile
