@@ -10,21 +10,23 @@ $(BIN)/python:
 	$(BIN)/pip install -q --upgrade pip==25.3
 
 # The step path's modules are compiled with mypyc (setup.py, the list in fresco_bridge/_compiled.py;
-# FRESCO_BRIDGE_PURE=1 builds nothing). An extension next to its .py is imported instead of it,
-# so the extensions are rebuilt whenever one of their sources changes (.build), before `demo`
-# and `test`: an edited .py is never silently shadowed by an old build.
+# FRESCO_BRIDGE_PURE=1 builds nothing). mypyc type-checks them against the installed
+# dependencies, so the dependencies are installed first (pure) and the extensions built after
+# (.build). An extension next to its .py is imported instead of it, so they are rebuilt whenever
+# one of their sources changes, before `demo` and `test`: an edited .py is never silently
+# shadowed by an old build.
 COMPILED := $(shell sed -n 's/^    "\(.*\.py\)",$$/\1/p' fresco_bridge/_compiled.py)
 BUILD_INPUTS := setup.py fresco_bridge/_compiled.py $(COMPILED)
 
 $(VENV)/.runtime: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install -q -e .
-	touch $@ $(VENV)/.build
+	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e .
+	touch $@
 
 $(VENV)/.test: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install -q -e '.[test]'
-	touch $@ $(VENV)/.runtime $(VENV)/.build
+	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[test]'
+	touch $@ $(VENV)/.runtime
 
-$(VENV)/.build: $(BUILD_INPUTS) | $(VENV)/.runtime
+$(VENV)/.build: $(BUILD_INPUTS) $(VENV)/.runtime
 	$(BIN)/pip install -q --no-deps -e .
 	touch $@
 

@@ -75,7 +75,8 @@ def _extensions() -> list[object]:
         return list(mypycify(list(compiled.COMPILED), opt_level="3",
                              group_name=compiled.GROUP))
     except (Exception, SystemExit) as exc:  # mypyc refused the source
-        return _pure(compiled, f"mypyc failed ({exc!r})")
+        return _pure(compiled, f"mypyc failed ({exc!r}; it type-checks the sources against the "
+                     "installed dependencies: install them first, as `make build` does)")
 
 
 class BuildExt(build_ext):
