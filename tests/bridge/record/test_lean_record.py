@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py  # type: ignore[import-untyped]
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fresco_bridge.cli import main as cli_main
@@ -167,6 +167,10 @@ CALL = st.one_of(
 
 @settings(max_examples=60, deadline=None)
 @given(st.lists(CALL, max_size=40))
+@example([("commit", 0.0, False), ("switch", "b", False), ("trial", 0.0, False),
+          ("switch", "a", False), ("trial", 0.0, False)])
+@example([("switch", "b", False), ("event", 0.0, False), ("switch", "a", False),
+          ("trial", 0.0, False), ("switch", "b", False), ("trial", 0.0, False)])
 def test_any_call_sequence_reads_back_as_written(tmp_path_factory: Any,
                                                  calls: list[tuple[str, Any, bool]]) -> None:
     """Each site's lines read back in the order they were recorded; a site's trial, daq and
@@ -201,8 +205,9 @@ def test_any_call_sequence_reads_back_as_written(tmp_path_factory: Any,
             body = {"event": "note", "reason": "why", "n": step}
         line = {"kind": kind, "site": site, "session": session, **body}
         if kind in ("commit", "event"):
-            # a commit opens the site's pending list in the writer too: the lists are written
-            # at close in the order the sites first had one
+            # the writer's list for a site exists from the site's first trial, daq, monitor or
+            # commit (an event only flushes it), and at close the sites' leftovers go out in
+            # that order (``RunRecord.close``)
             flushed = pending.setdefault(site, []) if kind == "commit" else pending.get(site, [])
             expected += flushed
             flushed.clear()
