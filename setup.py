@@ -70,6 +70,7 @@ def _extensions() -> list[object]:
     if shutil.which(command[0]) is None:
         return _pure(compiled, f"no C compiler ({command[0]} not found)")
     _remove_extensions(compiled, keep=True)
+    compiled.write_manifest(HERE)  # what is compiled, for the stale-build check
     os.chdir(HERE)  # mypyc takes the paths relative to the tree root
     try:
         return list(mypycify(list(compiled.COMPILED), opt_level="3",

@@ -1,10 +1,9 @@
 """fresco-bridge: the lab daemon between an FE integrator and the actuator controller."""
 
-import os as _os
+from ._compiled import pure_requested as _pure_requested
+from ._compiled import use_pure_sources as _use_pure_sources
 
-if _os.environ.get("FRESCO_BRIDGE_PURE", "") not in ("", "0"):  # run the pure sources
-    from ._compiled import use_pure_sources
-
-    use_pure_sources()
+if _pure_requested():  # FRESCO_BRIDGE_PURE=1: run the pure sources of the compiled modules
+    _use_pure_sources()
 
 __version__ = "0.1.0"

@@ -4,8 +4,10 @@ to run their pure sources instead.
 ``pip install -e .`` (``make demo``/``make test``) compiles the modules in ``COMPILED`` with
 mypyc (``setup.py``): the same source, as C extensions next to it. Python imports an extension
 before the ``.py`` beside it, so a source edited after the build would be silently ignored;
-``stale()`` finds such modules (``fresco-bridge`` warns at start, a test fails, the Makefile
-rebuilds first). ``FRESCO_BRIDGE_PURE=1``: at install, nothing is compiled; at run time, the
+``stale()`` finds such modules by the digest of each source recorded at the build
+(``MANIFEST``; modification times would not do: a wheel's install writes sources and extensions
+in no particular order), ``fresco-bridge`` warns at start, a test fails, the Makefile rebuilds
+first. ``FRESCO_BRIDGE_PURE=1``: at install, nothing is compiled; at run time, the
 pure sources are imported even where extensions are built (``use_pure_sources``, installed by
 ``fresco_bridge/__init__.py`` before anything else of ours is imported).
 
@@ -15,6 +17,7 @@ is installed.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.abc
 import importlib.machinery
 import importlib.util
@@ -47,6 +50,9 @@ COMPILED: tuple[str, ...] = (
 GROUP = "fresco_bridge._step_path"
 """mypyc's shared library: ``fresco_bridge/_step_path__mypyc*.so`` (in the package, one stable
 name: an editable install finds it whatever the list above)."""
+
+MANIFEST = "fresco_bridge/_step_path.sources"
+"""Written by the build next to the shared library: the sha256 of each source it compiled."""
 
 PACKAGES = ("protocol", "fresco_bridge", "sim_actuator")
 ROOT = Path(__file__).resolve().parent.parent
@@ -84,15 +90,36 @@ def _shared_library(path: Path, root: Path) -> bool:
         GROUP.rpartition(".")[2] + "__mypyc")
 
 
+def source_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def write_manifest(root: Path = ROOT, sources: Sequence[str] = COMPILED) -> None:
+    """Record the digest of each source about to be compiled (the build, ``setup.py``)."""
+    (root / MANIFEST).write_text("".join(f"{source_digest(root / source)}  {source}\n"
+                                         for source in sources))
+
+
+def _manifest(root: Path) -> dict[str, str]:
+    try:
+        text = (root / MANIFEST).read_text()
+    except OSError:
+        return {}
+    return {source: digest for digest, _, source in
+            (line.partition("  ") for line in text.splitlines())}
+
+
 def stale(root: Path = ROOT, sources: Sequence[str] = COMPILED) -> list[str]:
-    """Modules whose extension would run code that is not their source: the source changed
-    after the build, or the module is no longer in ``COMPILED`` (an old build left behind)."""
+    """Modules whose extension would run code that is not their source: the source is not
+    the one the build compiled (``MANIFEST``), or the module is no longer in ``COMPILED`` (an
+    old build left behind)."""
     found = []
     listed = {root / source for source in sources}
+    built = _manifest(root)
     for source in sources:
         path = root / source
-        ext = extension(path)
-        if ext is not None and path.exists() and path.stat().st_mtime > ext.stat().st_mtime:
+        if extension(path) is not None and path.exists() and \
+                built.get(source) != source_digest(path):
             found.append(module_name(source))
     for ext in built_extensions(root):
         origin = ext.with_name(ext.name.split(".", 1)[0] + ".py")

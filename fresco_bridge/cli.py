@@ -57,7 +57,7 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
 
 
 def _warn_if_stale() -> None:
-    """Loudly, at every start: a compiled module older than its source runs the old code."""
+    """Loudly, at every start: a compiled module whose source changed runs the old code."""
     stale = _compiled.stale()
     if stale:
         print(f"fresco-bridge: WARNING: {_compiled.stale_message(stale)}", file=sys.stderr)

@@ -50,25 +50,30 @@ def test_no_compiled_module_is_stale() -> None:
     assert not stale, _compiled.stale_message(stale)
 
 
-def _touch(path: Path, mtime: float) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("")
-    os.utime(path, (mtime, mtime))
-
-
 def test_stale_names_an_edited_source_and_a_module_left_off_the_list(tmp_path: Path) -> None:
-    _touch(tmp_path / "fresco_bridge" / "fresh.py", 1000.0)
-    _touch(tmp_path / "fresco_bridge" / f"fresh{EXT}", 2000.0)
-    _touch(tmp_path / "fresco_bridge" / f"edited{EXT}", 1000.0)
-    _touch(tmp_path / "fresco_bridge" / "edited.py", 2000.0)
-    _touch(tmp_path / "protocol" / "dropped.py", 1000.0)
-    _touch(tmp_path / "protocol" / f"dropped{EXT}", 2000.0)
-    _touch(tmp_path / "fresco_bridge" / f"_step_path__mypyc{EXT}", 1.0)  # the shared library
+    """By content, not by time: an edit is stale, and stays so however new the extension is;
+    an edit undone is not (a wheel's install writes sources and extensions in any order)."""
+    files = {"fresco_bridge/fresh.py": "a = 1\n", "fresco_bridge/edited.py": "b = 1\n",
+             "protocol/dropped.py": "c = 1\n"}
+    for source, text in files.items():
+        (tmp_path / source).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / source).write_text(text)
+        (tmp_path / source).with_suffix(EXT).write_text("")
+    (tmp_path / "fresco_bridge" / f"_step_path__mypyc{EXT}").write_text("")  # the shared library
     listed = ("fresco_bridge/fresh.py", "fresco_bridge/edited.py")
+    _compiled.write_manifest(tmp_path, listed)
+    assert _compiled.stale(tmp_path, listed) == ["protocol.dropped (not in the list)"]
+    (tmp_path / "fresco_bridge" / "edited.py").write_text("b = 2\n")
+    (tmp_path / "fresco_bridge" / f"edited{EXT}").touch()  # newer than the edit: still stale
     stale = _compiled.stale(tmp_path, listed)
     assert stale == ["fresco_bridge.edited", "protocol.dropped (not in the list)"]
     message = _compiled.stale_message(stale)
     assert "fresco_bridge.edited" in message and "make build" in message
+    (tmp_path / "fresco_bridge" / "edited.py").write_text("b = 1\n")  # the edit undone
+    assert _compiled.stale(tmp_path, listed) == ["protocol.dropped (not in the list)"]
+    (tmp_path / _compiled.MANIFEST).unlink()  # a build without digests: every module stale
+    assert _compiled.stale(tmp_path, listed)[:2] == ["fresco_bridge.fresh",
+                                                     "fresco_bridge.edited"]
 
 
 def test_the_cli_warns_at_start_about_a_stale_build(
