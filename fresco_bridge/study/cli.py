@@ -70,13 +70,14 @@ def add_study_parser(sub: Any) -> None:
     p.add_argument("--steps", type=_positive_int, default=None,
                    help="stop after this many steps (default: the whole record)")
     p.add_argument("--ann-iterations", type=_positive_int, default=None, metavar="N",
-                   help="cap online_ann's LM at N iterations per step (default: the paper's 50; "
-                        "fewer is cheaper and less faithful, recorded in study.json)")
+                   help="cap online_ann's LM at N iterations per step (default 8, equal in "
+                        "accuracy to the paper's 50 in BENCHMARKS.md; recorded in study.json)")
     p.add_argument("--ann-option", type=parse_option, action="append", default=[],
                    metavar="KEY=VALUE",
                    help="an online_ann option (JSON value), repeatable, e.g. divide=dividerand "
-                        "(MATLAB train's validation stop) or single_precision_hessian=true; "
-                        "recorded in study.json (default: the paper's method)")
+                        "(MATLAB train's validation stop) or single_precision_hessian=false "
+                        "(with --ann-iterations 50: the paper's exact fit); recorded in "
+                        "study.json")
     p.add_argument("--pretrain-iterations", type=_positive_int, default=1000, metavar="N",
                    help="LM iterations of the ANN's offline pre-training (default 1000)")
     p.add_argument("--workers", type=_positive_int, default=None,

@@ -31,7 +31,7 @@ from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_mo
 from fresco_bridge.sweeps import run_sweep
 from fresco_bridge.updating.base import Updater
 from fresco_bridge.updating.registry import UPDATERS, make_updater
-from fresco_bridge.updating.updaters import PAPER_ONLINE_LM, FixedModelUpdater
+from fresco_bridge.updating.updaters import FixedModelUpdater, online_lm_options
 from sim_actuator.models import make_model
 
 __all__ = [
@@ -65,11 +65,19 @@ class RunSpec:
     seed: int
     steps: int | None = None
     ann_iterations: int | None = None
-    """LM iteration cap of ``online_ann`` (None: the paper's 50); a cost knob for quick sweeps."""
+    """LM iteration cap of ``online_ann`` (None: its default, 8; the paper's is 50)."""
     pretrain_iterations: int = 1000
     """LM iterations of the offline pre-training (MATLAB ``trainlm``'s default epochs)."""
     ann_options: tuple[tuple[str, Any], ...] = ()
-    """Further ``online_ann`` options (``divide``, ``rtol``, …); none: the paper's method."""
+    """Further ``online_ann`` options (``divide``, ``rtol``, …); none: its defaults."""
+
+    def online_ann_options(self) -> dict[str, Any]:
+        """The options ``online_ann`` gets in this run (``--ann-option`` wins over the cap)."""
+        options: dict[str, Any] = {}
+        if self.ann_iterations is not None:
+            options["max_iterations"] = self.ann_iterations
+        options.update(self.ann_options)
+        return options
 
     @property
     def label(self) -> str:
@@ -110,13 +118,9 @@ def make_case_updater(case: str, prepared: Prepared) -> Updater:
         return make_updater(case, offline=(prepared.offline_disp, prepared.offline_force))
     if case == "online_ukf":
         return make_updater(case)  # the paper's start values and covariances
-    # offline_ann, online_ann (the paper's method, faithful: the registry's defaults). Each
+    # offline_ann, online_ann (the paper's method, the registry's defaults). Each
     # case gets its own copy: online_ann trains its network in place.
-    options: dict[str, Any] = {}
-    if case == "online_ann" and prepared.run.ann_iterations is not None:
-        options["max_iterations"] = prepared.run.ann_iterations
-    if case == "online_ann":
-        options.update(prepared.run.ann_options)
+    options = prepared.run.online_ann_options() if case == "online_ann" else {}
     return make_updater(case, model=copy.deepcopy(prepared.ann), seed=prepared.run.seed,
                         **options)
 
@@ -208,6 +212,9 @@ def run_study(
         by_run.setdefault(id(task.prepared), {}).setdefault(task.layout, {})[task.case] = history
     for p in prepared:
         per_layout = by_run[id(p)]
+        ann = p.run.online_ann_options()
+        ann_lm = online_lm_options(max_iterations=ann.get("max_iterations"),
+                                   single_precision_hessian=ann.get("single_precision_hessian"))
         document: dict[str, Any] = {
             "study": "paper",
             "record": p.run.record,
@@ -220,7 +227,8 @@ def run_study(
             "offline": {"samples": int(p.offline_disp.size), "calibrated_bilinear": p.calibrated,
                         "paper_bilinear": dict(PAPER_BILINEAR),
                         "pretrain_iterations": p.run.pretrain_iterations},
-            "online_ann_max_iterations": p.run.ann_iterations or PAPER_ONLINE_LM.max_iterations,
+            "online_ann_max_iterations": ann_lm.max_iterations,
+            "online_ann_single_precision_hessian": ann_lm.single_precision_hessian,
             "online_ann_options": dict(p.run.ann_options),
             "layouts": {
                 layout: {

@@ -53,7 +53,9 @@ UPDATERS: dict[str, UpdaterEntry] = {
     "offline_ann": UpdaterEntry(__name__, "make_offline_ann", "the pre-trained ANN, no updating "
                                 "(the paper's offline calibration)"),
     "online_ann": UpdaterEntry(__name__, "make_online_ann", "the paper's online ANN: 500 random "
-                               "offline + 200 forgetting-window samples, LM every step"),
+                               "offline + 200 forgetting-window samples, LM every step (8 "
+                               "iterations, float32 J^T W J: equal in accuracy to the "
+                               "paper's 50)"),
     "online_ukf": UpdaterEntry(__name__, "make_online_ukf", "the paper's UKF on the Bilinear "
                                "parameters [k0, alpha, Fy]"),
     "online_improved": UpdaterEntry("fresco_bridge.updating.improved", "OnlineImproved",
@@ -192,18 +194,20 @@ def make_online_ann(*, model: Any = None, model_file: str | Path | None = None,
                     rtol: float | None = None, divide: str | None = None,
                     max_fail: int | None = None, single_precision_hessian: bool | None = None,
                     seed: int = 0, pretrain_iterations: int = 1000) -> Updater:
-    """The paper's online ANN, faithful by default: LM up to 50 iterations every step.
+    """The paper's online ANN: LM every step, by default 8 iterations with a float32 J^T W J
+    (``ONLINE_ANN_LM``: equal in accuracy to the paper's 50 in float64, BENCHMARKS.md updating
+    part 12); ``max_iterations=50, single_precision_hessian=False`` is the paper's exact fit.
 
-    ``max_iterations``/``rtol`` override the cap and add a relative-decrease stop (both change
-    the method; BENCHMARKS.md measures what they cost). ``seed`` drives both the pre-training
+    ``rtol`` adds a relative-decrease stop, ``divide``/``max_fail`` MATLAB's validation stop
+    (BENCHMARKS.md part 6 measures what they change). ``seed`` drives both the pre-training
     start (with ``offline``) and the random choice of offline samples.
     """
-    from .updaters import ONLINE_ANN_DIVIDE, PAPER_ONLINE_LM, OnlineAnnUpdater, online_lm_options
+    from .updaters import ONLINE_ANN_DIVIDE, ONLINE_ANN_LM, OnlineAnnUpdater, online_lm_options
 
     ann = _ann_model("online_ann", model, model_file, offline, seed, pretrain_iterations)
     return OnlineAnnUpdater(ann, offline_samples=offline_samples, window=window,
                             forgetting=forgetting, window_share=window_share,
-                            lm=online_lm_options(max_iterations, rtol, PAPER_ONLINE_LM, max_fail,
+                            lm=online_lm_options(max_iterations, rtol, ONLINE_ANN_LM, max_fail,
                                                  single_precision_hessian),
                             divide=ONLINE_ANN_DIVIDE if divide is None else divide, seed=seed)
 

@@ -53,6 +53,7 @@ def test_json_has_exactly_the_issue_keys_per_case(study: dict[str, object]) -> N
     assert study["steps"] == STEPS + 1
     assert study["noise_pct"] == 1.0 and 0.05 < study["noise_std_kN"] < 0.5
     assert study["online_ann_max_iterations"] == 2
+    assert study["online_ann_single_precision_hessian"] is True  # the default fit's
     assert study["online_ann_options"] == {"divide": "none"}
     assert study["offline"]["pretrain_iterations"] == 100  # type: ignore[index]
 
