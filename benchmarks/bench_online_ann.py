@@ -228,9 +228,9 @@ def _best(fn: Callable[[], object], repeat: int = 30) -> float:
 
 def pieces(rounds: int) -> dict[str, list[float]]:
     """CPU ms of one LM iteration's pieces at the paper's sizes (700 x 301, 516 rows kept)."""
-    import scipy.linalg
-    from scipy.linalg.blas import dsyrk, ssyrk
-    from scipy.linalg.lapack import dpotrf, dpotrs
+    import scipy.linalg  # type: ignore[import-untyped]
+    from scipy.linalg.blas import dsyrk, ssyrk  # type: ignore[import-untyped]
+    from scipy.linalg.lapack import dpotrf, dpotrs  # type: ignore[import-untyped]
 
     from fresco_bridge.updating.lm import one_blas_thread
     from fresco_bridge.updating.mlp import Mlp
