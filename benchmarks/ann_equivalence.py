@@ -38,10 +38,8 @@ Run: ``nice -n 10 .venv/bin/python -m benchmarks.ann_equivalence --workers 2 --o
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import json
 import math
-import multiprocessing
 import os
 import subprocess
 import sys
@@ -53,8 +51,8 @@ from typing import Any
 import numpy as np
 from scipy import stats  # type: ignore[import-untyped]
 
-from benchmarks.bench_online_ann import VARIANTS, Pair, machine, prepare, run
-from fresco_bridge import indicators
+from benchmarks.bench_online_ann import VARIANTS, Pair, machine, prepare, scored_run
+from fresco_bridge.sweeps import run_sweep
 from fresco_bridge.updating import make_updater
 from fresco_bridge.updating.ann import AnnModel
 
@@ -284,45 +282,17 @@ def markdown(summary: Mapping[str, Any]) -> str:
 
 # --- runs -----------------------------------------------------------------------------------
 
-_MODELS: dict[str, AnnModel] = {}
-_PAIRS: dict[tuple[str, str], Pair] = {}
+Task = tuple[Key, AnnModel, Pair]
 
 
-def _init_worker(models: dict[str, AnnModel], pairs: list[Pair]) -> None:
-    """Pool initializer: one BLAS/OpenMP thread, and the prepared models and pairs."""
-    for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[k] = "1"
-    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
-
-    global _LIMITS
-    _LIMITS = threadpool_limits(1)
-    _MODELS.update(models)
-    _PAIRS.update({(p.layout, p.label): p for p in pairs})
-
-
-_LIMITS: Any = None
-
-
-def one_run(key: Key) -> dict[str, Any]:
-    """One replay of one method on one pair (worker side)."""
-    layout, label, method, seed = key
-    pair = _PAIRS[(layout, label)]
-    model = _MODELS[_specimen(label)]
-    its: list[int] = []
-    forced: list[float] = []
+def one_run(task: Task) -> dict[str, Any]:
+    """One replay of one method on one pair (a sweep task: any process)."""
+    (layout, label, method, seed), model, pair = task
     t0 = time.perf_counter()
-    pred, wall, cpu = run(make_updater("online_ann", model=model,
-                                       **{**VARIANTS[method], "seed": seed}),
-                          pair, lag=False, iterations=its, teacher=forced)
+    scores = scored_run(make_updater("online_ann", model=model,
+                                     **{**VARIANTS[method], "seed": seed}), pair)
     return {"layout": layout, "pair": label, "method": method, "seed": seed,
-            "samples": len(pair.twin_d),
-            "maeth": indicators.maeth(pair.twin_f, pred),
-            "teacher_forced_rmse": indicators.one_step_rmse(pair.twin_f, np.array(forced)),
-            "iterations_mean": float(np.mean(its)),
-            "cpu_ms_median": 1e3 * float(np.median(cpu)),
-            "cpu_ms_p99": 1e3 * float(np.percentile(cpu, 99)),
-            "wall_ms_median": 1e3 * float(np.median(wall)),
-            "wall_ms_p99": 1e3 * float(np.percentile(wall, 99)),
+            "samples": len(pair.twin_d), **scores,
             "run_s": time.perf_counter() - t0, "pid": os.getpid(),
             "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
@@ -409,25 +379,28 @@ def main(argv: list[str] | None = None) -> None:
         models, pairs = prepare(args.specimens, args.records, args.steps,
                                 args.pretrain_iterations, layouts)
         print(f"prepared {len(pairs)} pairs in {time.perf_counter() - t0:.1f} s", flush=True)
-        ctx = multiprocessing.get_context("forkserver")
+        by_key = {(p.layout, p.label): p for p in pairs}
+        tasks: list[Task] = [(k, models[_specimen(k[1])], by_key[(k[0], k[1])]) for k in todo]
         args.out.parent.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        with cf.ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx,
-                                    initializer=_init_worker,
-                                    initargs=(models, pairs)) as pool, \
-                args.out.open("a") as fh:
-            futures = {pool.submit(one_run, k): k for k in todo}
-            for i, fut in enumerate(cf.as_completed(futures), 1):
-                row = {**fut.result(), "steps": args.steps}
+        with args.out.open("a") as fh:
+            count = 0
+
+            def keep(_index: int, result: dict[str, Any]) -> None:
+                nonlocal count
+                count += 1
+                row = {**result, "steps": args.steps}
                 fh.write(json.dumps(row) + "\n")
                 fh.flush()
                 el = time.perf_counter() - t0
-                print(f"[{i}/{len(todo)} {el / 60:5.1f} min] {row['layout']:<14} "
+                print(f"[{count}/{len(todo)} {el / 60:5.1f} min] {row['layout']:<14} "
                       f"{row['pair']:<26} {row['method']:<16} seed {row['seed']}: MAETH "
                       f"{row['maeth']:8.3f} kN, teacher-forced RMSE "
                       f"{row['teacher_forced_rmse']:.4f} kN, LM it {row['iterations_mean']:.1f}, "
                       f"cpu median {row['cpu_ms_median']:.1f} p99 {row['cpu_ms_p99']:.1f} ms, "
                       f"{row['run_s']:.1f} s", flush=True)
+
+            run_sweep(one_run, tasks, workers=args.workers, on_result=keep)
     info["machine_end"] = machine()
     info["end_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     _report(args, info)

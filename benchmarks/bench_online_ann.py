@@ -145,6 +145,21 @@ def run(updater: Updater, pair: Pair, lag: bool, iterations: list[int] | None = 
     return pred, wall, cpu
 
 
+def scored_run(updater: Updater, pair: Pair) -> dict[str, float]:
+    """One replay (the updater learns step i first) scored: MAETH, the teacher-forced RMSE,
+    LM iterations and the update's wall and CPU time."""
+    its: list[int] = []
+    forced: list[float] = []
+    pred, wall, cpu = run(updater, pair, lag=False, iterations=its, teacher=forced)
+    return {"maeth": indicators.maeth(pair.twin_f, pred),
+            "teacher_forced_rmse": indicators.one_step_rmse(pair.twin_f, np.array(forced)),
+            "iterations_mean": float(np.mean(its)),
+            "wall_ms_median": 1e3 * float(np.median(wall)),
+            "wall_ms_p99": 1e3 * float(np.percentile(wall, 99)),
+            "cpu_ms_median": 1e3 * float(np.median(cpu)),
+            "cpu_ms_p99": 1e3 * float(np.percentile(cpu, 99))}
+
+
 def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
              variants: list[str], lag: bool = True) -> list[dict[str, Any]]:
     rows = []
@@ -158,26 +173,15 @@ def accuracy(models: dict[str, AnnModel], pairs: list[Pair],
                      "maeth": indicators.maeth(pair.twin_f, base),
                      "one_step_rmse": indicators.one_step_rmse(pair.twin_f, base)})
         for name in variants:
-            opts = VARIANTS[name]
-            its: list[int] = []
-            forced: list[float] = []
-            opts = {"seed": 1, **opts}
-            pred, wall, cpu = run(make_updater("online_ann", model=model, **opts), pair,
-                                  lag=False, iterations=its, teacher=forced)
+            opts = {"seed": 1, **VARIANTS[name]}
+            scores = scored_run(make_updater("online_ann", model=model, **opts), pair)
             one_step = math.nan
             if lag:
                 ahead, _, _ = run(make_updater("online_ann", model=model, **opts), pair,
                                   lag=True)
                 one_step = indicators.one_step_rmse(pair.twin_f, ahead)
-            row = {"pair": pair.label, "layout": pair.layout, "variant": name,
-                   "maeth": indicators.maeth(pair.twin_f, pred),
-                   "one_step_rmse": one_step,
-                   "teacher_forced_rmse": indicators.one_step_rmse(pair.twin_f, np.array(forced)),
-                   "iterations_mean": float(np.mean(its)),
-                   "wall_ms_median": 1e3 * float(np.median(wall)),
-                   "wall_ms_p99": 1e3 * float(np.percentile(wall, 99)),
-                   "cpu_ms_median": 1e3 * float(np.median(cpu)),
-                   "cpu_ms_p99": 1e3 * float(np.percentile(cpu, 99))}
+            row: dict[str, Any] = {"pair": pair.label, "layout": pair.layout, "variant": name,
+                                   "one_step_rmse": one_step, **scores}
             rows.append(row)
             print(f"  {pair.label} {pair.layout}: {name:<17} MAETH {row['maeth']:7.3f} kN, "
                   f"one-step RMSE {row['one_step_rmse']:.4f} kN, teacher-forced RMSE "

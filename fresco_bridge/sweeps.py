@@ -31,6 +31,10 @@ R = TypeVar("R")
 Progress = Callable[[int, int], None]
 """Called as ``progress(done, total)`` after each finished task (in the caller's process)."""
 
+OnResult = Callable[[int, Any], None]
+"""Called as ``on_result(index, result)`` as each task finishes, in completion order (in the
+caller's process): a long sweep can keep what is done (a resumable log) before it ends."""
+
 _ONE_THREAD = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -51,18 +55,21 @@ def run_sweep(
     connect_timeout: float = 30.0,
     task_timeout: float | None = None,
     progress: Progress | None = None,
+    on_result: OnResult | None = None,
 ) -> list[R]:
-    """``[fn(item) for item in items]``, run in parallel; results in the items' order."""
+    """``[fn(item) for item in items]``, run in parallel; results in the items' order (and
+    each one to ``on_result`` as it finishes)."""
     if workers is not None and workers < 1:
         raise SweepError(f"workers must be >= 1 (got {workers})")
     if not items:
         return []
     if scheduler is not None:
-        return _run_dask(fn, items, scheduler, connect_timeout, task_timeout, progress)
+        return _run_dask(fn, items, scheduler, connect_timeout, task_timeout, progress,
+                         on_result)
     n = min(workers or os.cpu_count() or 1, len(items))
     if n == 1:
-        return _run_serial(fn, items, progress)
-    return _run_pool(fn, items, n, task_timeout, progress)
+        return _run_serial(fn, items, progress, on_result)
+    return _run_pool(fn, items, n, task_timeout, progress, on_result)
 
 
 def _failed(index: int, exc: BaseException) -> SweepError:
@@ -71,13 +78,16 @@ def _failed(index: int, exc: BaseException) -> SweepError:
     return error
 
 
-def _run_serial(fn: Callable[[T], R], items: Sequence[T], progress: Progress | None) -> list[R]:
+def _run_serial(fn: Callable[[T], R], items: Sequence[T], progress: Progress | None,
+                on_result: OnResult | None) -> list[R]:
     results: list[R] = []
     for i, item in enumerate(items):
         try:
             results.append(fn(item))
         except Exception as exc:
             raise _failed(i, exc) from exc
+        if on_result is not None:
+            on_result(i, results[i])
         if progress is not None:
             progress(i + 1, len(items))
     return results
@@ -101,6 +111,7 @@ def _run_pool(
     n: int,
     task_timeout: float | None,
     progress: Progress | None,
+    on_result: OnResult | None,
 ) -> list[R]:
     results: list[Any] = [None] * len(items)
     deadline = None if task_timeout is None else time.monotonic() + task_timeout
@@ -117,6 +128,8 @@ def _run_pool(
                     results[i] = future.result()
                 except Exception as exc:
                     raise _failed(i, exc) from exc
+                if on_result is not None:
+                    on_result(i, results[i])
                 done += 1
                 if progress is not None:
                     progress(done, len(items))
@@ -139,6 +152,7 @@ def _run_dask(
     connect_timeout: float,
     task_timeout: float | None,
     progress: Progress | None,
+    on_result: OnResult | None,
 ) -> list[R]:
     try:
         from distributed import Client, as_completed  # untyped: used through Any below
@@ -168,6 +182,8 @@ def _run_dask(
                         results[i] = future.result()
                     except Exception as exc:
                         raise _failed(i, exc) from exc
+                    if on_result is not None:
+                        on_result(i, results[i])
                     done += 1
                     if progress is not None:
                         progress(done, len(items))

@@ -54,6 +54,17 @@ def test_progress_is_reported_per_task() -> None:
     assert [d for d, _ in seen] == [1, 2, 3] and {t for _, t in seen} == {3}
 
 
+def test_each_result_is_handed_over_as_it_finishes_in_every_executor() -> None:
+    for workers in (1, 2):
+        seen: dict[int, int] = {}
+        out = run_sweep(square, [1, 2, 3, 4], workers=workers, on_result=seen.__setitem__)
+        assert seen == {0: 1, 1: 4, 2: 9, 3: 16} and out == [1, 4, 9, 16]
+    kept: list[int] = []
+    with pytest.raises(SweepError, match="task 4 failed"):  # what finished before is kept
+        run_sweep(fail_on_three, [0, 1, 2, 3], workers=1, on_result=lambda i, r: kept.append(r))
+    assert kept == [0, 1, 2]
+
+
 def test_bad_workers_and_unreachable_scheduler_are_clear_errors() -> None:
     with pytest.raises(SweepError, match="workers must be >= 1"):
         run_sweep(square, [1], workers=0)
@@ -70,7 +81,10 @@ def test_a_real_dask_local_cluster_runs_the_sweep_in_order() -> None:
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
         address = cluster.scheduler_address
-        assert run_sweep(square, list(range(8)), scheduler=address) == [x * x for x in range(8)]
+        seen: dict[int, int] = {}
+        assert run_sweep(square, list(range(8)), scheduler=address,
+                         on_result=seen.__setitem__) == [x * x for x in range(8)]
+        assert seen == {x: x * x for x in range(8)}
         with pytest.raises(SweepError, match="task 4 failed"):
             run_sweep(fail_on_three, [0, 1, 2, 3], scheduler=address, task_timeout=60)
 
