@@ -15,18 +15,24 @@ Why it is outside both specimens: the law's docstring. Factories:
   ``bouc-wen+memory`` expert with the law refitted online), ``chaboche_residual_mixture``: that
   as E's fifth expert.
 
+``baber_wen_residual_mixture``: design H with its law expert replaced by the law plus the memory
+basis on its residual (BENCHMARKS.md "updating part 16", negative).
+
 ``excursion_bw`` (``sim_actuator.models.excursion_bw``, BENCHMARKS.md "updating part 8c"): Bouc-Wen
 with the exponent scheduled on the previous plastic excursion, isotropic hardening on the range
 and the transition origin ``c`` (0: beta = gamma); 9 free parameters, ``n_min`` clipped to
 ``n0``; fitted through the JIT drive. Capacity only (it failed there).
 
-``python -m benchmarks.refit_families <specimen> <seed> [chaboche|excursion-bw]``: step-1
-capacity. ``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
+``python -m benchmarks.refit_families <specimen> <seed> [chaboche|excursion-bw|baber-wen]
+[kt|soft|pulse|softpulse]``: step-1 capacity (``capacity``; ``baber-wen`` is
+``online_improved``'s law expert, BENCHMARKS.md "updating part 16").
+``taskset -c 0 python -m benchmarks.updater_design --workers 1 --factory
 benchmarks.refit_families:chaboche_online [--only menegotto-pinto]``.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -36,7 +42,8 @@ import numpy.typing as npt
 
 from fresco_bridge.updating.base import OwnsTwin
 from fresco_bridge.updating.branch import BranchRls, initial_stiffness
-from fresco_bridge.updating.improved import OnlineImproved, _MixtureTwin
+from fresco_bridge.updating.degrading import BABER_WEN, REFIT_SCHEDULE, baber_wen_refit
+from fresco_bridge.updating.improved import EXPERTS, OnlineImproved, _MixtureTwin
 from fresco_bridge.updating.physics import _PhysicsTwin, data_scales
 from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater, law_forces
 from fresco_bridge.updating.shadow import stepper
@@ -153,8 +160,9 @@ class RefitResidual(OwnsTwin):
     name = "chaboche+memory"
 
     def __init__(self, family: LawFamily, *, offline: tuple[FloatArray, FloatArray],
-                 **options: Any) -> None:  # fmt: skip
+                 name: str = "chaboche+memory", **options: Any) -> None:  # fmt: skip
         disp, force = offline
+        self.name = name
         self.law = RefitUpdater(family, offline=offline, name=self.name, **options)
         law_force = law_forces(family.build(self.law.parameters), disp)
         self.residual = BranchRls(offline=(disp, force - law_force), memory_terms=True,
@@ -162,6 +170,15 @@ class RefitResidual(OwnsTwin):
                                   stiffness=initial_stiffness(disp, force), shrink=True)
         self._twin = _PhysicsTwin(self.law.twin, self.residual.twin)
         self._last_update = 0.0
+
+    @property
+    def misfit(self) -> float:
+        """The law's whole-history misfit (``online_improved``'s law trust reads it)."""
+        return self.law.misfit
+
+    @property
+    def force_peak(self) -> float:
+        return self.law.force_peak
 
     def source_twin(self) -> HysteresisModel:
         return _PhysicsTwin(self.law.source_twin(), self.residual.source_twin())
@@ -189,28 +206,71 @@ def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
                         chaboche_residual(disp, force, **options))
 
 
-def capacity(specimen: str, seed: int, starts: int = 6,
-             family: str = "chaboche") -> dict[str, dict[str, float]]:  # fmt: skip
+def baber_wen_residual_mixture(disp: FloatArray, force: FloatArray,
+                               **options: Any) -> OnlineImproved:  # fmt: skip
+    """Design H with its ``baber-wen`` expert replaced by that law plus the memory basis learning
+    its residual every step, law trust applying to the pair (BENCHMARKS.md "updating part 16":
+    the residual adapts within the first strong pulse, where the law refits too rarely)."""
+    others = tuple(e for e in EXPERTS if e != "baber-wen")
+    mixture = OnlineImproved(offline=(disp, force), experts=others, **options)
+    expert = RefitResidual(BABER_WEN, offline=(disp, force), name="baber-wen+memory",
+                           **REFIT_SCHEDULE)
+    mixture = _with_expert(mixture, expert.name, expert)
+    mixture._laws = [len(mixture.experts) - 1]
+    mixture._update_trust()
+    return mixture
+
+
+def baber_wen_schedule_mixture(disp: FloatArray, force: FloatArray,
+                               **options: Any) -> OnlineImproved:  # fmt: skip
+    """Design H with its ``baber-wen`` expert on another refit schedule: ``every``, ``max_nfev``,
+    ``offline_weight``, ``warmup``, ``stride`` go to the law (``degrading.REFIT_SCHEDULE``
+    otherwise), the rest to ``OnlineImproved`` (BENCHMARKS.md "updating part 16")."""
+    keys = ("every", "max_nfev", "offline_weight", "warmup", "stride", "offline_nfev")
+    schedule = {k: options.pop(k) for k in keys if k in options}
+    others = tuple(e for e in EXPERTS if e != "baber-wen")
+    mixture = OnlineImproved(offline=(disp, force), experts=others, **options)
+    mixture = _with_expert(mixture, "baber-wen", baber_wen_refit((disp, force), **schedule))
+    mixture._laws = [len(mixture.experts) - 1]
+    mixture._update_trust()
+    return mixture
+
+
+def capacity(specimen: str, seed: int, starts: int = 6, family: str = "chaboche",
+             record: str = "kt") -> dict[str, dict[str, float]]:  # fmt: skip
     """Step 1 of the spike: the family fitted in hindsight (best of ``starts``; Chaboche on every
-    3rd sample plus reversals, the excursion Bouc-Wen on every sample) to (a) the tested
-    element's and (b) the twin's own whole history of the reference case (``kanai_tajimi``
-    3 m/s², 20 s, ``seed``, 0 % noise), then the twin free-runs in closed loop with those
-    parameters; MAETH against the twin's true force."""
+    3rd sample plus reversals, the others on every sample) to (a) the tested element's whole
+    history of the reference case (a ``updater_design`` record of family ``record``, 3 m/s²,
+    20 s, ``seed``, 0 % noise), (b) that and the offline database together (the design runs'
+    first 2500 steps of a conventional run: everything an online fit could ever see), (c) the
+    twin's own whole history (the family's bound: not available online); then the twin
+    free-runs in closed loop with those parameters; MAETH against the twin's true force. Also
+    (d) the offline database alone: what an online fit has before the test starts."""
+    from benchmarks.updater_design import _conventional, design_motion
     from fresco_bridge import indicators
-    from fresco_bridge.integrator import kanai_tajimi
+    from fresco_bridge.study.constants import OFFLINE_SAMPLES
     from fresco_bridge.study.simulate import simulate_case, specimen_model
     from fresco_bridge.updating.refit import compress, fit_law
     from fresco_bridge.updating.updaters import FixedModelUpdater
 
-    law_family = {"chaboche": CHABOCHE, "excursion-bw": EXCURSION_BW}[family]
-    motion = kanai_tajimi(3.0, 20.0, seed=seed)
+    families = {"chaboche": CHABOCHE, "excursion-bw": EXCURSION_BW, "baber-wen": BABER_WEN}
+    law_family = families[family]
+    motion = design_motion(record, seed)
     ref = simulate_case("generalisation", specimen,
                         FixedModelUpdater("reference", specimen_model(specimen)), motion)
+    conv = _conventional(specimen, motion, 0.0)
+    offline = (conv.tested_drift[:OFFLINE_SAMPLES], conv.tested_force[:OFFLINE_SAMPLES])
+    tested = (ref.tested_drift, ref.tested_force)
     out = {}
-    for label, d, f in (("tested", ref.tested_drift, ref.tested_force),
-                        ("twin", ref.twin_drift, ref.twin_true_force)):  # fmt: skip
+    for label, data in (("offline", [offline]), ("tested", [tested]),
+                        ("tested+offline", [tested, offline]),
+                        ("twin", [(ref.twin_drift, ref.twin_true_force)])):  # fmt: skip
+        d, f = data[0]
         space = law_family.space(d, f)
-        keep = compress(d, 3 if family == "chaboche" else 1)
+        histories = []
+        for hd, hf in data:
+            keep = compress(hd, 3 if family == "chaboche" else 1)
+            histories.append((hd[keep], hf[keep], 1.0))
         rng = np.random.default_rng(0)
         lower, upper = np.array(space.lower), np.array(space.upper)
         best: tuple[float, FloatArray] | None = None
@@ -222,18 +282,22 @@ def capacity(specimen: str, seed: int, starts: int = 6,
                 x0[CHABOCHE_FREE.index("qe")] = -rng.uniform(0.1, 0.6)
             elif i:
                 x0 = np.clip(x0 * np.exp(rng.normal(0.0, 0.5, x0.size)), lower, upper)
-                x0[EXCURSION_FREE.index("c")] = rng.uniform(0.0, 1.0)
-            x = fit_law(law_family, [(d[keep], f[keep], 1.0)], space, start=x0, max_nfev=200)
+                if family == "excursion-bw":
+                    x0[EXCURSION_FREE.index("c")] = rng.uniform(0.0, 1.0)
+            x = fit_law(law_family, histories, space, start=x0, max_nfev=200)
             model = law_family.build(law_family.params(x))
-            rms = float(np.sqrt(np.mean((law_forces(model, d) - f) ** 2)))
+            sq = sum(float(np.sum((law_forces(model.clone(), hd) - hf) ** 2)) for hd, hf in data)
+            rms = math.sqrt(sq / sum(hd.size for hd, _ in data))
             if best is None or rms < best[0]:
                 best = (rms, x)
         assert best is not None
         law = law_family.build(law_family.params(best[1]))
-        fit_max = float(np.max(np.abs(law_forces(law.clone(), d) - f)))
+        fit_max = max(float(np.max(np.abs(law_forces(law.clone(), hd) - hf))) for hd, hf in data)
         run = simulate_case("generalisation", specimen, FixedModelUpdater(family, law), motion)
+        err = np.abs(run.twin_true_force - run.twin_force)
         out[label] = {"fit_rms": best[0], "fit_max": fit_max,
-                      "maeth": indicators.maeth(run.twin_true_force, run.twin_force)}
+                      "maeth": indicators.maeth(run.twin_true_force, run.twin_force),
+                      "worst_step": float(np.argmax(err))}
     return out
 
 
@@ -241,5 +305,8 @@ if __name__ == "__main__":
     import sys
 
     kind = sys.argv[3] if len(sys.argv) > 3 else "chaboche"
-    for name, row in capacity(sys.argv[1], int(sys.argv[2]), family=kind).items():
-        print(sys.argv[1], sys.argv[2], kind, name, {k: round(v, 3) for k, v in row.items()})
+    record = sys.argv[4] if len(sys.argv) > 4 else "kt"
+    rows = capacity(sys.argv[1], int(sys.argv[2]), family=kind, record=record)
+    for name, row in rows.items():
+        print(sys.argv[1], record, sys.argv[2], kind, name,
+              {k: round(v, 3) for k, v in row.items()})

@@ -19,7 +19,16 @@ returning an ``Updater`` (for experiments not yet in the registry). ``--baseline
 default ``online_improved`` (``--baseline-option KEY=VALUE``: with these options) and prints the
 geometric mean of the ratios and the worst ratio. ``--seeds 3,4,5,6`` runs the closed-loop set on
 other record seeds (more design runs, no replay pairs; never the evaluation records).
-``taskset -c 0 python -m benchmarks.updater_design --workers 1 [--option …]``.
+
+``--family`` draws those seeds from other synthetic families (``DESIGN_FAMILIES``, BENCHMARKS.md
+"updating part 16"): the default set never made the BWBN specimen miss its 0 % target, while
+three evaluation records did, so there was nothing to design against. ``kt`` is the default
+record (firm soil, ``omega_g`` 15.6 rad/s, the Jennings envelope over 10/50 % of 20 s); ``soft``
+a soft-soil filter (8 rad/s, damping 0.4: longer periods, like the far-field Tustin records);
+``pulse`` the firm filter under an impulsive envelope (strong from 1 s to 4 s, then decaying at
+0.5/s: the strongest cycles early, like the near-fault ones); ``softpulse`` both. All at the
+study's 3 m/s², seeded, never an evaluation record. ``--noise 0`` and ``--only bwbn`` restrict
+the runs. ``taskset -c 0 python -m benchmarks.updater_design --workers 1 [--option …]``.
 """
 
 from __future__ import annotations
@@ -36,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from fresco_bridge import indicators
-from fresco_bridge.integrator import kanai_tajimi
+from fresco_bridge.integrator import GroundMotion, JenningsEnvelope, kanai_tajimi
 from fresco_bridge.study.calibrate import calibrate_bilinear
 from fresco_bridge.study.constants import OFFLINE_SAMPLES, PAPER_BILINEAR
 from fresco_bridge.study.simulate import simulate_case, specimen_model
@@ -56,6 +65,23 @@ REPLAY_STEPS = 3000
 
 Factory = Callable[..., Updater]
 
+DESIGN_FAMILIES: dict[str, dict[str, Any]] = {
+    "kt": {},
+    "soft": {"omega_g": 8.0, "zeta_g": 0.4},
+    "pulse": {"envelope": JenningsEnvelope(1.0, 4.0, 0.5)},
+    "softpulse": {"omega_g": 8.0, "zeta_g": 0.4, "envelope": JenningsEnvelope(1.0, 4.0, 0.5)},
+}
+"""Synthetic design record families (module docstring): ``kanai_tajimi`` keyword arguments."""
+
+
+def design_motion(family: str, seed: int, duration: float = 20.0) -> GroundMotion:
+    """A design record: ``family`` of ``DESIGN_FAMILIES``, 3 m/s², ``seed``."""
+    return kanai_tajimi(3.0, duration, seed=seed, **DESIGN_FAMILIES[family])
+
+
+def _label(family: str, seed: int) -> str:
+    return f"seed {seed}" if family == "kt" else f"{family} seed {seed}"
+
 
 def _factory(spec: str | None) -> Factory:
     if spec is None:
@@ -73,8 +99,8 @@ def _conventional(specimen: str, motion: Any, noise_std: float, layout: str = "p
 
 
 def _closed_loop(seed: int, specimen: str, noise_pct: float, factory: Factory,
-                 options: dict[str, Any]) -> dict[str, Any]:
-    motion = kanai_tajimi(3.0, 20.0, seed=seed)
+                 options: dict[str, Any], family: str = "kt") -> dict[str, Any]:
+    motion = design_motion(family, seed)
     clean = simulate_case("paper", specimen,
                           FixedModelUpdater("reference", specimen_model(specimen)), motion)
     noise_std = noise_pct / 100.0 * float(np.max(np.abs(clean.tested_force)))
@@ -92,7 +118,7 @@ def _closed_loop(seed: int, specimen: str, noise_pct: float, factory: Factory,
     conv_cal = indicators.maeth(base.twin_true_force, base.twin_force)
     maeth = indicators.maeth(run.twin_true_force, run.twin_force)
     err = np.abs(run.twin_true_force - run.twin_force)
-    return {"record": f"seed {seed}", "specimen": specimen, "noise_pct": noise_pct,
+    return {"record": _label(family, seed), "specimen": specimen, "noise_pct": noise_pct,
             "conv_cal": conv_cal, "target": (0.1 if noise_pct == 0 else 0.2) * conv_cal,
             "maeth": maeth, "reduction_pct": 100.0 * (1.0 - maeth / conv_cal),
             "worst_step": int(np.argmax(err)), "cpu_s": seconds}  # fmt: skip
@@ -117,23 +143,42 @@ def _replay_pair(specimen: str, factory: Factory, options: dict[str, Any]) -> di
             "reduction_pct": math.nan, "worst_step": int(np.argmax(err)), "cpu_s": seconds}
 
 
-def _one(job: tuple[tuple[Any, str, float], str | None, dict[str, Any]]) -> dict[str, Any]:
-    (record, specimen, noise), factory_spec, options = job
+Job = tuple[tuple[Any, str, float], str | None, dict[str, Any], str]
+
+
+def _one(job: Job) -> dict[str, Any]:
+    (record, specimen, noise), factory_spec, options, family = job
     factory = _factory(factory_spec)
     if record == "replay":
         return _replay_pair(specimen, factory, options)
-    return _closed_loop(int(record), specimen, noise, factory, options)
+    return _closed_loop(int(record), specimen, noise, factory, options, family)
+
+
+def design_runs(only: str | None = None, seeds: tuple[int, ...] | None = None,
+                families: tuple[str, ...] = ("kt",), noise: float | None = None
+                ) -> list[tuple[tuple[Any, str, float], str]]:
+    """The runs ``evaluate`` makes: ((record seed or "replay", specimen, noise %), family)."""
+    unknown = [f for f in families if f not in DESIGN_FAMILIES]
+    if unknown or not families or (seeds is None and families != ("kt",)):
+        raise ValueError(f"updater_design: families must be of {', '.join(DESIGN_FAMILIES)}, "
+                         f"others than kt with seeds (got {', '.join(families) or 'none'} with "
+                         f"seeds {seeds})")  # fmt: skip
+    design = (*CLOSED_LOOP, *REPLAY) if seeds is None else tuple(
+        (seed, spec, level) for seed in seeds for spec in SPECIMENS for level in (0.0, 1.0))
+    items = [it for it in design if (only is None or it[1] == only)
+             and (noise is None or it[0] == "replay" or it[2] == noise)]
+    return [(it, fam) for fam in families for it in items]
 
 
 def evaluate(factory_spec: str | None, options: dict[str, Any], workers: int,
-             only: str | None = None, seeds: tuple[int, ...] | None = None
+             only: str | None = None, seeds: tuple[int, ...] | None = None,
+             families: tuple[str, ...] = ("kt",), noise: float | None = None
              ) -> list[dict[str, Any]]:
     """The ten design numbers of one candidate (``only``: a specimen name to run half;
-    ``seeds``: closed-loop runs on these record seeds instead, no replay pairs)."""
-    design = (*CLOSED_LOOP, *REPLAY) if seeds is None else tuple(
-        (seed, spec, noise) for seed in seeds for spec in SPECIMENS for noise in (0.0, 1.0))
-    items = [it for it in design if only is None or it[1] == only]
-    jobs = [(it, factory_spec, options) for it in items]
+    ``seeds``: closed-loop runs on these record seeds of each of ``families`` instead, no
+    replay pairs; ``noise``: that load-cell noise level only)."""
+    jobs: list[Job] = [(it, factory_spec, options, fam)
+                       for it, fam in design_runs(only, seeds, families, noise)]
     if workers <= 1:
         return [_one(j) for j in jobs]
     with ProcessPoolExecutor(workers) as pool:
@@ -172,14 +217,24 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=lambda t: tuple(int(x) for x in t.split(",")),
                         help="closed-loop record seeds instead of the design set (e.g. 3,4,5,6: "
                              "more design runs; no replay pairs)")
+    parser.add_argument("--family", type=lambda t: tuple(t.split(",")), default=("kt",),
+                        help="with --seeds: design record families, comma-separated, of "
+                             f"{', '.join(DESIGN_FAMILIES)} (default kt)")
+    parser.add_argument("--noise", type=float, choices=(0.0, 1.0),
+                        help="one load-cell noise level only (%%)")
     parser.add_argument("--only", choices=SPECIMENS, help="one specimen only")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--json", help="write the rows here")
     args = parser.parse_args(argv)
     options = dict(args.option)
-    rows = evaluate(args.factory, options, args.workers, args.only, args.seeds)
+    try:
+        design_runs(args.only, args.seeds, args.family, args.noise)
+    except ValueError as exc:
+        parser.error(str(exc))
+    scope = (args.only, args.seeds, args.family, args.noise)
+    rows = evaluate(args.factory, options, args.workers, *scope)
     base_options = dict(args.baseline_option)
-    base = (evaluate(None, base_options, args.workers, args.only, args.seeds)
+    base = (evaluate(None, base_options, args.workers, *scope)
             if args.baseline or base_options else None)
     _print(rows, base)
     if args.json:
