@@ -206,19 +206,26 @@ def chaboche_residual_mixture(disp: FloatArray, force: FloatArray,
                         chaboche_residual(disp, force, **options))
 
 
+def _with_law_expert(disp: FloatArray, force: FloatArray, name: str, expert: Any,
+                     options: dict[str, Any]) -> OnlineImproved:  # fmt: skip
+    """Design H (``options`` to ``OnlineImproved``) with ``expert`` in place of its ``baber-wen``
+    law expert, law trust applying to it (its ``misfit`` and ``force_peak``)."""
+    others = tuple(e for e in EXPERTS if e != "baber-wen")
+    mixture = _with_expert(OnlineImproved(offline=(disp, force), experts=others, **options),
+                           name, expert)  # fmt: skip
+    mixture._laws = [len(mixture.experts) - 1]
+    mixture._update_trust()
+    return mixture
+
+
 def baber_wen_residual_mixture(disp: FloatArray, force: FloatArray,
                                **options: Any) -> OnlineImproved:  # fmt: skip
     """Design H with its ``baber-wen`` expert replaced by that law plus the memory basis learning
     its residual every step, law trust applying to the pair (BENCHMARKS.md "updating part 16":
     the residual adapts within the first strong pulse, where the law refits too rarely)."""
-    others = tuple(e for e in EXPERTS if e != "baber-wen")
-    mixture = OnlineImproved(offline=(disp, force), experts=others, **options)
     expert = RefitResidual(BABER_WEN, offline=(disp, force), name="baber-wen+memory",
                            **REFIT_SCHEDULE)
-    mixture = _with_expert(mixture, expert.name, expert)
-    mixture._laws = [len(mixture.experts) - 1]
-    mixture._update_trust()
-    return mixture
+    return _with_law_expert(disp, force, expert.name, expert, options)
 
 
 def baber_wen_schedule_mixture(disp: FloatArray, force: FloatArray,
@@ -228,12 +235,8 @@ def baber_wen_schedule_mixture(disp: FloatArray, force: FloatArray,
     otherwise), the rest to ``OnlineImproved`` (BENCHMARKS.md "updating part 16")."""
     keys = ("every", "max_nfev", "offline_weight", "warmup", "stride", "offline_nfev")
     schedule = {k: options.pop(k) for k in keys if k in options}
-    others = tuple(e for e in EXPERTS if e != "baber-wen")
-    mixture = OnlineImproved(offline=(disp, force), experts=others, **options)
-    mixture = _with_expert(mixture, "baber-wen", baber_wen_refit((disp, force), **schedule))
-    mixture._laws = [len(mixture.experts) - 1]
-    mixture._update_trust()
-    return mixture
+    return _with_law_expert(disp, force, "baber-wen", baber_wen_refit((disp, force), **schedule),
+                            options)
 
 
 def capacity(specimen: str, seed: int, starts: int = 6, family: str = "chaboche",

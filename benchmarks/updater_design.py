@@ -161,8 +161,8 @@ def design_runs(only: str | None = None, seeds: tuple[int, ...] | None = None,
     unknown = [f for f in families if f not in DESIGN_FAMILIES]
     if unknown or not families or (seeds is None and families != ("kt",)):
         raise ValueError(f"updater_design: families must be of {', '.join(DESIGN_FAMILIES)}, "
-                         f"others than kt with seeds (got {', '.join(families) or 'none'} with "
-                         f"seeds {seeds})")  # fmt: skip
+                         f"and families other than kt need --seeds (got "
+                         f"{', '.join(families) or 'none'} with seeds {seeds})")  # fmt: skip
     design = (*CLOSED_LOOP, *REPLAY) if seeds is None else tuple(
         (seed, spec, level) for seed in seeds for spec in SPECIMENS for level in (0.0, 1.0))
     items = [it for it in design if (only is None or it[1] == only)
