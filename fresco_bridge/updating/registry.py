@@ -26,6 +26,7 @@ __all__ = [
     "PAPER_BILINEAR",
     "UPDATERS",
     "UpdaterEntry",
+    "calibrated_bilinear",
     "make_none",
     "make_offline_ann",
     "make_online_ann",
@@ -49,7 +50,8 @@ class UpdaterEntry:
 
 UPDATERS: dict[str, UpdaterEntry] = {
     "none": UpdaterEntry(__name__, "make_none", "a fixed hysteresis law, no updating (default: "
-                         "the paper's Bilinear k0 68 kN/mm, Fy 35 kN, alpha 0.008)"),
+                         "the paper's Bilinear k0 68 kN/mm, Fy 35 kN, alpha 0.008; with "
+                         "offline: the Bilinear calibrated to it)"),
     "offline_ann": UpdaterEntry(__name__, "make_offline_ann", "the pre-trained ANN, no updating "
                                 "(the paper's offline calibration)"),
     "online_ann": UpdaterEntry(__name__, "make_online_ann", "the paper's online ANN: 500 random "
@@ -57,7 +59,8 @@ UPDATERS: dict[str, UpdaterEntry] = {
                                "iterations, float32 J^T W J: equal in accuracy to the "
                                "paper's 50)"),
     "online_ukf": UpdaterEntry(__name__, "make_online_ukf", "the paper's UKF on the Bilinear "
-                               "parameters [k0, alpha, Fy]"),
+                               "parameters [k0, alpha, Fy] (start: the paper's values; "
+                               "with offline: the calibrated Bilinear)"),
     "online_improved": UpdaterEntry("fresco_bridge.updating.improved", "OnlineImproved",
                                     "ours: reversal-basis, stop-operator and Bouc-Wen-plus-"
                                     "residual experts (RLS with forgetting, ridge, gating) "
@@ -97,18 +100,28 @@ def make_updater(name: str, **options: Any) -> Updater:
 
 
 def make_none(*, model: str | HysteresisModel = "bilinear",
-              params: dict[str, float] | None = None) -> Updater:
+              params: dict[str, float] | None = None,
+              offline: tuple[npt.ArrayLike, npt.ArrayLike] | None = None) -> Updater:
     """A fixed law: a model kind of ``sim_actuator.models`` with ``params``, or a model object.
 
-    ``model="bilinear"`` without params is the paper's assumed Bilinear; a model object (e.g.
-    the specimen's true law for the reference case) is cloned, state included.
+    ``model="bilinear"`` without params is the paper's assumed Bilinear; with ``offline`` (an
+    offline (d, F) history) it is the Bilinear calibrated to that history, the study's
+    ``conventional_calibrated``: the baseline a lab compares an updater with. A model object
+    (e.g. the specimen's true law for the reference case) is cloned, state included.
     """
     from .updaters import FixedModelUpdater
 
     if not isinstance(model, str):
-        if params is not None:
-            raise UpdaterError("updater 'none': give params only with a model kind name")
+        if params is not None or offline is not None:
+            raise UpdaterError("updater 'none': give params or offline only with a model kind "
+                               "name")
         return FixedModelUpdater("none", model.clone())
+    if offline is not None:
+        if model != "bilinear" or params is not None:
+            raise UpdaterError(f"updater 'none': offline calibrates the Bilinear; give it "
+                               f"without params and with model bilinear (got model {model!r}"
+                               f"{', params' if params is not None else ''})")
+        params = calibrated_bilinear("none", offline)
     if params is None:
         if model != "bilinear":
             raise UpdaterError(f"updater 'none': model {model!r} needs params")
@@ -118,6 +131,17 @@ def make_none(*, model: str | HysteresisModel = "bilinear",
     except ModelParameterError as exc:
         raise UpdaterError(f"updater 'none': {exc}") from exc
     return FixedModelUpdater("none", law)
+
+
+def calibrated_bilinear(name: str, offline: tuple[npt.ArrayLike, npt.ArrayLike]
+                        ) -> dict[str, float]:
+    """The Bilinear (k0, fy, alpha) fitted to an offline (d, F) history (``study.calibrate``)."""
+    from fresco_bridge.study.calibrate import calibrate_bilinear
+
+    try:
+        return calibrate_bilinear(offline[0], offline[1])
+    except ValueError as exc:
+        raise UpdaterError(f"updater {name!r}: offline: {exc}") from exc
 
 
 _PRETRAINED: dict[tuple[str, int, int], Any] = {}
@@ -212,14 +236,23 @@ def make_online_ann(*, model: Any = None, model_file: str | Path | None = None,
                             divide=ONLINE_ANN_DIVIDE if divide is None else divide, seed=seed)
 
 
-def make_online_ukf(*, k0: float = 68.0, alpha: float = 0.008, fy: float = 35.0,
-                    p0: Any = None, q: Any = None, r: float | None = None,
-                    sigma_alpha: float = 1.0) -> Updater:
-    """The paper's UKF; start values and covariances in kN and mm (defaults: the paper's)."""
+def make_online_ukf(*, k0: float | None = None, alpha: float | None = None,
+                    fy: float | None = None, p0: Any = None, q: Any = None,
+                    r: float | None = None, sigma_alpha: float = 1.0,
+                    offline: tuple[npt.ArrayLike, npt.ArrayLike] | None = None) -> Updater:
+    """The paper's UKF; start values and covariances in kN and mm (defaults: the paper's).
+
+    With ``offline`` the start values are the Bilinear calibrated to that history (the paper's
+    start suits only its own damper); ``k0``/``alpha``/``fy`` given as well override it.
+    """
     from .ukf import PAPER_UKF, OnlineUkfUpdater
 
+    start = dict(PAPER_BILINEAR) if offline is None else calibrated_bilinear("online_ukf",
+                                                                               offline)
     return OnlineUkfUpdater(
-        k0=k0, alpha=alpha, fy=fy,
+        k0=start["k0"] if k0 is None else k0,
+        alpha=start["alpha"] if alpha is None else alpha,
+        fy=start["fy"] if fy is None else fy,
         p0=PAPER_UKF["p0"] if p0 is None else p0,
         q=PAPER_UKF["q"] if q is None else q,
         r=float(PAPER_UKF["r"]) if r is None else r,  # type: ignore[arg-type]

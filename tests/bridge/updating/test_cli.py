@@ -155,6 +155,26 @@ def test_bad_csv_is_a_clear_error(files: dict[str, Path], tmp_path: Path, conten
     assert not out.exists()
 
 
+def test_replay_none_with_offline_is_the_calibrated_bilinear(
+    files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--updater none --offline`` is the baseline a lab compares an updater with."""
+    from fresco_bridge.study.calibrate import calibrate_bilinear
+    from sim_actuator.models import make_model
+
+    out = tmp_path / "cal.csv"
+    assert main(["updater", "replay", "--source", str(files["source"]), "--twin",
+                 str(files["twin"]), "--updater", "none", "--offline", str(files["offline"]),
+                 "--quiet", "-o", str(out)]) == 0
+    assert "MAETH" in capsys.readouterr().out
+    off = _rows(files["offline"])
+    law = make_model("bilinear", **calibrate_bilinear([float(r["disp"]) for r in off],
+                                                      [float(r["force"]) for r in off]))
+    for r in _rows(out):
+        assert float(r["force_pred"]) == law.set_trial(float(r["disp"]))[0]
+        law.commit()
+
+
 def test_bad_options_are_clear_errors(files: dict[str, Path], tmp_path: Path,
                                       capsys: pytest.CaptureFixture[str]) -> None:
     base = ["updater", "replay", "--source", str(files["source"]), "--twin", str(files["twin"]),

@@ -105,7 +105,8 @@ def test_twin_refuses_non_finite_trial(updater: Updater) -> None:
 def test_registry_errors_name_the_problem() -> None:
     with pytest.raises(UpdaterError, match=r"unknown updater 'nope'; known: none"):
         make_updater("nope")
-    with pytest.raises(UpdaterError, match=r"unknown option\(s\) bogus; allowed: model, params"):
+    with pytest.raises(UpdaterError,
+                       match=r"unknown option\(s\) bogus; allowed: model, params, offline"):
         make_updater("none", bogus=1)
     with pytest.raises(UpdaterError, match="needs params"):
         make_updater("none", model="bwbn")
@@ -122,6 +123,30 @@ def test_none_is_the_paper_bilinear_or_any_law() -> None:
     true = make_updater("none", model=law)
     assert true.twin is not law  # the reference twin is its own copy
     assert true.twin.set_trial(1.0) == law.set_trial(1.0)
+
+
+def test_none_and_online_ukf_start_from_the_bilinear_calibrated_to_offline() -> None:
+    """``offline`` gives the study's conventional_calibrated twin and the UKF's start values."""
+    from fresco_bridge.study.calibrate import calibrate_bilinear
+
+    d = disp_history(600, seed=31, amp=8.0)
+    f = force_history(d)
+    params = calibrate_bilinear(d, f)
+    calibrated = make_updater("none", offline=(d, f))
+    law = make_model("bilinear", **params)
+    for x in (0.5, 3.0, -6.0):
+        assert calibrated.twin.set_trial(x) == law.set_trial(x)
+        calibrated.twin.commit()
+        law.commit()
+    ukf = make_updater("online_ukf", offline=(d, f))
+    assert ukf.parameters == pytest.approx(  # type: ignore[attr-defined]
+        (params["k0"], params["alpha"], params["fy"]))
+    overridden = make_updater("online_ukf", offline=(d, f), fy=7.0)
+    assert overridden.parameters[2] == 7.0  # type: ignore[attr-defined]
+    with pytest.raises(UpdaterError, match=r"offline calibrates the Bilinear.*params"):
+        make_updater("none", offline=(d, f), params={"k0": 1.0, "fy": 1.0, "alpha": 0.0})
+    with pytest.raises(UpdaterError, match="updater 'none': offline: calibration needs"):
+        make_updater("none", offline=(d[:5], f[:5]))
 
 
 def test_offline_ann_twin_is_the_recurrence(small_ann: AnnModel) -> None:
