@@ -35,7 +35,7 @@ from .mlp import PAPER_LAYERS, Mlp
 
 FloatArray = npt.NDArray[np.float64]
 
-__all__ = ["PRETRAIN_LM", "AnnModel", "AnnTwin", "pretrain"]
+__all__ = ["PRETRAIN_LM", "AnnModel", "AnnTwin", "pretrain", "recurrence_warning"]
 
 PRETRAIN_LM = LmOptions(max_iterations=1000, mu=1e-3, momentum=0.0)
 """Offline pre-training: MATLAB ``trainlm`` defaults (the paper does not state its own)."""
@@ -218,3 +218,16 @@ def pretrain(
         "initial_mse_normalised": result.initial_cost / n, "source": source,
     }
     return AnnModel(net, result.theta, scaler, disp.copy(), f.copy(), PAPER_FEATURES, training)
+
+
+def recurrence_warning(free_run_maeth: float, measured_peak: float) -> str | None:
+    """A warning when the network's own recurrence on its training data errs by more than the
+    largest force measured: as a twin (``offline_ann``, and ``online_ann``'s start) it would
+    feed back forces the element never had. A one-step fit can be excellent while this
+    happens (the measured friction damper, BENCHMARKS.md updating part 17)."""
+    if free_run_maeth <= measured_peak:
+        return None
+    return (f"warning: the network's own recurrence (the twin's mode) errs by up to "
+            f"{free_run_maeth:.4g} kN on its training data, more than the largest measured "
+            f"force ({measured_peak:.4g} kN): as a twin it is unstable on this element; "
+            f"replay it before using it live (online_improved does not use this network)")

@@ -137,9 +137,10 @@ def _load_training_data(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarra
 def _pretrain(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from fresco_bridge import indicators
     from fresco_bridge.progress import ProgressBar
 
-    from .ann import PRETRAIN_LM, pretrain
+    from .ann import PRETRAIN_LM, pretrain, recurrence_warning
     from .modelfile import import_torch, save_model
 
     import_torch("writing a model file")  # fail before a long training, not after it
@@ -164,13 +165,16 @@ def _pretrain(args: argparse.Namespace) -> int:
     one_step = model.predict_one_step(disp, force)
     free_run = model.simulate(disp)
     model.training["one_step_rmse_kN"] = float(np.sqrt(np.mean((one_step - force) ** 2)))
-    model.training["free_run_maeth_kN"] = float(np.max(np.abs(free_run - force)))
+    model.training["free_run_maeth_kN"] = indicators.maeth(force, free_run)
     save_model(model, args.out)
     t = model.training
     print(f"wrote {args.out}: {model.net.n_params} parameters, {t['iterations']} iterations "
           f"({t['stop']}), {seconds:.1f} s; normalised MSE {t['mse_normalised']:.3g}; "
           f"one-step RMSE {t['one_step_rmse_kN']:.4g} kN, free-run MAETH "
           f"{t['free_run_maeth_kN']:.4g} kN (the twin's own recurrence on the training data)")
+    warning = recurrence_warning(t["free_run_maeth_kN"], float(np.max(np.abs(force))))
+    if warning is not None:
+        print(warning, file=sys.stderr)
     if not args.no_plot:
         plot = args.plot if args.plot is not None else args.out.with_suffix(".png")
         _fit_plot(plot, disp, force, one_step, free_run, source)

@@ -63,6 +63,16 @@ def test_pretrain_csv_writes_model_and_plot(files: dict[str, Path],
     assert out.with_suffix(".png").stat().st_size > 10_000
 
 
+def test_recurrence_warning_only_when_the_free_run_errs_beyond_the_measured_peak() -> None:
+    from fresco_bridge.updating.ann import recurrence_warning
+
+    assert recurrence_warning(3.0, 17.7) is None
+    assert recurrence_warning(17.7, 17.7) is None
+    text = recurrence_warning(122.6, 17.7)
+    assert text is not None and text.startswith("warning: ")
+    assert "122.6 kN" in text and "17.7 kN" in text and "unstable" in text
+
+
 def test_pretrain_run_directory(tmp_path: Path) -> None:
     run_dir, _ = record_run(tmp_path, steps=120, hold_at_end=False)
     out = tmp_path / "run.pt"

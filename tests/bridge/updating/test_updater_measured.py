@@ -43,3 +43,15 @@ def test_a_pair_runs_every_case_through_the_cli(brfd: Path, tmp_path: Path,
     # every case scored against the same measured twin force
     assert len({round(r["twin_peak_kN"], 9) for r in rows.values()}) == 1
     assert (tmp_path / "brfd.pt").is_file()
+
+
+def test_pretrain_warns_that_the_papers_recurrence_is_unstable_on_the_damper(
+        brfd: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The rectangular friction loop: a fine one-step fit whose own recurrence runs away."""
+    from fresco_bridge.cli import main
+
+    offline = um._write_csv(tmp_path / "sine.csv", um.load_brfd(um.OFFLINE_RECORD, 64))
+    assert main(["updater", "pretrain", str(offline), "-o", str(tmp_path / "m.pt"),
+                 "--units", um.UNITS, "--no-plot"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the network's own recurrence" in err and "unstable" in err
