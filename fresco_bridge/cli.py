@@ -15,6 +15,7 @@ from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
 from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
 from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
+from .entry import reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
@@ -152,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        return reader_gone()
     except OSError as exc:  # a port in use, a run directory that cannot be written, …
         logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
         where = f" ({exc.filename})" if exc.filename else ""

@@ -10,11 +10,26 @@ commands are parsed here with the same ``add_diagnosis_parsers``; every other co
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 
 from .diagnosis.cli import COMMANDS, add_diagnosis_parsers, diagnosis_command
 
-__all__ = ["main"]
+__all__ = ["BROKEN_PIPE_EXIT", "main", "reader_gone"]
+
+BROKEN_PIPE_EXIT = 141
+"""128 + SIGPIPE: what a coreutils command returns when its reader went away (``| head``)."""
+
+
+def reader_gone() -> int:
+    """The reader of stdout went away (``| head``): not a failure of the command (its files are
+    written before its summary is printed), so no error line; stdout goes to /dev/null so the
+    interpreter's final flush stays quiet too. The exit code."""
+    # no real descriptor (an in-process caller): nothing to redirect
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return BROKEN_PIPE_EXIT
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
         return diagnosis_command(parsed)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        return reader_gone()
     except Exception as exc:  # the CLI boundary, as cli.main: one clear line, no traceback
         what = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         where = f" ({exc.filename})" if isinstance(exc, OSError) and exc.filename else ""

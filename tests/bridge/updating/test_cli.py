@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -214,3 +217,35 @@ def test_replay_online_improved_with_an_offline_database_and_its_options(
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "experts must be distinct names" in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_a_reader_that_goes_away_is_not_an_error(files: dict[str, Path], tmp_path: Path) -> None:
+    """``fresco-bridge updater replay … | head -0``: the predictions are written, no error line,
+    exit 141 (128 + SIGPIPE, as coreutils)."""
+    out = tmp_path / "pred.csv"
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "fresco_bridge.cli", "updater", "replay", "--source",
+             str(files["source"]), "--twin", str(files["twin"]), "--updater", "none",
+             "--quiet", "-o", str(out)],
+            stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120, check=False)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
+    assert len(_rows(out)) == N and out.with_suffix(".json").is_file()
+
+
+def test_the_light_entry_treats_a_gone_reader_alike(monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """``fresco-bridge diagnose … | head`` goes through ``entry.main``, not ``cli.main``."""
+    from fresco_bridge import entry
+
+    def gone(_args: object) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(entry, "diagnosis_command", gone)
+    assert entry.main(["diagnose", "x.csv"]) == entry.BROKEN_PIPE_EXIT
+    assert capsys.readouterr().err == ""
