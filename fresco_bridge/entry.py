@@ -23,9 +23,9 @@ BROKEN_PIPE_EXIT = 141
 
 
 def reader_gone() -> int:
-    """The reader of stdout went away (``| head``): not a failure of the command (its files are
-    written before its summary is printed), so no error line; stdout goes to /dev/null so the
-    interpreter's final flush stays quiet too. The exit code."""
+    """The reader of stdout went away (``| head``): the user's choice, not a failure, so no
+    error line (the command stops at the line it could not print, as coreutils do); stdout goes
+    to /dev/null so the interpreter's final flush stays quiet too. The exit code."""
     # no real descriptor (an in-process caller): nothing to redirect
     with contextlib.suppress(AttributeError, OSError, ValueError):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
