@@ -271,6 +271,19 @@ def _replay(args: argparse.Namespace) -> int:
             f"peaks true +{peaks.pv_es_pos * f:.4g}/-{peaks.pv_es_neg * f:.4g}, predicted "
             f"+{peaks.pv_ums_pos * f:.4g}/-{peaks.pv_ums_neg * f:.4g} {unit} (AEPV "
             f"{peaks.aepv_pos * f:.4g}/{peaks.aepv_neg * f:.4g} {unit})")
+        offline = _offline_database(options)
+        if offline is not None and args.updater != "none":
+            base = replay(make_updater("none", offline=offline), source["disp"],
+                          source["force"], twin["disp"], lag=args.lag)
+            base_metrics = {"maeth": indicators.maeth(true, base.force_pred),
+                            "rms": indicators.one_step_rmse(true, base.force_pred)}
+            summary["baseline"] = {"updater": "none --offline (the calibrated Bilinear)",
+                                   "metrics_kN": base_metrics}
+            lines.append(
+                f"the Bilinear calibrated to the same offline database: MAETH "
+                f"{base_metrics['maeth'] * f:.4g} {unit}, RMS error {base_metrics['rms'] * f:.4g} "
+                f"{unit}; {args.updater} is {_relative(metrics['maeth'], base_metrics['maeth'])} "
+                f"in MAETH, {_relative(metrics['rms'], base_metrics['rms'])} in RMS error")
     else:
         lines.append(f"{args.twin} has no force column: nothing to score against")
     meta = args.out.with_suffix(".json")
@@ -278,6 +291,27 @@ def _replay(args: argparse.Namespace) -> int:
     lines.append(f"wrote {args.out} and {meta}")
     print("\n".join(lines))
     return 0
+
+
+def _offline_database(options: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The offline (d, F) the updater was given (``--offline``, or a model file's own)."""
+    if "offline" in options:
+        d, f = options["offline"]
+        return np.asarray(d), np.asarray(f)
+    if "model_file" in options:
+        from .modelfile import load_model
+
+        model = load_model(Path(options["model_file"]))
+        return model.offline_d, model.offline_force
+    return None
+
+
+def _relative(value: float, base: float) -> str:
+    """``x % lower`` / ``x % higher`` than ``base`` (``equal`` when both are 0)."""
+    if base == 0.0:
+        return "equal" if value == 0.0 else "higher (the baseline is exact)"
+    change = 100.0 * (value - base) / base
+    return f"{abs(change):.1f} % {'lower' if change < 0 else 'higher'}"
 
 
 def _jsonable(value: Any) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -113,7 +114,7 @@ def test_replay_online_ann_with_model_file_and_lag(files: dict[str, Path]) -> No
     if not model.exists():
         main(["updater", "pretrain", str(files["offline"]), "-o", str(model), "--iterations",
               "15", "--no-plot"])
-    scores = {}
+    scores, base = {}, {}
     for name, extra in (("offline_ann", []), ("online_ann", ["--option", "max_iterations=3",
                                                              "--option", "offline_samples=100"])):
         out = files["root"] / f"pred_{name}.csv"
@@ -123,7 +124,11 @@ def test_replay_online_ann_with_model_file_and_lag(files: dict[str, Path]) -> No
         summary = json.loads(out.with_suffix(".json").read_text())
         assert summary["lag"] is True and summary["options"]["model_file"] == str(model)
         scores[name] = summary["metrics_kN"]["maeth"]
+        # the baseline: the Bilinear calibrated to the model file's own offline database
+        assert summary["baseline"]["updater"].startswith("none --offline")
+        base[name] = summary["baseline"]["metrics_kN"]["maeth"]
     assert all(np.isfinite(v) for v in scores.values())
+    assert base["offline_ann"] == base["online_ann"] > 0.0
 
 
 def test_replay_units_round_trip(files: dict[str, Path], tmp_path: Path) -> None:
@@ -164,7 +169,7 @@ def test_bad_csv_is_a_clear_error(files: dict[str, Path], tmp_path: Path, conten
     assert code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: ")
-    assert __import__("re").search(message, err), err
+    assert re.search(message, err), err
     assert not out.exists()
 
 
@@ -179,7 +184,9 @@ def test_replay_none_with_offline_is_the_calibrated_bilinear(
     assert main(["updater", "replay", "--source", str(files["source"]), "--twin",
                  str(files["twin"]), "--updater", "none", "--offline", str(files["offline"]),
                  "--quiet", "-o", str(out)]) == 0
-    assert "MAETH" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "MAETH" in text and "calibrated to the same offline" not in text  # it is the baseline
+    assert "baseline" not in json.loads(out.with_suffix(".json").read_text())
     off = _rows(files["offline"])
     law = make_model("bilinear", **calibrate_bilinear([float(r["disp"]) for r in off],
                                                       [float(r["force"]) for r in off]))
@@ -210,7 +217,17 @@ def test_replay_online_improved_with_an_offline_database_and_its_options(
             "--updater", "online_improved", "--offline", str(files["offline"]), "--quiet"]
     out = tmp_path / "pred.csv"
     assert main([*base, "--option", 'experts="reversal,reversal+memory"', "-o", str(out)]) == 0
-    assert "MAETH" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    calibrated = json.loads(out.with_suffix(".json").read_text())["baseline"]["metrics_kN"]
+    assert re.search(r"the Bilinear calibrated to the same offline database: MAETH [0-9.]+ kN, "
+                     r"RMS error [0-9.]+ kN; online_improved is [0-9.]+ % (lower|higher) in "
+                     r"MAETH", text), text
+    assert main(["updater", "replay", "--source", str(files["source"]), "--twin",
+                 str(files["twin"]), "--updater", "none", "--offline", str(files["offline"]),
+                 "--quiet", "-o", str(tmp_path / "cal.csv")]) == 0
+    capsys.readouterr()
+    alone = json.loads((tmp_path / "cal.json").read_text())["metrics_kN"]
+    assert calibrated["maeth"] == alone["maeth"] and calibrated["rms"] == alone["rms"]
     rows = _rows(out)
     assert len(rows) == N and all(np.isfinite(float(r["force_pred"])) for r in rows)
     assert main([*base, "--option", 'experts="reversal,plays"', "-o", str(tmp_path / "x.csv")]) == 2
