@@ -272,9 +272,14 @@ def _replay(args: argparse.Namespace) -> int:
             f"+{peaks.pv_ums_pos * f:.4g}/-{peaks.pv_ums_neg * f:.4g} {unit} (AEPV "
             f"{peaks.aepv_pos * f:.4g}/{peaks.aepv_neg * f:.4g} {unit})")
         offline = _offline_database(options)
+        baseline = None
         if offline is not None and args.updater != "none":
-            base = replay(make_updater("none", offline=offline), source["disp"],
-                          source["force"], twin["disp"], lag=args.lag)
+            try:
+                baseline = make_updater("none", offline=offline)
+            except UpdaterError as exc:  # e.g. a model file's database too short to calibrate
+                lines.append(f"no calibrated-Bilinear baseline: {exc}")
+        if baseline is not None:
+            base = replay(baseline, source["disp"], source["force"], twin["disp"], lag=args.lag)
             base_metrics = {"maeth": indicators.maeth(true, base.force_pred),
                             "rms": indicators.one_step_rmse(true, base.force_pred)}
             summary["baseline"] = {"updater": "none --offline (the calibrated Bilinear)",

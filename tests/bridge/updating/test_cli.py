@@ -131,6 +131,23 @@ def test_replay_online_ann_with_model_file_and_lag(files: dict[str, Path]) -> No
     assert base["offline_ann"] == base["online_ann"] > 0.0
 
 
+def test_replay_without_a_baseline_when_the_model_database_is_too_short(
+    files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model pre-trained on 5 samples: the replay still scores, and says why no baseline."""
+    model = tmp_path / "tiny.pt"
+    assert main(["updater", "pretrain", str(files["offline"]), "-o", str(model), "--samples",
+                 "5", "--iterations", "3", "--no-plot"]) == 0
+    out = tmp_path / "pred.csv"
+    assert main(["updater", "replay", "--source", str(files["source"]), "--twin",
+                 str(files["twin"]), "--updater", "offline_ann", "--model", str(model),
+                 "--quiet", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "no calibrated-Bilinear baseline: updater 'none': offline: calibration needs" in text
+    summary = json.loads(out.with_suffix(".json").read_text())
+    assert "baseline" not in summary and np.isfinite(summary["metrics_kN"]["rms"])
+
+
 def test_replay_units_round_trip(files: dict[str, Path], tmp_path: Path) -> None:
     """The same data in m and N give the same predictions, written back in m and N."""
     rows = _rows(files["source"])
