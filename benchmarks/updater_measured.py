@@ -54,10 +54,12 @@ from typing import Any
 import numpy as np
 
 from fresco_bridge.cli import main as cli_main
+from fresco_bridge.updating.histories import Units
 
 BRFD = (Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
         / "rotary_friction_damper_BRFD")
 UNITS = "in,kip"
+KN_PER_FORCE_UNIT = Units.parse(UNITS).to_kn
 OFFLINE_RECORD = "0.25Hz30lbtension1amplitude"
 OFFLINE_STEPS = 2500
 IV_DBE, IV_MCE = "ImperialValleyDBE", "ImperialValleyMCE"
@@ -163,7 +165,7 @@ def run_case(files: Files, source: str, twin: str, case: str, lag: bool) -> dict
     true = np.array([float(r["force_true"]) for r in _dict_rows(pred)])
     return {"pair": pair_name(source, twin), "case": case, "steps": doc["steps"],
             "maeth_kN": doc["metrics_kN"]["maeth"], "rms_kN": doc["metrics_kN"]["rms"],
-            "twin_peak_kN": float(np.max(np.abs(true))) * 4.4482216152605,
+            "twin_peak_kN": float(np.max(np.abs(true))) * KN_PER_FORCE_UNIT,
             "update_ms": doc["update_ms"], "wall_s": doc["wall_seconds"], "cpu_s": cpu,
             "bounded": bool(math.isfinite(doc["metrics_kN"]["maeth"]))}
 
