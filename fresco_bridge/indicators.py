@@ -67,6 +67,7 @@ __all__ = [
     "one_step_rmse",
     "peak_errors",
     "peak_values",
+    "rmseth",
     "tracking_indicator",
     "white_noise_std",
     "xcorr_delay",
@@ -156,7 +157,18 @@ def maeth(true: Signal, pred: Signal) -> float:
 
 def one_step_rmse(true: Signal, pred_ahead: Signal) -> float:
     """RMS of one-step-ahead prediction errors sqrt(mean((true − pred_ahead)²))."""
-    t, p = _pair(true, pred_ahead, where="one_step_rmse")
+    return _rms_error(true, pred_ahead, "one_step_rmse")
+
+
+def rmseth(true: Signal, pred: Signal) -> float:
+    """RMS error over the time history sqrt(mean((true − pred)²)) of a twin's served force:
+    beside MAETH, an error no single step decides (on a measured friction damper MAETH is set
+    by force chatter no hysteresis law follows: BENCHMARKS.md updating part 17)."""
+    return _rms_error(true, pred, "rmseth")
+
+
+def _rms_error(true: Signal, pred: Signal, where: str) -> float:
+    t, p = _pair(true, pred, where=where)
     return math.sqrt(float(np.mean((t - p) ** 2)))
 
 

@@ -258,7 +258,7 @@ def _replay(args: argparse.Namespace) -> int:
         peaks = indicators.peak_values(true, result.force_pred)
         metrics = {
             "maeth": indicators.maeth(true, result.force_pred),
-            "rms": indicators.one_step_rmse(true, result.force_pred),
+            "rms": indicators.rmseth(true, result.force_pred),
             "pv_true_pos": peaks.pv_es_pos, "pv_true_neg": peaks.pv_es_neg,
             "pv_pred_pos": peaks.pv_ums_pos, "pv_pred_neg": peaks.pv_ums_neg,
             "aepv_pos": peaks.aepv_pos, "aepv_neg": peaks.aepv_neg,
@@ -281,7 +281,7 @@ def _replay(args: argparse.Namespace) -> int:
         if baseline is not None:
             base = replay(baseline, source["disp"], source["force"], twin["disp"], lag=args.lag)
             base_metrics = {"maeth": indicators.maeth(true, base.force_pred),
-                            "rms": indicators.one_step_rmse(true, base.force_pred)}
+                            "rms": indicators.rmseth(true, base.force_pred)}
             summary["baseline"] = {"updater": "none --offline (the calibrated Bilinear)",
                                    "metrics_kN": base_metrics}
             lines.append(

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from fresco_bridge.indicators import IndicatorError, maesd, maeth, one_step_rmse, peak_values
+from fresco_bridge.indicators import (
+    IndicatorError,
+    maesd,
+    maeth,
+    one_step_rmse,
+    peak_values,
+    rmseth,
+)
 
 
 def test_peak_values_and_their_errors_are_magnitudes_per_sign() -> None:
@@ -20,6 +27,7 @@ def test_maeth_and_one_step_rmse_by_hand() -> None:
     true, pred = [0.0, 1.0, -2.0, 3.0], [0.5, 1.0, -1.0, 3.0]
     assert maeth(true, pred) == 1.0
     assert one_step_rmse(true, pred) == pytest.approx(math.sqrt((0.25 + 1.0) / 4))
+    assert rmseth(true, pred) == one_step_rmse(true, pred)  # the same RMS, of the served force
 
 
 def test_maesd_is_per_story() -> None:
@@ -34,6 +42,7 @@ def test_maesd_is_per_story() -> None:
         lambda: maeth([1.0, 2.0], [1.0]),
         lambda: maeth([1.0, math.nan], [1.0, 2.0]),
         lambda: one_step_rmse([], []),
+        lambda: rmseth([1.0, math.inf], [1.0, 2.0]),
         lambda: maesd(np.zeros((3, 2)), np.zeros((3, 1))),
         lambda: maesd(np.full((2, 2), np.inf), np.zeros((2, 2))),
     ],

@@ -13,8 +13,9 @@ from fresco_bridge.study.paper import RunSpec, available_cases, run_study
 
 CASE_KEYS = {
     "pv_es_pos", "pv_es_neg", "pv_ums_pos", "pv_ums_neg", "aepv_pos", "aepv_neg", "maeth",
-    "maesd", "one_step_rmse", "update_time_ms",
+    "rmseth", "maesd", "one_step_rmse", "update_time_ms",
 }  # fmt: skip
+"""The issue's keys, and ``rmseth`` (the RMS error over the time history, beside MAETH)."""
 STEPS = 200
 
 
@@ -38,6 +39,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     assert summary["runs"] == [document]
     check = (out / "summary.md").read_text()
     assert "synthetic-seed3 | menegotto-pinto | 1 | 3 |" in check and "≥ 80 %" in check
+    assert "RMSETH vs calibrated" in check
     return document
 
 
@@ -48,6 +50,7 @@ def test_json_has_exactly_the_issue_keys_per_case(study: dict[str, object]) -> N
         assert set(body["cases"]) == set(available_cases())
         for metrics in body["cases"].values():
             assert set(metrics) == CASE_KEYS
+            assert 0.0 <= metrics["rmseth"] <= metrics["maeth"]  # an RMS never exceeds the max
             assert len(metrics["maesd"]) == 2
             assert set(metrics["update_time_ms"]) == {"median", "p99"}
     assert study["steps"] == STEPS + 1
