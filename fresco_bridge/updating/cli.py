@@ -164,7 +164,7 @@ def _pretrain(args: argparse.Namespace) -> int:
     model.training["seconds"] = seconds
     one_step = model.predict_one_step(disp, force)
     free_run = model.simulate(disp)
-    model.training["one_step_rmse_kN"] = float(np.sqrt(np.mean((one_step - force) ** 2)))
+    model.training["one_step_rmse_kN"] = indicators.one_step_rmse(force, one_step)
     model.training["free_run_maeth_kN"] = indicators.maeth(force, free_run)
     save_model(model, args.out)
     t = model.training
