@@ -28,7 +28,12 @@ from pathlib import Path
 from types import ModuleType
 
 # Paths relative to the repository root, roughly in the order of a step (transport → reply →
-# record). Left out, and why: BENCHMARKS.md issue 8, session 7.
+# record). Left interpreted on purpose: ``steps.py`` (``CommittedStep`` is subclassed and sets its
+# slots through descriptors, which a native class lacks), ``controls/sim.py`` and
+# ``sim_actuator/models/`` (base classes of every controller kind and law, shared with the numba
+# drives), ``indicators.py`` (runs per batch, not per step), ``record/syncer.py`` (a compiled
+# ``threading.Thread`` subclass crashed the garbage collector). Figures: ``BENCHMARKS.md``,
+# "Step cost and scaling".
 COMPILED: tuple[str, ...] = (
     "protocol/_buffer.py",
     "protocol/wire.py",

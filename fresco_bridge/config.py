@@ -170,8 +170,8 @@ class BridgeConfig(_Strict):
     run_dir: ConfigPath = Path("runs")
     run_name: Name = "run"
     event_loop: Literal["auto", "uvloop", "asyncio"] = "auto"
-    """The event loop ``serve`` runs on: ``uvloop`` (libuv; about a sixth less CPU per step,
-    BENCHMARKS.md issue 8), ``asyncio`` (the standard library's), ``auto``: uvloop when it is
+    """The event loop ``serve`` runs on: ``uvloop`` (libuv; less CPU per step, ``BENCHMARKS.md``,
+    "Step cost and scaling"), ``asyncio`` (the standard library's), ``auto``: uvloop when it is
     installed."""
     control_socket: ConfigPath | None = None
     """Operator control socket (``fresco-bridge ctl``); default ``control.sock`` in the run
@@ -186,8 +186,9 @@ class RecordConfig(_Strict):
     sync_interval: float = Field(default=0.05, ge=0.0, le=10.0)
     """Group commit (``fsync = "background"``): seconds between two fdatasyncs at most; a
     power loss can cost the commits of this long plus one fdatasync. Events sync at once.
-    50 ms by default: each fdatasync costs the shared CPU a few hundred µs of wake-ups and I/O
-    completions, which at 10 ms was ≈ 3–10 % of a fast step (BENCHMARKS.md issue 8, session 4)."""
+    50 ms by default: every fdatasync costs the CPU the step loop shares wake-ups and I/O
+    completions, a visible share of a fast step when it runs much more often (``BENCHMARKS.md``,
+    "Record size and durability")."""
 
 
 class TelemetryConfig(_Strict):
@@ -223,7 +224,8 @@ class TelemetryConfig(_Strict):
     """|measured − command| (mm) past which a ``monitor-warning`` event is raised."""
     monitors: bool = True
     """Run the online error monitors per committed step: published with MQTT telemetry and
-    written to the run record (``monitor`` lines) when recording is on (~10 µs per step)."""
+    written to the run record (``monitor`` lines) when recording is on (its cost per step:
+    ``BENCHMARKS.md``, "Telemetry")."""
     metrics_port: int | None = Field(default=None, ge=0, le=65535)
     """Serve Prometheus ``/metrics`` on this port (off when unset; 0 picks a free port)."""
     metrics_host: IPv4Address = "127.0.0.1"

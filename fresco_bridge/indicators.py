@@ -162,8 +162,8 @@ def one_step_rmse(true: Signal, pred_ahead: Signal) -> float:
 
 def rmseth(true: Signal, pred: Signal) -> float:
     """RMS error over the time history sqrt(mean((true − pred)²)) of a twin's served force:
-    beside MAETH, an error no single step decides (on a measured friction damper MAETH is set
-    by force chatter no hysteresis law follows: BENCHMARKS.md updating part 17)."""
+    beside MAETH, an error no single step decides (on a measured friction damper MAETH can be
+    set by force chatter no hysteresis law follows: ``BENCHMARKS.md``, "Online updating")."""
     return _rms_error(true, pred, "rmseth")
 
 
@@ -243,7 +243,7 @@ def _fei_of_rows(both: FloatArray, step: float, l: int, *, taper: bool  # noqa: 
 
 @functools.lru_cache(maxsize=8)
 def _hann(n: int) -> FloatArray:
-    """``np.hanning(n)``, made once per length (read-only): 9 of the 38 µs of a 512-point
+    """``np.hanning(n)``, made once per length (read-only): making it was a quarter of a
     ``fei`` (the online monitor's, every ``window/4`` steps)."""
     window = np.hanning(n)
     window.flags.writeable = False

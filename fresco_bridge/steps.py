@@ -27,9 +27,9 @@ class CommittedStep:
     def __init__(self, site: str, session: int, step: int, time: float,
                  trial: tuple[float, ...], ctrl: tuple[float, ...],
                  daq_disp: tuple[float, ...], daq_force: tuple[float, ...], state: str) -> None:
-        """The generated ``__init__`` of a frozen dataclass, at half the cost: it sets the slots
-        through their descriptors instead of ``object.__setattr__`` by name (1.33 → 0.73–0.79 µs,
-        once a committed step when a listener is attached). Still frozen, compared and hashed
+        """The generated ``__init__`` of a frozen dataclass, at about half the cost (one is made
+        every committed step when a listener is attached): it sets the slots through their
+        descriptors instead of ``object.__setattr__`` by name. Still frozen, compared and hashed
         by value; a named tuple (as ``Signals``) is not possible: ``StepSample`` extends it."""
         _SET[0](self, site)
         _SET[1](self, session)

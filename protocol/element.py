@@ -126,7 +126,7 @@ _MUST_REPLY: Final = ServerState.MUST_REPLY
 _CLOSED: Final = ServerState.CLOSED
 _ERROR: Final = ServerState.ERROR
 # Module constants, not ``ServerState.READY`` on the per-message path: reading an enum member
-# off its class costs ≈ 0.1 µs on Python 3.11 (measured), and a message passed ≈ 7 of them.
+# off its class is an attribute lookup through the enum's metaclass, several times a message.
 
 
 def _check_data_size_cap(max_data_size: int) -> None:

@@ -147,8 +147,8 @@ _DEGRADATION = (
     Param("delta_eta", "law", "1", 0.0, 0.5, 2e-4, "stiffness degradation per unit energy"),
 )
 """No degrading A (delta_a): to first order it lowers the stiffness like delta_eta and the
-strength like delta_nu, so the three are not identifiable together (measured: with delta_a
-fitted too, a plain-bench degradation record's mean rate came out 20 % off instead of 2 %)."""
+strength like delta_nu, so the three are not identifiable together (with delta_a fitted too,
+the degradation rate of a bench record comes out far off)."""
 PINCHING_FIXED = {"lam": 0.5}
 """The BWBN pinching term the candidate holds fixed: Foliente's coupling lambda = 0.5 (the
 sim-actuator preset; with psi0 fitted, the spread psi0 (lambda + zeta1) is what the data fix

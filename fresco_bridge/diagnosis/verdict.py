@@ -86,9 +86,9 @@ STAGED_JOINT_EVALUATIONS = 10
 candidate is fitted in two stages: its effect parameters alone with the law held at the
 baseline's values (a Jacobian of one to three drives instead of seven to ten), then everything
 together from there for at most this many evaluations. A long random record makes every drive
-a long path of a stiff law (the MR damper: ~4000 yield displacements per drive, 0.06-0.36 s);
-the joint refit from a good start needs few steps (measured on the MR damper: the same
-calibration cost within 0.1 % for backlash and pinching at a third to half the drives)."""
+a long path of a stiff law (thousands of yield displacements per drive), and a joint refit from
+a good start needs few steps: the same calibration cost for a fraction of the drives
+(``BENCHMARKS.md``, "Diagnosis")."""
 
 
 @dataclass(frozen=True)

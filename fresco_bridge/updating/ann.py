@@ -224,7 +224,7 @@ def recurrence_warning(free_run_maeth: float, measured_peak: float) -> str | Non
     """A warning when the network's own recurrence on its training data errs by more than the
     largest force measured: as a twin (``offline_ann``, and ``online_ann``'s start) it would
     feed back forces the element never had. A one-step fit can be excellent while this
-    happens (the measured friction damper, BENCHMARKS.md updating part 17)."""
+    happens (a measured friction damper does it: ``BENCHMARKS.md``, "Online updating")."""
     if free_run_maeth <= measured_peak:
         return None
     return (f"warning: the network's own recurrence (the twin's mode) errs by up to "

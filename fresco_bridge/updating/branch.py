@@ -26,7 +26,7 @@ envelope (max excursion so far) in the direction of motion.
 ``s·F_r + k·u`` has gone past each of a grid of force levels since the reversal (a series-Iwan /
 multi-surface picture: an element yields at a *force*, so a branch that starts from a small
 reversal force stays elastic longer; the fixed saturation lengths of ``psi`` cannot move that
-knee — BENCHMARKS.md, issue 9 part 7).
+knee).
 
 Learning: the weights are shared by the tested element and its twin (same law, different
 histories). They start from a ridge fit to the offline database and are updated every step by

@@ -4,27 +4,24 @@ degradation and *no pinching* (Baber & Wen 1981), refitted on the tested element
 
 Why: the rig's damper (``bwbn``) loses strength and stiffness with the hysteretic energy it has
 dissipated. That is a state of the element, which the weights of a reversal basis fitted to the
-tested element's *recent* past cannot carry over to a twin in another state (BENCHMARKS.md,
-issue 9 part 7); a law with the energy as a state variable can: the parameters are shared, the
-energy is each element's own. Hindsight capacity on the design records (BENCHMARKS.md, updating
-part 8b): fitted to the tested element's whole history, the twin's free run misses by 0.46 /
-0.50 kN where E misses by 0.57 / 1.24 kN.
+tested element's *recent* past cannot carry over to a twin in another state; a law with the
+energy as a state variable can: the parameters are shared, the energy is each element's own.
+What it achieves against the other experts: ``BENCHMARKS.md``, "Online updating".
 
 The law: ``sim_actuator.models.bwbn`` with the pinching off (``zeta_s = 0``: h = 1, its
 equations are then exactly Baber-Wen's), ``A0 = 1``, ``delta_a = 0`` and ``gamma = 1 - beta``
 fixed (``_FIXED``: one of the scale parameters is redundant); free: k0, fy, alpha, n, beta,
-delta_nu, delta_eta. Why this is honest (issue 9: no family may contain either specimen's own
+delta_nu, delta_eta. Why this is honest (no family may contain either study specimen's own
 law): the family has no pinching term at all, and the specimen pinches (``zeta_s = 0.3``), so
 the specimen is not in it; it contains no Menegotto-Pinto law either (a smooth Bouc-Wen
 transition, no Steel02 curvature memory, no isotropic hardening). The code is ``bwbn``'s (never
 written twice), the family is not.
 
-Fit: ``refit.fit_law`` through the JIT drive of ``sim_actuator.models.paths`` (the same
-algorithm, ~7x faster than stepping the object; a Baber-Wen evaluation costs RK4 substeps in
-proportion to the travel in yield displacements, not to the number of samples, so compressing
-the history saves less than it does for a closed-form law). Fit and twin use the same
-``BABER_WEN_DZ_MAX``; the law objects step through the same kernel (``stepped``: the same
-bits; the refitted law's state replays after each refit were Python RK4).
+Fit: through the JIT drive of ``sim_actuator.models.paths`` (the same algorithm as the object,
+much faster; a Baber-Wen evaluation costs RK4 substeps in proportion to the travel in yield
+displacements, not to the number of samples, so compressing the history saves less than for a
+closed-form law). Fit and twin use the same ``BABER_WEN_DZ_MAX``, and the law objects step
+through the same kernel (``stepped``: the same bits).
 """
 
 from __future__ import annotations
@@ -46,14 +43,14 @@ __all__ = ["BABER_WEN", "BABER_WEN_DZ_MAX", "N_MAX", "REFIT_SCHEDULE", "baber_we
 FloatArray = npt.NDArray[np.float64]
 
 BABER_WEN_DZ_MAX = 0.1
-"""RK4 step of the law in z, fit and twin alike: a model, not a reference (0.05 gave the same
-design numbers to the printed digit; most steps need one substep either way)."""
+"""RK4 step of the law in z, fit and twin alike: a model, not a reference (halving it does not
+change the updater's scores; most steps need one substep either way)."""
 
 N_MAX = 3.0
-"""Upper bound of the sharpness n. Why: RK4 substeps grow with n (|dz/du| up to ~n near z_u) and
-a fit to a sharply yielding element (Menegotto-Pinto, R0 = 12) drove n to the old bound 10, where
-one refit cost up to 5 s and the 3000-step replay 29 s (design records; a degrading damper fits
-n ~ 1.1). With gamma = 1 - beta >= 0 (beta <= 1) the substep bound stays <= 1 + N_MAX."""
+"""Upper bound of the sharpness n. Why: RK4 substeps grow with n (|dz/du| up to ~n near z_u), and
+a fit to a sharply yielding element (Menegotto-Pinto) drives n up until each refit costs seconds,
+while a degrading damper fits n near 1. With gamma = 1 - beta >= 0 (beta <= 1) the substep bound
+stays <= 1 + N_MAX."""
 
 _FREE = ("k0", "fy", "alpha", "n", "beta", "delta_nu", "delta_eta")
 _FIXED = {"A0": 1.0, "delta_a": 0.0, "zeta_s": 0.0, "p": 0.0, "q": 0.0, "psi0": 1.0,
@@ -65,7 +62,7 @@ redundant (a free gamma made the fit wander along that valley)."""
 
 REFIT_SCHEDULE: dict[str, Any] = {"every": 300, "stride": 5, "max_nfev": 5, "offline_nfev": 200,
                                   "warmup": 50}  # fmt: skip
-"""Refit schedule chosen on the design records (BENCHMARKS.md, updating part 8b): every 300
+"""Refit schedule (chosen on the design records, ``BENCHMARKS.md``, "Online updating"): every 300
 steps 5 evaluations (each 8 law runs with the finite-difference Jacobian) on every 5th sample
 plus the reversals of the history so far and of the offline database; the offline database
 stays in every refit (without it the first refits, on 50-250 noisy steps, diverged)."""

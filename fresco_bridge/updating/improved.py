@@ -1,65 +1,40 @@
 """``online_improved``: experts weighted by how well each reproduces the tested element.
 
-Why a mixture: no single structure measured wins on both study specimens (BENCHMARKS.md, issue 9
-candidates). A reversal-coordinate basis (``branch``) is best where the law is far from any
-smooth state-variable form; a fitted Bouc-Wen law plus a residual basis (``physics``)
-generalises a degrading element's history to the twin through its own state. Which one is
-better is visible online without the twin's truth, on the tested element itself, two ways:
+Why a mixture: no single structure serves both kinds of specimen. A reversal-coordinate basis
+(``branch``) is best where the law is far from any smooth state-variable form; a fitted law with
+its own state (``physics``, ``degrading``) carries a degrading element's history over to the
+twin. Which one is better can be seen online, on the tested element alone (no twin truth):
 
 * *free run*: a shadow copy of each expert's twin is driven by the tested element's
-  displacement and never sees its force (exactly the twin's situation: its own predicted
-  forces are its memory), and is compared with the measured force;
+  displacement and never sees its force (the twin's own situation), compared with the measured
+  force;
 * *one step*: each expert's prediction of the tested force from the tested element's measured
   memory, before it learns from the step.
 
-``score="both"`` (default) adds the two squared errors; ``S_k`` is their exponentially weighted
-mean (factor ``mixing`` per step, each step's value clipped at ``gate**2 * S_k`` so one
-load-cell spike cannot flip the choice), and expert k weighs ``1 / S_k**2`` (normalised) —
-or, with ``shadow=True`` once the shadow scores exist, ``1 / (S_k * H_k)``, ``H_k``
-the expert's error on a stored stretch of the tested element's history whose state matches the
-twin's (``shadow``: the score on the recent past ranks experts as their twins would not when
-the twin is in another state; BENCHMARKS.md, issue 9 part 7). Why
-both: the one-step error alone is flattered by the measured reversal force (a Bouc-Wen
-residual expert that scored best by it was the worst twin on a replay pair), the free-run
-error alone lets an expert's old drift linger (worse on Menegotto-Pinto); BENCHMARKS.md has the
-numbers. The twin's force is the weighted sum of the experts' twins, each on its own memory of
-the twin's history.
+``score="both"`` (default) adds the two squared errors, because each alone misleads: the
+one-step error is flattered by the measured reversal force, the free-run error lets an old
+drift linger. ``S_k`` is their exponentially weighted mean (factor ``mixing``, each step clipped
+at ``gate**2 * S_k`` so one load-cell spike cannot flip the choice); expert k weighs
+``1 / S_k**2`` (normalised), or ``1 / (S_k * H_k)`` with ``shadow=True``, ``H_k`` its error on a
+stretch of the tested element's history whose state matches the twin's (``shadow``). The twin's
+force is the weighted sum of the experts' twins, each on its own memory.
 
-*Law trust* (``law_trust``, default ``LAW_TRUST`` = 0.02): a law expert (``baber-wen``) whose rms
-force misfit over the *whole* history it was fitted to (the offline database and everything the
-tested element did so far, ``refit.RefitUpdater.misfit``) is at most ``law_trust`` × that
-history's peak |force| takes all the weight; otherwise the mixture weighs as above. Why: the
-scores rank experts by the tested element's *recent* past, where a forgetting basis fits as well
-as the law or better, yet it transfers worse to a twin in another state; one parameter set that
-explains two whole histories (offline and online) in different states is evidence that the law
-generalises to a third, which no forgetting basis can claim. On the design records
-(BENCHMARKS.md, updating part 9b) the law's relative misfit is 0.6–1.4 % on the BWBN specimen
-(its family is right; the 1 % noise included) and 6–9 % on Menegotto-Pinto (it is not), but
-2.6–2.75 % on the test suite's 200-step Menegotto-Pinto study (a 201-step offline database: a
-short history is weak evidence), where 3 % trusted the law and lost to the calibrated Bilinear;
-hence 2 %, between the two. The switch can change only at a refit. ``law_trust=0``
-is design G's plain mixture. No twin truth enters: only the tested element's measurements.
+*Law trust* (``law_trust``): a law expert whose rms misfit over the whole history it was fitted
+to is at most ``law_trust`` × that history's peak |force| takes all the weight. Why: the scores
+rank experts on the *recent* past, where a forgetting basis fits as well as a law yet transfers
+worse to a twin in another state; one parameter set explaining two whole histories is evidence
+the law generalises. ``law_trust=0`` is the plain mixture. The switch changes only at a refit.
 
-Experts (``experts=``): ``reversal`` (the basis alone: design B of BENCHMARKS.md),
-``reversal+memory`` (plus the previous-branch and envelope terms), ``bouc-wen+memory`` (the
-fitted law plus the memory basis on its residual, shrunk towards zero), ``reversal+stops`` (the
-basis plus stop operators scheduled on the element's own plastic deformation, ``play``: a twin
-that is still virgin keeps what the tested element taught while it was virgin), ``baber-wen``
-(a degrading Bouc-Wen law without pinching, refitted online on the tested element's whole
-history, the twin running it on its own history: ``degrading``; BENCHMARKS.md, updating part
-8b). The default is these five (design G, BENCHMARKS.md updating part 9: on the design records
-0.786 of design E's MAETH in geometric mean, worst +1.1 %, a 3000-step replay 6.3 s against
-4.1 s). Optional, not in the default mixture: ``reversal+memory+stops``,
-``reversal+memory+hinges`` (``reversal+memory`` plus force hinges: the knee where the elastic
-trial force reaches a force level, ``branch``). Design F of BENCHMARKS.md (issue 9 part 7) is
-design E plus ``reversal+memory+hinges`` with ``shadow=True``: better on the design records,
-~1.4× the cost of a replay, so not the default. The basis experts learn by their own
-exponentially weighted, ridge-regularised least squares with Huber gating (``forgetting``,
-``ridge``, ``gate``; ``branch.WeightedRls``); ``baber-wen`` by periodic refits (``refit``).
-Cost per step: the experts' updates and shadows, tenths of a millisecond (with ``shadow``,
-plus free runs every 20 steps), and a ``baber-wen`` refit every 300 steps: a spike of ~80 ms
-that grows with the history (the fit is over all of it). Served live, it belongs beside the
-event loop, not in it.
+Experts (``experts=``; :data:`EXPERTS` by default, :data:`OPTIONAL_EXPERTS` on request):
+``reversal`` (the basis alone), ``reversal+memory`` (plus previous-branch and envelope terms),
+``bouc-wen+memory`` (a fitted Bouc-Wen law plus the memory basis on its residual, ``physics``),
+``reversal+stops`` (plus stop operators scheduled on the element's own plastic deformation,
+``play``), ``baber-wen`` (a degrading law refitted on the tested element's whole history,
+``degrading``), ``reversal+memory+hinges`` (force hinges, ``branch``). The bases learn by
+exponentially weighted ridge least squares with Huber gating (``forgetting``, ``ridge``,
+``gate``); ``baber-wen`` by periodic refits, which cost far more than an ordinary step and grow
+with the history: served live, the updater belongs beside the event loop. Figures, the choice
+of the defaults and what fails: ``BENCHMARKS.md``, "Online updating".
 """
 
 from __future__ import annotations
@@ -93,7 +68,8 @@ applies to them."""
 LAW_TRUST = 0.02
 """Default ``law_trust``: a law expert whose rms misfit over the whole history it was fitted to
 is at most this fraction of that history's peak |force| takes all the weight (module
-docstring; BENCHMARKS.md, updating part 9b)."""
+docstring). Chosen between the misfits of a right and a wrong law family: ``BENCHMARKS.md``,
+"Online updating"."""
 
 SCORES = ("both", "free-run", "one-step")
 """How an expert is scored on the tested element (module docstring)."""

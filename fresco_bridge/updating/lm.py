@@ -20,8 +20,8 @@ does in MATLAB. :func:`divide_rand` is MATLAB's ``dividerand`` (the default data
 ``train``: 70 % training, 15 % validation, 15 % test, at random).
 
 BLAS runs on one thread inside a fit: numpy's and scipy's OpenBLAS pools each spin 2 threads,
-and alternating gemm (numpy) with Cholesky (scipy) on 2 cores made one fit 5-10x slower
-(``shared/notes/ecosystem.md`` section 4; measured again here, see BENCHMARKS.md).
+and alternating gemm (numpy) with Cholesky (scipy) on 2 cores makes one fit several times
+slower (``BENCHMARKS.md``, "Online updating").
 """
 
 from __future__ import annotations
@@ -64,8 +64,8 @@ class LmOptions:
     """Validation stop after this many iterations above the best validation cost (needs a
     validation set; ``trainlm``'s default)."""
     single_precision_hessian: bool = False
-    """J and J^T W J in float32 (BLAS ssyrk, ~0.6x the time); gradient, Cholesky, costs and
-    parameters stay float64. Not exact: BENCHMARKS.md measures what it changes."""
+    """J and J^T W J in float32 (BLAS ssyrk, faster); gradient, Cholesky, costs and parameters
+    stay float64. Not exact: ``BENCHMARKS.md``, "Online updating", measures what it changes."""
 
     def __post_init__(self) -> None:
         checks = {

@@ -186,7 +186,7 @@ class BranchStopRls(OwnsTwin):
     """The expert (module docstring); ``offline`` = (displacement, force) arrays.
 
     ``memory_terms`` adds the branch memory terms of ``reversal+memory`` (an optional expert:
-    not in the default mixture, BENCHMARKS.md has why)."""
+    not in the default mixture; why: ``BENCHMARKS.md``, "Online updating")."""
 
     name = "online_improved"
 

@@ -1,11 +1,10 @@
 """Shadow scoring for ``online_improved``: each expert's *current* model tested on a stretch of
 the tested element's own history whose state matches the twin's now.
 
-Why (BENCHMARKS.md, issue 9 parts 5 and 7): the mixture's usual score is each expert's error on
-the tested element's *recent* past, which ranks experts as their twins would not when the twin
-is in another state (RSN960 Menegotto-Pinto: the expert weighted 0.55 was the worst twin alone);
-ranking by state-matched *bins* of old errors was stale (part 5), and using old *weights*
-worse (part 7). Here the stretch is old but the model is current: every ``every`` steps, the
+Why: the mixture's usual score is each expert's error on the tested element's *recent* past,
+which can rank experts as their twins would not when the twin is in another state (an expert
+weighted highest can be the worst twin alone). Old errors binned by state are stale, and old
+weights are worse; here the stretch is old but the model is current: every ``every`` steps, the
 stored step of the tested element whose state is nearest the twin's — span so far (max d −
 min d) and recent amplitude (max |d| over the last ``window`` steps), compared in log ratio —
 starts a free run of each expert's twin over the next ``length`` measured steps, from the
@@ -16,9 +15,9 @@ that free run is the expert's shadow score ``H_k``; the mixture weighs experts b
 ``1 / (S_k · H_k)`` (``S_k`` the usual score). Only displacements, the tested element's
 measured forces and the experts' own models enter; never the twin's truth.
 
-Cost: ``every`` = 20, ``length`` = 100, four experts: one 400-step free run every 20 steps
-(≈ 0.5 ms a step on average; the median step does none of it). Memory: one stored twin per
-expert per step, the oldest dropped past ``keep`` steps.
+Cost: one free run of ``length`` steps per expert every ``every`` steps (the median step does
+none of it); memory: one stored twin per expert per step, the oldest dropped past ``keep``
+steps. Figures and what it changes: ``BENCHMARKS.md``, "Online updating".
 """
 
 from __future__ import annotations

@@ -18,18 +18,15 @@ measurement ``(d_i, F_i)`` of the tested element:
 4. Levenberg-Marquardt (:mod:`.lm`: damping 1e-5, momentum 0.1, warm start from the previous
    step's network) refits the network, stopped by ``trainlm``'s own rules (gradient norm <
    1e-7, damping > 1e10; see :mod:`.lm`) or the iteration cap. The paper caps at 50
-   iterations; the default (``ONLINE_ANN_LM``) caps at 8 and forms J^T W J in float32: a
-   pre-registered non-inferiority test (28 record pairs x 3 seeds, the twin under its own
-   loading) found it equal in accuracy to the paper's settings (BENCHMARKS.md, updating part
-   12) at an eighth of the time, and the issue asks the online step to use the fastest fit
-   at equal accuracy. Beside the tested damper (the paper's layout), where the paper's fit
-   is near exact, it re-fits the newest samples 2-3x less tightly (still ~0.1 kN).
-   ``max_iterations=50, single_precision_hessian=false`` is the paper's exact fit
-   (``PAPER_ONLINE_LM``). A relative-decrease stop (``rtol``) and
-   MATLAB ``train``'s default data division with its validation stop
-   (``divide="dividerand"``: every step 70 % of the rows train, 15 % validate, 15 % are held
-   out, the best-validation network is kept) are options: BENCHMARKS.md (part 6) measures
-   what they change and argues why the paper's reading is "all 700 rows train";
+   iterations; the default (``ONLINE_ANN_LM``) caps at 8 and forms J^T W J in float32, because
+   the online step should use the fastest fit of equal accuracy, and a pre-registered test on
+   the twin under its own loading found it equal at a fraction of the time (beside the tested
+   damper it re-fits the newest samples less tightly). ``max_iterations=50,
+   single_precision_hessian=false`` is the paper's exact fit (``PAPER_ONLINE_LM``). A
+   relative-decrease stop (``rtol``) and MATLAB ``train``'s default data division with its
+   validation stop (``divide="dividerand"``: every step 70 % of the rows train, 15 % validate,
+   15 % are held out, the best-validation network is kept) are options. Figures, and why the
+   paper's reading is "all 700 rows train": ``BENCHMARKS.md``, "Online updating";
 5. the twin (an :class:`~.ann.AnnTwin` with its own committed recurrence) uses the new network
    from its next trial on.
 """
@@ -69,7 +66,7 @@ DIVIDE_FUNCTIONS = ("none", "dividerand")
 ``dividerand`` (MATLAB ``train``'s default: 70/15/15 % at random every step, validation stop)."""
 
 ONLINE_ANN_DIVIDE = "none"
-"""``online_ann``'s default division (BENCHMARKS.md, part 6, argues the choice)."""
+"""``online_ann``'s default division (``BENCHMARKS.md``, "Online updating", argues the choice)."""
 
 PAPER_ONLINE_LM = LmOptions(max_iterations=50, mu=1e-5, momentum=0.1)
 """The paper's online LM: damping 1e-5, at most 50 iterations, momentum 0.1, ``trainlm``'s

@@ -502,7 +502,7 @@ def drive_many(law: int, params: FloatArray, paths: FloatArray, gaps: FloatArray
     """``drive`` for a population: row i drives ``params[i]`` along ``paths[i]`` with
     ``gaps[i]`` (a finite-difference Jacobian is one population). One call, one thread:
     parallelism belongs to the records (a process per record), which scales on a loaded
-    machine where threads inside one fit did not (measured: slower than serial at load 3)."""
+    machine where threads inside one fit did not (they ran slower than serial)."""
     prm = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
     rows = np.ascontiguousarray(np.atleast_2d(paths), dtype=np.float64)
     gap = np.broadcast_to(np.asarray(gaps, dtype=np.float64), (prm.shape[0],))

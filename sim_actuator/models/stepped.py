@@ -3,13 +3,13 @@ objects, the same bits, a fraction of the time per trial.
 
 Why: ``online_improved`` steps Bouc-Wen laws thousands of times per replay — each expert's
 tested element, twin and shadow, and the refitted law's state replays after every refit — and
-the Python RK4 substeps were a third of its replay time (BENCHMARKS.md, updating part 11). Only
-``_advance`` (the substeps of one trial) is replaced, by the kernel ``paths.drive`` runs: its
-operations are the object's in the same order, so every state and force is identical, which
-``tests/sim_actuator/models/test_stepped.py`` checks to the bit. A trial the kernel refuses (more
-than ``MAX_SUBSTEPS``) is repeated by the object's own ``_advance``, which raises its usual
-error. Everything else (``set_trial``'s force and tangent, commit, clone, state,
-``with_params``) is the object's.
+the Python RK4 substeps were a large share of its replay time (``BENCHMARKS.md``, "Online
+updating"). Only ``_advance`` (the substeps of one trial) is replaced, by the kernel
+``paths.drive`` runs: its operations are the object's in the same order, so every state and
+force is identical, which ``tests/sim_actuator/models/test_stepped.py`` checks to the bit. A
+trial the kernel refuses (more than ``MAX_SUBSTEPS``) is repeated by the object's own
+``_advance``, which raises its usual error. Everything else (``set_trial``'s force and
+tangent, commit, clone, state, ``with_params``) is the object's.
 """
 
 from __future__ import annotations
