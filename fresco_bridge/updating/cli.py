@@ -129,8 +129,8 @@ def add_updater_parser(sub: Any) -> None:
     r.add_argument("--option", type=parse_option, action="append", default=[], metavar="KEY=VALUE",
                    help="an updater option (JSON value), repeatable, e.g. max_iterations=50")
     r.add_argument("--units", type=_units, default=Units(), metavar="DISP,FORCE",
-                   help="units of the CSVs' disp and force, also used for pred.csv "
-                        "(default mm,kN)")
+                   help="units of the CSVs' disp and force (a run directory is in mm,kN), "
+                        "also used for pred.csv (default mm,kN)")
     r.add_argument("-o", "--out", type=Path, required=True, help="predictions CSV to write")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
