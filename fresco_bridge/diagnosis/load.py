@@ -3,19 +3,21 @@
 The CSV header names the columns: ``time,cmd_disp,meas_force`` are required, ``meas_disp`` is
 optional (without it the interface layer cannot be seen). The bridge's own export
 (``fresco-bridge runs export``: ``time,step,site,cmd_disp,meas_disp,meas_force,session``) is
-read as is; a site with several actuators uses actuator 1 (``cmd_disp_1``...). Every problem is
-a :class:`DiagnosisInputError` naming the file, the row or column, and why.
+read as is; a site with several actuators uses actuator 1 (``cmd_disp_1``...), a record with
+several integrator sessions its longest. Reading is :mod:`fresco_bridge.element_history`'s (the
+updater commands read the same way); every problem is a :class:`DiagnosisInputError` naming the
+file, the row or column, and why.
 """
 
 from __future__ import annotations
 
-import csv
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
+
+from ..element_history import HistoryInputError, check_increasing, read_element_history
 
 __all__ = [
     "MIN_SAMPLES",
@@ -188,147 +190,35 @@ def record_from_arrays(
                 f"({bad.size} such sample(s)); remove or repair those rows"
             )
         clean[name] = a
-    steps = np.diff(clean["time"])
-    back = np.flatnonzero(steps <= 0.0)
-    if back.size:
-        i = int(back[0])
-        raise DiagnosisInputError(
-            f"{source}: time is not strictly increasing at {where(i + 1)} "
-            f"({float(clean['time'][i])!r} then {float(clean['time'][i + 1])!r}); sort the "
-            "record or give one session"
-        )
+    try:
+        check_increasing("time", clean["time"], source, lines)
+    except HistoryInputError as exc:
+        raise DiagnosisInputError(str(exc)) from None
     if float(np.ptp(clean["cmd_disp"])) == 0.0:
         raise DiagnosisInputError(f"{source}: cmd_disp is constant: nothing was tested")
     return Record(clean["time"], clean["cmd_disp"], clean.get("meas_disp"),
                   clean["meas_force"], source, list(notes or []))
 
 
-def _column(header: list[str], name: str) -> int | None:
-    """Index of ``name`` (or ``name_1`` for a multi-actuator export), None when absent."""
-    for candidate in (name, f"{name}_1"):
-        if candidate in header:
-            return header.index(candidate)
-    return None
-
-
-def _load_csv(path: Path, site: str | None, units: dict[str, float]) -> Record:
+def _from_history(path: Path, site: str | None, units: dict[str, float]) -> Record:
+    """The record through the one reader of a tested element's history; actuator 1, and the
+    longest integrator session when the record holds several."""
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise DiagnosisInputError(f"{path}: cannot read: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise DiagnosisInputError(f"{path}: not a UTF-8 text CSV") from None
-    if not rows:
-        raise DiagnosisInputError(f"{path}: empty file (expected a header line)")
-    header = [h.strip() for h in rows[0]]
-    cols = {name: _column(header, name) for name in ("time", "cmd_disp", "meas_disp",
-                                                     "meas_force")}
-    missing = [n for n in ("time", "cmd_disp", "meas_force") if cols[n] is None]
-    if missing:
-        raise DiagnosisInputError(
-            f"{path}: missing column(s) {', '.join(missing)} in the header "
-            f"({','.join(header)}); required: time,cmd_disp,meas_force (meas_disp optional)"
-        )
-    notes: list[str] = []
-    if "cmd_disp_1" in header:
-        notes.append("several actuators: actuator 1 diagnosed")
-    body = [(i, r) for i, r in enumerate(rows[1:], start=2) if any(c.strip() for c in r)]
-    site_col = header.index("site") if "site" in header else None
-    if site_col is not None:
-        sites = sorted({r[site_col] for _, r in body if len(r) > site_col})
-        if site is None and len(sites) > 1:
-            raise DiagnosisInputError(
-                f"{path}: the record holds {len(sites)} sites ({', '.join(sites)}); "
-                "choose one with --site"
-            )
-        if site is not None:
-            if site not in sites:
-                raise DiagnosisInputError(
-                    f"{path}: no site {site!r} (sites: {', '.join(sites) or 'none'})")
-            body = [(i, r) for i, r in body if r[site_col] == site]
-    elif site is not None:
-        raise DiagnosisInputError(f"{path}: --site {site} given but the CSV has no site column")
-    if "session" in header:
-        body, note = _longest_session(body, header.index("session"))
-        if note:
-            notes.append(note)
-    values: dict[str, list[float]] = {name: [] for name, c in cols.items() if c is not None}
-    for line, row in body:
-        for name, c in cols.items():
-            if c is None:
-                continue
-            text = row[c].strip() if c < len(row) else ""
-            try:
-                values[name].append(float(text))
-            except ValueError:
-                raise DiagnosisInputError(
-                    f"{path}:{line}: column {name} is {text!r}, not a number") from None
-            if not math.isfinite(values[name][-1]):
-                raise DiagnosisInputError(
-                    f"{path}:{line}: column {name} is {text!r} (NaN rows cannot be diagnosed; "
-                    "remove or repair them)"
-                )
-    arr = {k: np.array(v, dtype=np.float64) for k, v in values.items()}
-    meas = arr.get("meas_disp")
-    return record_from_arrays(
-        arr["time"] * units["time"], arr["cmd_disp"] * units["disp"],
-        arr["meas_force"] * units["force"], None if meas is None else meas * units["disp"],
-        source=str(path), notes=notes, lines=[line for line, _ in body],
-    )
-
-
-def _longest_session(body: list[tuple[int, list[str]]],
-                     col: int) -> tuple[list[tuple[int, list[str]]], str | None]:
-    sessions: dict[str, list[tuple[int, list[str]]]] = {}
-    for line, row in body:
-        sessions.setdefault(row[col] if col < len(row) else "", []).append((line, row))
-    if len(sessions) <= 1:
-        return body, None
-    name, rows = max(sessions.items(), key=lambda kv: len(kv[1]))
-    return rows, f"{len(sessions)} integrator sessions: the longest (session {name}) diagnosed"
-
-
-def _load_run(path: Path, site: str | None) -> Record:
-    from ..runs import RunDirError, load_run, session_signals
-
-    try:
-        run = load_run(path)
-    except RunDirError as exc:
+        history = read_element_history(path, ("time", "cmd_disp", "meas_force"), ("meas_disp",),
+                                       site=site, session="longest")
+    except HistoryInputError as exc:
         raise DiagnosisInputError(str(exc)) from None
-    if not run.steps:
-        raise DiagnosisInputError(
-            f"{path}: the run has no committed steps (nothing was tested, or the integrator "
-            "never committed a step)"
-        )
-    sites = sorted({s.site for s in run.steps})
-    if site is None:
-        if len(sites) > 1:
-            raise DiagnosisInputError(
-                f"{path}: the run holds {len(sites)} sites ({', '.join(sites)}); choose one "
-                "with --site")
-        site = sites[0]
-    elif site not in sites:
-        raise DiagnosisInputError(f"{path}: no committed steps for site {site!r} "
-                                  f"(sites: {', '.join(sites)})")
-    signals = [s for s in session_signals(run.steps) if s.site == site]
-    notes = list(run.notes)
-    sig = max(signals, key=lambda s: s.step.size)
-    if len(signals) > 1:
-        notes.append(f"{len(signals)} integrator sessions: the longest (session {sig.session}) "
-                     "diagnosed")
-    if sig.cmd.shape[1] > 1:
-        notes.append("several actuators: actuator 1 diagnosed")
-    return record_from_arrays(sig.time, sig.cmd[:, 0], sig.force[:, 0], sig.meas[:, 0],
-                              source=f"{path} (site {site})", notes=notes)
+    cols = history.columns
+    meas = cols.get("meas_disp")
+    return record_from_arrays(
+        cols["time"] * units["time"], cols["cmd_disp"] * units["disp"],
+        cols["meas_force"] * units["force"], None if meas is None else meas * units["disp"],
+        source=history.source, notes=history.notes, lines=history.lines,
+    )
 
 
 def load_record(path: Path, *, site: str | None = None, units: str | None = None) -> Record:
     """Read a run directory or a CSV (``units`` converts a CSV's columns to mm, kN, s)."""
-    if path.is_dir():
-        if units:
-            raise DiagnosisInputError("--units applies to a CSV; a run directory is in mm, kN, s")
-        return _load_run(path, site)
-    if not path.exists():
-        raise DiagnosisInputError(f"{path}: no such file or run directory")
-    return _load_csv(path, site, parse_units(units))
+    if path.is_dir() and units:
+        raise DiagnosisInputError("--units applies to a CSV; a run directory is in mm, kN, s")
+    return _from_history(path, site, parse_units(units))

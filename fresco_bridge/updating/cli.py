@@ -1,29 +1,34 @@
 """``fresco-bridge updater pretrain|replay``: parser and handler (registered in the CLI).
 
-* ``pretrain DATA -o model.pt`` — the paper's Step 1-2: an ANN trained on existing test data
-  (a bridge run directory or a CSV ``time,disp,force``), a fit plot beside the model file.
-* ``replay --source SRC.csv --twin TWIN.csv --updater NAME -o pred.csv`` — any updater on
-  archived data: SRC is the tested element step by step, TWIN the twin's displacement (and its
-  force when known, for scoring). Writes ``step,disp,force_pred[,force_true]`` and a JSON
-  summary beside it, prints MAETH / RMS / peak errors.
+* ``pretrain DATA -o model.pt`` — the paper's Step 1-2: an ANN trained on existing test data,
+  a fit plot beside the model file.
+* ``replay --source SRC --twin TWIN --updater NAME -o pred.csv`` — any updater on archived
+  data: SRC is the tested element step by step, TWIN the twin's displacement (and its force
+  when known, for scoring). Writes ``step,disp,force_pred[,force_true]`` and a JSON summary
+  beside it, prints MAETH / RMS / peak errors.
 
-Bad input (files, columns, options) is one line on stderr and exit code 2.
+Every history (DATA, SRC, TWIN, ``--offline``) is a bridge run directory, the bridge's export
+CSV or a ``time,disp,force`` CSV, read by :func:`.histories.read_history` (the measured
+displacement). Bad input (files, columns, options) is one line on stderr and exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import inspect
 import json
 import sys
 import time
+import types
+import typing
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .base import UpdaterError
-from .histories import HistoryError, Units, read_csv_history, read_run_history
+from .histories import History, HistoryError, Units, read_history
 from .registry import UPDATERS, make_updater, updater_options
 
 __all__ = ["add_updater_parser", "updater_command"]
@@ -70,13 +75,13 @@ def add_updater_parser(sub: Any) -> None:
         description="Train the source paper's restoring-force network (6 -> 10 x 3 tanh -> 1) "
                     "on the tested element's measured (d, F) history by Levenberg-Marquardt and "
                     "write a versioned model file (torch format) and a fit plot.")
-    p.add_argument("data", type=Path, metavar="DATA",
-                   help="a bridge run directory, or a CSV with columns time,disp,force")
+    p.add_argument("data", type=Path, metavar="DATA", help=_DATA_HELP)
     p.add_argument("-o", "--out", type=Path, required=True, help="model file to write (.pt)")
-    p.add_argument("--site", default=None, help="site of a run directory (default: its only one)")
+    p.add_argument("--site", default=None,
+                   help="site of a run directory or export (default: its only one)")
     p.add_argument("--actuator", type=int, default=1, help="actuator of the site (default 1)")
     p.add_argument("--session", type=int, default=None,
-                   help="integrator session of a run directory (default: the last)")
+                   help="integrator session of a run directory or export (default: the last)")
     p.add_argument("--samples", type=int, default=None,
                    help="use the first N steps (the paper: 2500; default: all)")
     p.add_argument("--iterations", type=int, default=1000,
@@ -92,26 +97,40 @@ def add_updater_parser(sub: Any) -> None:
 
     r = cmds.add_parser(
         "replay", help="evaluate an updater offline on recorded data",
-        description="Step through SRC (the tested element's time,disp,force) and TWIN (the "
-                    "twin's time,disp[,force]) row by row: the updater observes SRC step i and "
-                    "the twin predicts its force at TWIN's disp of step i (with --lag, before "
-                    "observing step i). Writes step,disp,force_pred[,force_true].")
-    r.add_argument("--source", type=Path, required=True, metavar="SRC.csv")
-    r.add_argument("--twin", type=Path, required=True, metavar="TWIN.csv")
+        description="Step through SRC (the tested element's displacement and force) and TWIN "
+                    "(the twin's displacement, and its force when known) row by row: the "
+                    "updater observes SRC step i and the twin predicts its force at TWIN's "
+                    "displacement of step i (with --lag, before observing step i). Writes "
+                    "step,disp,force_pred[,force_true]. " + _DATA_HELP)
+    r.add_argument("--source", type=Path, required=True, metavar="SRC",
+                   help="the tested element's history")
+    r.add_argument("--twin", type=Path, required=True, metavar="TWIN",
+                   help="the twin's history (a force column, when present, is scored against)")
     r.add_argument("--updater", required=True, choices=sorted(UPDATERS),
                    help="; ".join(f"{k}: {v.description}" for k, v in UPDATERS.items()))
     r.add_argument("--model", type=Path, default=None, metavar="F",
                    help="ANN model file from `updater pretrain` (offline_ann, online_ann)")
-    r.add_argument("--offline", type=Path, default=None, metavar="CSV",
-                   help="offline database time,disp,force: the ANN is pre-trained on it in "
-                        "process (instead of --model)")
+    r.add_argument("--offline", type=Path, default=None, metavar="DATA",
+                   help="offline database (an earlier test of the element): the start of "
+                        "online_improved and online_ukf, the calibrated Bilinear of none; the "
+                        "ANN is pre-trained on it in process (instead of --model)")
+    r.add_argument("--site", default=None,
+                   help="site of SRC and TWIN when a run directory or export holds several")
+    r.add_argument("--twin-site", default=None, metavar="SITE",
+                   help="TWIN's site when it is another site of the run (default: --site)")
+    r.add_argument("--offline-site", default=None, metavar="SITE",
+                   help="site of --offline when it holds several")
+    r.add_argument("--session", type=int, default=None,
+                   help="integrator session of SRC and TWIN (default: the last of each)")
+    r.add_argument("--actuator", type=int, default=1,
+                   help="actuator of a multi-actuator site (default 1)")
     r.add_argument("--lag", action="store_true",
                    help="the twin's step i only knows the source through step i-1")
     r.add_argument("--option", type=parse_option, action="append", default=[], metavar="KEY=VALUE",
                    help="an updater option (JSON value), repeatable, e.g. max_iterations=50")
     r.add_argument("--units", type=_units, default=Units(), metavar="DISP,FORCE",
-                   help="units of the CSVs' disp and force, also used for pred.csv "
-                        "(default mm,kN)")
+                   help="units of the CSVs' disp and force (a run directory is in mm,kN), "
+                        "also used for pred.csv (default mm,kN)")
     r.add_argument("-o", "--out", type=Path, required=True, help="predictions CSV to write")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -127,11 +146,22 @@ def updater_command(args: argparse.Namespace) -> int:
         return 2
 
 
+_DATA_HELP = ("A history is a bridge run directory, the bridge's export CSV (`fresco-bridge "
+              "export`: an updater learns from meas_disp, the displacement the specimen went "
+              "through, not cmd_disp) or a CSV with columns time,disp,force.")
+
+
 def _load_training_data(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str]:
-    if args.data.is_dir():
-        return read_run_history(args.data, args.site, args.actuator, args.session)
-    cols = read_csv_history(args.data, ("time", "disp", "force"), units=args.units)
-    return cols["disp"], cols["force"], str(args.data)
+    history = read_history(args.data, site=args.site, session=args.session,
+                           actuator=args.actuator, units=args.units)
+    assert history.force is not None  # need_force
+    _print_notes("data", history)
+    return history.disp, history.force, history.source
+
+
+def _print_notes(role: str, history: History) -> None:
+    for note in history.notes:
+        print(f"{role}: {note}", file=sys.stderr)
 
 
 def _pretrain(args: argparse.Namespace) -> int:
@@ -215,36 +245,39 @@ def _replay(args: argparse.Namespace) -> int:
 
     from .replay import replay
 
-    source = read_csv_history(args.source, ("time", "disp", "force"), units=args.units)
-    twin = read_csv_history(args.twin, ("time", "disp"), ("force",), units=args.units)
-    n_src, n_twin = len(source["disp"]), len(twin["disp"])
+    given = dict(args.option)
+    _check_options(args.updater, given, model=args.model is not None,
+                   offline=args.offline is not None)
+    src = read_history(args.source, site=args.site, session=args.session,
+                       actuator=args.actuator, units=args.units)
+    twin = read_history(args.twin, need_force=False, site=args.twin_site or args.site,
+                        session=args.session, actuator=args.actuator, units=args.units)
+    assert src.force is not None  # need_force
+    n_src, n_twin = len(src.disp), len(twin.disp)
     if n_twin > n_src:
-        raise HistoryError(f"{args.twin}: {n_twin} steps, but {args.source} has only {n_src}: "
+        raise HistoryError(f"{twin.source}: {n_twin} steps, but {src.source} has only {n_src}: "
                            "every twin step needs the source's step")
-    options = dict(args.option)
-    accepted = updater_options(args.updater)
+    _print_notes("source", src)
+    _print_notes("twin", twin)
+    options = dict(given)
     if args.model is not None:
-        if "model_file" not in accepted:
-            raise UpdaterError(f"--model: updater {args.updater!r} takes no model file")
         options["model_file"] = args.model
     if args.offline is not None:
-        if "offline" not in accepted:
-            raise UpdaterError(f"--offline: updater {args.updater!r} takes no offline database")
-        cols = read_csv_history(args.offline, ("time", "disp", "force"), units=args.units)
-        options["offline"] = (cols["disp"], cols["force"])
-    updater = make_updater(args.updater, **options)
+        database = read_history(args.offline, site=args.offline_site, actuator=args.actuator,
+                                units=args.units)
+        _print_notes("offline", database)
+        options["offline"] = (database.disp, database.force)
+    updater = _build_updater(args.updater, options, given)
     bar = ProgressBar(f"replay {args.updater}", n_twin, enabled=not args.quiet)
     start = time.perf_counter()
-    result = replay(updater, source["disp"], source["force"], twin["disp"], lag=args.lag,
-                    progress=bar)
+    result = replay(updater, src.disp, src.force, twin.disp, lag=args.lag, progress=bar)
     wall = time.perf_counter() - start
-    _write_predictions(args.out, result.twin_disp, result.force_pred, twin.get("force"),
-                       args.units)
+    _write_predictions(args.out, result.twin_disp, result.force_pred, twin.force, args.units)
     summary: dict[str, Any] = {
         "updater": args.updater,
         "options": {k: _jsonable(v) for k, v in options.items() if k != "offline"},
         "offline": str(args.offline) if args.offline is not None else None,
-        "source": str(args.source), "twin": str(args.twin), "lag": args.lag,
+        "source": src.source, "twin": twin.source, "lag": args.lag,
         "units": str(args.units), "steps": n_twin, "wall_seconds": wall,
         "update_ms": {"median": float(np.median(result.update_seconds) * 1e3),
                       "p99": float(np.percentile(result.update_seconds, 99) * 1e3),
@@ -253,8 +286,8 @@ def _replay(args: argparse.Namespace) -> int:
     lines = [f"replay {args.updater}{' --lag' if args.lag else ''}: {n_twin} steps in "
              f"{wall:.2f} s; update median {summary['update_ms']['median']:.2f} ms, "
              f"p99 {summary['update_ms']['p99']:.2f} ms"]
-    if "force" in twin:
-        true = twin["force"]
+    if twin.force is not None:
+        true = twin.force
         peaks = indicators.peak_values(true, result.force_pred)
         metrics = {
             "maeth": indicators.maeth(true, result.force_pred),
@@ -279,7 +312,7 @@ def _replay(args: argparse.Namespace) -> int:
             except UpdaterError as exc:  # e.g. a model file's database too short to calibrate
                 lines.append(f"no calibrated-Bilinear baseline: {exc}")
         if baseline is not None:
-            base = replay(baseline, source["disp"], source["force"], twin["disp"], lag=args.lag)
+            base = replay(baseline, src.disp, src.force, twin.disp, lag=args.lag)
             base_metrics = {"maeth": indicators.maeth(true, base.force_pred),
                             "rms": indicators.rmseth(true, base.force_pred)}
             summary["baseline"] = {"updater": "none --offline (the calibrated Bilinear)",
@@ -290,12 +323,102 @@ def _replay(args: argparse.Namespace) -> int:
                 f"{unit}; {args.updater} is {_relative(metrics['maeth'], base_metrics['maeth'])} "
                 f"in MAETH, {_relative(metrics['rms'], base_metrics['rms'])} in RMS error")
     else:
-        lines.append(f"{args.twin} has no force column: nothing to score against")
+        lines.append(f"{twin.source} has no force column: nothing to score against")
     meta = args.out.with_suffix(".json")
     meta.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     lines.append(f"wrote {args.out} and {meta}")
     print("\n".join(lines))
     return 0
+
+
+_OPTION_FLAGS = {"model_file": "--model F (a network from `updater pretrain`)",
+                 "offline": "--offline DATA (an earlier history of the tested element)"}
+"""Updater options the command line gives by their own flag, not by --option."""
+
+
+def _check_options(name: str, given: dict[str, Any], *, model: bool, offline: bool) -> None:
+    """Before any file is read: what the updater needs, what it takes, the --option types."""
+    for key in given:
+        if key in _OPTION_FLAGS:
+            raise UpdaterError(f"--option {key}: give it as {_OPTION_FLAGS[key]}")
+    accepted = updater_options(name)
+    if model and "model_file" not in accepted:
+        raise UpdaterError(f"--model: updater {name!r} takes no model file")
+    if offline and "offline" not in accepted:
+        raise UpdaterError(f"--offline: updater {name!r} takes no offline database")
+    needs = UPDATERS[name].needs
+    if needs and not ((model and "model_file" in needs) or (offline and "offline" in needs)):
+        flags = [flag for key, flag in _OPTION_FLAGS.items() if key in needs]
+        raise UpdaterError(f"updater {name!r} needs {' or '.join(flags)}")
+    factory = UPDATERS[name].load()
+    hints = typing.get_type_hints(factory.__init__ if inspect.isclass(factory) else factory)
+    for key, value in given.items():
+        if key in hints and not _fits(value, hints[key]):
+            raise UpdaterError(f"--option {key}={json.dumps(_jsonable(value))}: updater "
+                               f"{name!r} takes {_kind(hints[key])} for {key}")
+
+
+def _fits(value: Any, hint: Any) -> bool:
+    """Whether a JSON-decoded ``--option`` value fits a factory's annotation (unknown: yes)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is Any:
+        return True
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, a) for a in args)
+    if hint in (int, float) and isinstance(value, bool):
+        return False
+    if hint is float:
+        return isinstance(value, int | float)
+    if hint is Path:
+        return isinstance(value, str | Path)
+    if origin is dict:
+        return isinstance(value, dict) and all(
+            _fits(k, args[0]) and _fits(v, args[1]) for k, v in value.items())
+    if origin is tuple:
+        if not isinstance(value, tuple):
+            return False
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_fits(v, args[0]) for v in value)
+        return len(args) == len(value) and all(map(_fits, value, args))
+    if isinstance(hint, type) and origin is None:
+        try:
+            return isinstance(value, hint)
+        except TypeError:  # a protocol that cannot be checked at run time
+            return True
+    return True
+
+
+def _kind(hint: Any, plural: bool = False) -> str:
+    """An annotation in the words of a JSON ``--option`` value."""
+    words = {int: ("an integer", "integers"), float: ("a number", "numbers"),
+             bool: ("true or false", "true or false"), str: ("a string", "strings"),
+             type(None): ("null", "nulls"), Path: ("a path", "paths")}
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_kind(a, plural) for a in args)
+    if origin is dict:
+        return f"{'objects' if plural else 'an object'} of {_kind(args[1], True)}"
+    if origin is tuple:
+        head = "lists" if plural else "a list"
+        return f"{head} of {_kind(args[0], True)}" if args[-1] is Ellipsis else \
+            f"{head} of {len(args)}"
+    if hint in words:
+        return words[hint][plural]
+    return str(getattr(hint, "__name__", hint))
+
+
+def _build_updater(name: str, options: dict[str, Any], given: dict[str, Any]) -> Any:
+    """``make_updater``; a value the factory refuses beyond its annotation names the options."""
+    try:
+        return make_updater(name, **options)
+    except UpdaterError:
+        raise
+    except (TypeError, ValueError) as exc:
+        if not given:
+            raise
+        values = ", ".join(f"{k}={json.dumps(_jsonable(v))}" for k, v in given.items())
+        raise UpdaterError(f"updater {name!r}: an --option value was refused ({values}): "
+                           f"{exc}") from None
 
 
 def _offline_database(options: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:

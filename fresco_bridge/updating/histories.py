@@ -1,30 +1,30 @@
-"""Recorded (d, F) histories for the ``updater`` commands: CSV files and bridge run directories.
+"""Recorded (d, F) histories for the ``updater`` commands: run directories and CSV files.
 
-The I/O edge of the updating package (the numerics never read files). Every error is a
-:class:`HistoryError` naming the file, the line and the column, and saying why.
+The I/O edge of the updating package (the numerics never read files), over the one reader of
+a tested element's history (:mod:`fresco_bridge.element_history`, which ``diagnose`` uses too).
+Every error is a :class:`HistoryError` naming the file, the line and the column, and saying why.
 
-CSV: a header row, then one row per committed step. ``time`` must increase strictly; a
-``step`` column, when present, too. Other columns are ignored. Values are converted to mm and
-kN by ``Units`` (``--units m,N``), and back for writing.
+CSV: the bridge's export (``time,step,site,cmd_disp,meas_disp,meas_force,session``) or a
+header row ``time,disp,force`` and one row per committed step. ``time`` must increase
+strictly; a ``step`` column, when present, too. Other columns are ignored. Values are converted
+to mm and kN by ``Units`` (``--units m,N``), and back for writing.
 """
 
 from __future__ import annotations
 
-import csv
-import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.element_history import HistoryInputError, read_element_history
+
 from .base import UpdaterError
 
 FloatArray = npt.NDArray[np.float64]
 
-__all__ = ["DISP_UNITS", "FORCE_UNITS", "HistoryError", "Units", "read_csv_history",
-           "read_run_history"]
+__all__ = ["DISP_UNITS", "FORCE_UNITS", "History", "HistoryError", "Units", "read_history"]
 
 DISP_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 """Displacement unit -> mm."""
@@ -66,114 +66,43 @@ class Units:
         return f"{self.disp},{self.force}"
 
 
-def read_csv_history(path: Path, required: Sequence[str], optional: Sequence[str] = (),
-                     units: Units = Units()) -> dict[str, FloatArray]:
-    """The named columns of a CSV as float arrays (disp in mm, force in kN)."""
-    try:
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except FileNotFoundError:
-        raise HistoryError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HistoryError(f"{path}: cannot read ({exc})") from exc
-    if not rows or not any(cell.strip() for cell in rows[0]):
-        raise HistoryError(f"{path}: empty file (expected a header row: "
-                           f"{','.join([*required, *optional])})")
-    header = [cell.strip() for cell in rows[0]]
-    missing = [name for name in required if name not in header]
-    if missing:
-        raise HistoryError(f"{path}:1: missing column(s) {', '.join(missing)} (the header has "
-                           f"{', '.join(header)}; needed: {', '.join(required)})")
-    wanted = [n for n in (*required, *optional) if n in header]
-    if "step" in header and "step" not in wanted:
-        wanted.append("step")
-    index = {name: header.index(name) for name in wanted}
-    data = {name: np.empty(len(rows) - 1) for name in wanted}
-    n = 0
-    for line_no, row in enumerate(rows[1:], start=2):
-        if not any(cell.strip() for cell in row):
-            continue  # a blank line (e.g. at the end)
-        for name, col in index.items():
-            cell = row[col].strip() if col < len(row) else ""
-            try:
-                value = float(cell)
-            except ValueError:
-                raise HistoryError(f"{path}:{line_no}: column {name!r}: not a number "
-                                   f"({cell!r})") from None
-            if not math.isfinite(value):
-                raise HistoryError(f"{path}:{line_no}: column {name!r}: {cell!r} is not finite "
-                                   "(a gap in the record? every step needs a value)")
-            data[name][n] = value
-        n += 1
-    if n == 0:
-        raise HistoryError(f"{path}: no data rows after the header")
-    out = {name: values[:n] for name, values in data.items()}
-    for name in ("time", "step"):
-        if name in out:
-            bad = np.flatnonzero(np.diff(out[name]) <= 0.0)
-            if bad.size:
-                i = int(bad[0]) + 1
-                raise HistoryError(
-                    f"{path}:{_line_of(rows, i)}: column {name!r}: {float(out[name][i])!r} does "
-                    f"not increase (previous row {float(out[name][i - 1])!r}); steps must be in "
-                    "order, "
-                    "one row each"
-                )
-    if "disp" in out:
-        out["disp"] = out["disp"] * units.to_mm
-    if "force" in out:
-        out["force"] = out["force"] * units.to_kn
-    return out
+@dataclass(frozen=True)
+class History:
+    """One tested element's (d, F) history for an updater, in mm and kN."""
+
+    disp: FloatArray
+    force: FloatArray | None
+    """None when the file has no force column (a twin's displacement alone)."""
+    source: str
+    notes: list[str]
 
 
-def _line_of(rows: list[list[str]], data_index: int) -> int:
-    """The file line number of the ``data_index``-th non-blank data row."""
-    seen = -1
-    for line_no, row in enumerate(rows[1:], start=2):
-        if any(cell.strip() for cell in row):
-            seen += 1
-            if seen == data_index:
-                return line_no
-    return len(rows)
+def read_history(path: Path, *, need_force: bool = True, site: str | None = None,
+                 session: int | None = None, actuator: int = 1,
+                 units: Units = Units()) -> History:
+    """A run directory, the bridge's export CSV or a ``time,disp,force`` CSV, as (d, F).
 
-
-def read_run_history(path: Path, site: str | None = None, actuator: int = 1,
-                     session: int | None = None) -> tuple[FloatArray, FloatArray, str]:
-    """(disp mm, force kN, description) of one actuator's measurements in a bridge run.
-
-    A run can hold several sites and integrator sessions; with one site it is used, and the
-    last session is used unless ``session`` says otherwise (each session starts from rest).
+    The displacement is the *measured* one (an export's ``meas_disp``), not the command: it is
+    what the specimen went through, so the force it answered belongs to it. ``units`` apply to
+    a CSV (a run directory is in mm and kN); a record with several sites needs ``site``; of
+    several integrator sessions the last is used unless ``session`` says otherwise (each
+    session starts from rest).
     """
-    from fresco_bridge.runs import RunDirError, load_run
-
+    if path.is_dir():
+        units = Units()
+    force_col = ("force",)
     try:
-        run = load_run(path)
-    except RunDirError as exc:
-        raise HistoryError(str(exc)) from exc
-    sites = sorted({s.site for s in run.steps})
-    if not sites:
-        raise HistoryError(f"{path}: the run has no committed steps")
-    if site is None:
-        if len(sites) > 1:
-            raise HistoryError(f"{path}: the run has sites {', '.join(sites)}; choose one "
-                               "with --site")
-        site = sites[0]
-    if site not in sites:
-        raise HistoryError(f"{path}: no site {site!r} in the run (sites: {', '.join(sites)})")
-    steps = [s for s in run.steps if s.site == site]
-    sessions = sorted({s.session for s in steps})
-    chosen = sessions[-1] if session is None else session
-    if chosen not in sessions:
-        raise HistoryError(f"{path}: site {site!r} has sessions "
-                           f"{', '.join(map(str, sessions))}, not {session}")
-    steps = [s for s in steps if s.session == chosen]
-    width = len(steps[0].meas_disp)
-    if not 1 <= actuator <= width:
-        raise HistoryError(f"{path}: site {site!r} has {width} actuator(s), not {actuator}")
-    disp = np.array([s.meas_disp[actuator - 1] for s in steps])
-    force = np.array([s.meas_force[actuator - 1] for s in steps])
-    bad = np.flatnonzero(~(np.isfinite(disp) & np.isfinite(force)))
-    if bad.size:
-        raise HistoryError(f"{path}: site {site!r} step {steps[int(bad[0])].step}: the "
-                           "measurement is not finite (a HOLD answer?); cannot train on it")
-    return disp, force, f"{path} site {site} session {chosen} actuator {actuator}"
+        history = read_element_history(
+            path, ("time", "disp", *(force_col if need_force else ())),
+            () if need_force else force_col, site=site, session=session, actuator=actuator,
+            aliases=_EXPORT_NAMES)
+    except HistoryInputError as exc:
+        raise HistoryError(str(exc)) from None
+    cols = history.columns
+    force = cols.get("force")
+    return History(cols["disp"] * units.to_mm, None if force is None else force * units.to_kn,
+                   history.source, history.notes)
+
+
+_EXPORT_NAMES = {"disp": "meas_disp", "force": "meas_force"}
+"""Where an export (and a run directory) keeps what a ``time,disp,force`` CSV calls disp, force."""

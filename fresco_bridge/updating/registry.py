@@ -1,9 +1,10 @@
 """One registry of updaters: ``make_updater(name, **options)``.
 
 A new updater is one line in :data:`UPDATERS`: its name, the module and factory (a function or
-the class) that build it (imported only when used, so the CLI starts fast), and one sentence
-for ``--help``. ``make_updater`` passes options by keyword and rejects unknown option names
-with the list of the allowed ones, before anything is built.
+the class) that build it (imported only when used, so the CLI starts fast), one sentence for
+``--help`` and the options of which it needs one (its data: a network or an offline history).
+``make_updater`` passes options by keyword and rejects unknown option names with the list of
+the allowed ones, and a missing needed one by name, before anything is built.
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ class UpdaterEntry:
     module: str
     factory: str
     description: str
+    needs: tuple[str, ...] = ()
+    """Options of which one must be given (none: the updater has a default for everything)."""
 
     def load(self) -> Callable[..., Updater]:
         fn: Callable[..., Updater] = getattr(importlib.import_module(self.module), self.factory)
@@ -53,11 +56,12 @@ UPDATERS: dict[str, UpdaterEntry] = {
                          "the paper's Bilinear k0 68 kN/mm, Fy 35 kN, alpha 0.008; with "
                          "offline: the Bilinear calibrated to it)"),
     "offline_ann": UpdaterEntry(__name__, "make_offline_ann", "the pre-trained ANN, no updating "
-                                "(the paper's offline calibration)"),
+                                "(the paper's offline calibration)",
+                                needs=("model", "model_file", "offline")),
     "online_ann": UpdaterEntry(__name__, "make_online_ann", "the paper's online ANN: 500 random "
                                "offline + 200 forgetting-window samples, LM every step (8 "
                                "iterations, float32 J^T W J: equal in accuracy to the "
-                               "paper's 50)"),
+                               "paper's 50)", needs=("model", "model_file", "offline")),
     "online_ukf": UpdaterEntry(__name__, "make_online_ukf", "the paper's UKF on the Bilinear "
                                "parameters [k0, alpha, Fy] (start: the paper's values; "
                                "with offline: the calibrated Bilinear)"),
@@ -66,7 +70,8 @@ UPDATERS: dict[str, UpdaterEntry] = {
                                     "residual experts (RLS with forgetting, ridge, gating) "
                                     "weighted by their free-run and one-step errors on the "
                                     "tested element (needs offline; shadow=true also scores "
-                                    "them on a stretch matched to the twin's state)"),
+                                    "them on a stretch matched to the twin's state)",
+                                    needs=("offline",)),
 }
 """Name -> where its factory lives and what it is."""
 
@@ -87,12 +92,15 @@ def _entry(name: str) -> UpdaterEntry:
 
 def make_updater(name: str, **options: Any) -> Updater:
     """Build the updater ``name`` with keyword ``options`` (UpdaterError on a bad name/option)."""
-    factory = _entry(name).load()
+    entry = _entry(name)
+    factory = entry.load()
     allowed = updater_options(name)
     unknown = sorted(set(options) - set(allowed))
     if unknown:
         raise UpdaterError(f"updater {name!r}: unknown option(s) {', '.join(unknown)}; "
                            f"allowed: {', '.join(allowed) or '(none)'}")
+    if entry.needs and all(options.get(k) is None for k in entry.needs):
+        raise UpdaterError(f"updater {name!r} needs the option {' or '.join(entry.needs)}")
     return factory(**options)
 
 

@@ -80,6 +80,53 @@ def record_run(
     return run_dir, seen
 
 
+RIG_SITE_TOML = """
+[[sites]]
+name = "rig"
+port = 0
+[sites.controller]
+kind = "rig"
+file = "{rig}"
+ramp_time = {dt}
+stiffness = 10.0
+"""
+
+NOISY_RIG = """
+name = "noisy-rig"
+seed = 5
+substep_rate = 1000.0
+settle_time = 0.0
+default_ramp_time = {dt}
+[specimen]
+kind = "bilinear"
+params = {{ k0 = 10.0, fy = 8.0, alpha = 0.05 }}
+[sensors.lvdt]
+noise_std = 0.02
+"""
+"""A simulated lab whose LVDT reads the piston with noise: measured displacement != command."""
+
+
+def rig_site(root: Path) -> str:
+    """The TOML of a site ``rig`` served by :data:`NOISY_RIG` (written under ``root``)."""
+    rig = root / "rig.toml"
+    rig.write_text(NOISY_RIG.format(dt=DT))
+    return RIG_SITE_TOML.format(rig=rig, dt=DT)
+
+
+def record_sessions(root: Path, toml: str, sessions: list[tuple[str, int]]) -> Path:
+    """One bridge; one integrator session per (site, steps), in order, each closed before the
+    next (a site takes its next client only then); returns the run directory."""
+    with RunningBridge(toml, root) as bridge:
+        for n, (site, steps) in enumerate(sessions, 1):
+            with GenericClientLink("127.0.0.1", bridge.ports[site], 1, data_size=1) as link:
+                drive(link, steps)
+            deadline = time.monotonic() + 10
+            while sum(r.get("event") == "session-close" for r in raw_lines(bridge.run_dir)) < n:
+                assert time.monotonic() < deadline, "the bridge never closed the session"
+                time.sleep(0.01)
+        return bridge.run_dir
+
+
 def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
     """Every complete line of record.jsonl, decoded independently of fresco_bridge.record:
     format 2 (README "Run record") filled in here by its written rules — a missing ``seq`` is

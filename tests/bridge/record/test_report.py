@@ -9,7 +9,6 @@ import math
 import shutil
 import subprocess
 import sys
-import time
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -20,12 +19,10 @@ from matplotlib.image import imread
 
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.demo import run_demo
-from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import RunRecord
 from fresco_bridge.report.html import write_report
 from fresco_bridge.runs import RunDirError, load_run
-from tests.support.bridge import RunningBridge
-from tests.support.recorded_run import LAB_TOML, drive, raw_lines, record_run
+from tests.support.recorded_run import LAB_TOML, raw_lines, record_run, record_sessions
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -213,17 +210,8 @@ port = 0
 model = "elastic"
 params = { k = 4.0 }
 """
-    with RunningBridge(toml, tmp_path) as bridge:
-        for i, steps in enumerate((40, 25), 1):  # two integrator sessions on the same site
-            with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as link:
-                drive(link, steps)
-            deadline = time.monotonic() + 10  # the site takes the next client once this closed
-            while sum(r.get("event") == "session-close" for r in raw_lines(bridge.run_dir)) < i:
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
-        with GenericClientLink("127.0.0.1", bridge.ports["story2"], 1, data_size=1) as link:
-            drive(link, 30)
-        run_dir = bridge.run_dir
+    # two integrator sessions on the same site, then one on the other
+    run_dir = record_sessions(tmp_path, toml, [("spring", 40), ("spring", 25), ("story2", 30)])
     rep = parse(write_report(run_dir))
     assert rep.sections == ["run", "summary", "site-spring", "site-story2", "events", "config"]
     assert len(rep.images) == 8

@@ -167,12 +167,12 @@ def test_replay_units_round_trip(files: dict[str, Path], tmp_path: Path) -> None
 @pytest.mark.parametrize(
     ("content", "message"),
     [
-        ("time,disp\n0,1\n", r"src\.csv:1: missing column\(s\) force"),
+        ("time,disp\n0,1\n", r"src\.csv:1: missing column\(s\) force \(or meas_force\)"),
         ("time,disp,force\n0,1,2\n0.01,2,nan\n",
-         r"src\.csv:3: column 'force': 'nan' is not finite"),
+         r"src\.csv:3: column force is 'nan', not a finite number"),
         ("time,disp,force\n0,1,2\n0.02,2,3\n0.01,3,4\n",
-         r"src\.csv:4: column 'time': 0\.01 does not increase"),
-        ("time,disp,force\n0,1,2\n0.01,x,3\n", r"src\.csv:3: column 'disp': not a number \('x'\)"),
+         r"src\.csv: time is not strictly increasing at line 4 \(0\.02 then 0\.01\)"),
+        ("time,disp,force\n0,1,2\n0.01,x,3\n", r"src\.csv:3: column disp is 'x', not a number"),
         ("", r"src\.csv: empty file"),
     ],
 )

@@ -110,8 +110,13 @@ def test_registry_errors_name_the_problem() -> None:
         make_updater("none", bogus=1)
     with pytest.raises(UpdaterError, match="needs params"):
         make_updater("none", model="bwbn")
-    with pytest.raises(UpdaterError, match="exactly one of model, model_file, offline"):
+    with pytest.raises(UpdaterError, match="'online_ann' needs the option model or model_file "
+                                           "or offline"):
         make_updater("online_ann")
+    with pytest.raises(UpdaterError, match="'online_improved' needs the option offline"):
+        make_updater("online_improved")  # not a TypeError from deep inside
+    with pytest.raises(UpdaterError, match="exactly one of model, model_file, offline"):
+        make_updater("offline_ann", model_file="a.pt", offline=(D, F))
 
 
 def test_none_is_the_paper_bilinear_or_any_law() -> None:

@@ -1,0 +1,249 @@
+"""One tested element's recorded history, read from a bridge run directory or a CSV.
+
+The one reader behind the commands that learn from or judge a test (``diagnose``, ``updater
+pretrain``, ``updater replay``): one site, one integrator session, one actuator, committed step
+by committed step. A CSV is the bridge's own export (``fresco-bridge export``:
+``time,step,site,cmd_disp,meas_disp,meas_force,session``, with ``_1.._n`` suffixes when a site
+has n actuators) or any file whose header names the columns the caller asks for. Values come
+back as written (a run directory is in mm, kN and s; a CSV in its own units, which the caller
+converts). Every problem is a :class:`HistoryInputError` naming the file, the line or column,
+and why, so each command can print it as one line.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+__all__ = [
+    "RUN_COLUMNS",
+    "ElementHistory",
+    "HistoryInputError",
+    "SessionChoice",
+    "check_increasing",
+    "read_element_history",
+]
+
+RUN_COLUMNS = ("time", "step", "cmd_disp", "meas_disp", "meas_force")
+"""What a run directory holds per committed step (the export's numeric columns)."""
+
+SessionChoice = int | Literal["last", "longest"]
+"""An integrator session by number, or the rule that picks one when a record holds several."""
+
+
+class HistoryInputError(ValueError):
+    """A history cannot be read as asked (the message names the file, where and why)."""
+
+
+@dataclass(frozen=True)
+class ElementHistory:
+    """The columns asked for, one value per committed step, and where they came from."""
+
+    columns: dict[str, FloatArray]
+    source: str
+    lines: list[int] | None = None
+    """The file line of each sample (a CSV), so later checks can point into the file."""
+    notes: list[str] = field(default_factory=list)
+    """Choices made for the caller (which session, which actuator), worth printing."""
+
+
+def check_increasing(name: str, values: FloatArray, source: str,
+                     lines: Sequence[int] | None = None) -> None:
+    """HistoryInputError when ``values`` (time, step) do not increase strictly."""
+    back = np.flatnonzero(np.diff(values) <= 0.0)
+    if back.size:
+        i = int(back[0]) + 1
+        where = f"line {lines[i]}" if lines is not None else f"sample {i + 1}"
+        raise HistoryInputError(
+            f"{source}: {name} is not strictly increasing at {where} "
+            f"({float(values[i - 1])!r} then {float(values[i])!r}); sort the record or give "
+            "one session"
+        )
+
+
+def read_element_history(
+    path: Path, required: Sequence[str], optional: Sequence[str] = (), *,
+    site: str | None = None, session: SessionChoice | None = None, actuator: int = 1,
+    aliases: Mapping[str, str] | None = None,
+) -> ElementHistory:
+    """The ``required`` (and present ``optional``) columns of one element's history.
+
+    ``site`` may be omitted only when the record holds one; ``session`` defaults to ``last``.
+    In a CSV, ``aliases`` name another column read when a wanted one is absent (``disp`` read
+    from the export's ``meas_disp``); a run directory has the :data:`RUN_COLUMNS`.
+    """
+    choice: SessionChoice = "last" if session is None else session
+    if path.is_dir():
+        return _read_run(path, [*required, *optional], aliases or {}, site, choice, actuator)
+    if not path.exists():
+        raise HistoryInputError(f"{path}: no such file or run directory")
+    return _read_csv(path, required, optional, aliases or {}, site, choice, actuator)
+
+
+def _choose_site(path: Path, sites: list[str], site: str | None) -> str:
+    if not sites:
+        raise HistoryInputError(f"{path}: the run has no committed steps (nothing was "
+                                "tested, or the integrator never committed a step)")
+    if site is None:
+        if len(sites) > 1:
+            raise HistoryInputError(f"{path}: the record holds {len(sites)} sites "
+                                    f"({', '.join(sites)}); choose one with --site")
+        return sites[0]
+    if site not in sites:
+        raise HistoryInputError(f"{path}: no site {site!r} in the record "
+                                f"(sites: {', '.join(sites)})")
+    return site
+
+
+def _choose_session(where: str, sizes: Mapping[int, int],
+                    choice: SessionChoice) -> tuple[int, str | None]:
+    """The session number and, when the record holds several, a note saying which was used."""
+    if isinstance(choice, int):
+        if choice not in sizes:
+            raise HistoryInputError(f"{where} has sessions "
+                                    f"{', '.join(map(str, sorted(sizes)))}, not {choice}")
+        return choice, None
+    chosen = max(sizes, key=lambda s: sizes[s]) if choice == "longest" else max(sizes)
+    if len(sizes) == 1:
+        return chosen, None
+    return chosen, (f"{len(sizes)} integrator sessions: the {choice} (session {chosen}, "
+                    f"{sizes[chosen]} steps) used")
+
+
+def _read_run(path: Path, wanted: Sequence[str], aliases: Mapping[str, str], site: str | None,
+              choice: SessionChoice, actuator: int) -> ElementHistory:
+    from .runs import RunDirError, load_run, session_signals
+
+    try:
+        run = load_run(path)
+    except RunDirError as exc:
+        raise HistoryInputError(str(exc)) from None
+    name = _choose_site(path, sorted({s.site for s in run.steps}), site)
+    signals = {s.session: s for s in session_signals(run.steps) if s.site == name}
+    sizes = {k: v.step.size for k, v in signals.items()}
+    number, note = _choose_session(f"{path}: site {name!r}", sizes, choice)
+    sig = signals[number]
+    notes = [*run.notes, *([note] if note else [])]
+    width = sig.cmd.shape[1]
+    if not 1 <= actuator <= width:
+        raise HistoryInputError(f"{path}: site {name!r} has {width} actuator(s), not {actuator}")
+    if width > 1:
+        notes.append(f"site {name!r} has {width} actuators: actuator {actuator} used")
+    available = {"time": sig.time.astype(np.float64), "step": sig.step.astype(np.float64),
+                 "cmd_disp": sig.cmd[:, actuator - 1], "meas_disp": sig.meas[:, actuator - 1],
+                 "meas_force": sig.force[:, actuator - 1]}
+    source = f"{path} (site {name}, session {number}, actuator {actuator})"
+    columns: dict[str, FloatArray] = {}
+    for col in wanted:
+        values = available.get(col, available.get(aliases.get(col, "")))
+        if values is None:
+            raise HistoryInputError(f"{path}: a run directory has no column {col!r}")
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise HistoryInputError(
+                f"{source}: step {int(sig.step[int(bad[0])])}: {col} is not finite (a HOLD "
+                f"answer? {bad.size} such step(s)); every step needs a value")
+        columns[col] = values
+    return ElementHistory(columns, source, None, notes)
+
+
+def _column(header: list[str], name: str, actuator: int) -> int | None:
+    """Index of ``name`` (``name_<actuator>`` in a multi-actuator export), None when absent."""
+    for candidate in (name, f"{name}_{actuator}"):
+        if candidate in header:
+            return header.index(candidate)
+    return None
+
+
+def _read_csv(path: Path, required: Sequence[str], optional: Sequence[str],
+              aliases: Mapping[str, str], site: str | None, choice: SessionChoice,
+              actuator: int) -> ElementHistory:
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as exc:
+        raise HistoryInputError(f"{path}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise HistoryInputError(f"{path}: not a UTF-8 text CSV") from None
+    if not rows or not any(cell.strip() for cell in rows[0]):
+        raise HistoryInputError(f"{path}: empty file (expected a header line: "
+                                f"{','.join([*required, *optional])})")
+    header = [h.strip() for h in rows[0]]
+    if "step" in header and "step" not in (*required, *optional):
+        optional = (*optional, "step")  # checked for order below
+    cols: dict[str, tuple[str, int]] = {}
+    for name in (*required, *optional):
+        for candidate in (name, aliases.get(name)):
+            index = None if candidate is None else _column(header, candidate, actuator)
+            if index is not None:
+                cols[name] = (header[index], index)
+                break
+    missing = [n + (f" (or {aliases[n]})" if n in aliases else "") for n in required
+               if n not in cols]
+    if missing:
+        raise HistoryInputError(
+            f"{path}:1: missing column(s) {', '.join(missing)} (the header has "
+            f"{', '.join(header)}; needed: {', '.join(required)})")
+    notes: list[str] = []
+    width = sum(1 for h in header if h.startswith("meas_force_"))
+    if width and actuator > width:
+        raise HistoryInputError(f"{path}: {width} actuator(s), not {actuator}")
+    if width > 1:
+        notes.append(f"{width} actuators: actuator {actuator} used")
+    body = [(i, r) for i, r in enumerate(rows[1:], start=2) if any(c.strip() for c in r)]
+    if not body:
+        raise HistoryInputError(f"{path}: no data rows after the header")
+    where = str(path)
+    if "site" in header:
+        col = header.index("site")
+        chosen = _choose_site(path, sorted({r[col] for _, r in body if len(r) > col}), site)
+        body = [(i, r) for i, r in body if len(r) > col and r[col] == chosen]
+        where += f" (site {chosen})"
+    elif site is not None:  # one element; other inputs of the same command may have sites
+        notes.append(f"no site column: --site {site} does not apply, every row is used")
+    if "session" in header:
+        body, note = _one_session(path, where, body, header.index("session"), choice)
+        if note:
+            notes.append(note)
+    columns = {name: np.empty(len(body)) for name in cols}
+    for n, (line, row) in enumerate(body):
+        for name, (label, c) in cols.items():
+            text = row[c].strip() if c < len(row) else ""
+            try:
+                value = float(text)
+            except ValueError:
+                raise HistoryInputError(
+                    f"{path}:{line}: column {label} is {text!r}, not a number") from None
+            if not math.isfinite(value):
+                raise HistoryInputError(
+                    f"{path}:{line}: column {label} is {text!r}, not a finite number (a gap in "
+                    "the record? every step needs a value: remove or repair the row)")
+            columns[name][n] = value
+    lines = [line for line, _ in body]
+    for name in ("time", "step"):
+        if name in columns:
+            check_increasing(name, columns[name], where, lines)
+    return ElementHistory(columns, where, lines, notes)
+
+
+def _one_session(path: Path, where: str, body: list[tuple[int, list[str]]], col: int,
+                 choice: SessionChoice) -> tuple[list[tuple[int, list[str]]], str | None]:
+    groups: dict[int, list[tuple[int, list[str]]]] = {}
+    for line, row in body:
+        text = row[col].strip() if col < len(row) else ""
+        try:
+            groups.setdefault(int(text), []).append((line, row))
+        except ValueError:
+            raise HistoryInputError(f"{path}:{line}: column session is {text!r}, not an "
+                                    "integer") from None
+    number, note = _choose_session(where, {k: len(v) for k, v in groups.items()}, choice)
+    return groups[number], note
