@@ -15,7 +15,6 @@ from fresco_bridge.study.constants import (
     SPECIMENS,
     SYNTHETIC_DURATION_S,
 )
-from fresco_bridge.updating.cli import parse_option
 
 __all__ = ["add_study_parser", "study_command"]
 
@@ -42,6 +41,8 @@ def _positive_int(text: str) -> int:
 
 def add_study_parser(sub: Any) -> None:
     """``study paper`` and its options."""
+    from fresco_bridge.updating.cli import parse_option  # here: updating imports study.constants
+
     p_study = sub.add_parser("study", help="reproducible studies (the source paper's case study)")
     studies = p_study.add_subparsers(dest="study", required=True)
     p = studies.add_parser(
