@@ -35,12 +35,12 @@ import numpy as np
 
 from fresco_bridge import indicators
 from fresco_bridge.integrator.demo import demo_ground_motion
-from fresco_bridge.study.constants import PAPER_BILINEAR
 from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating import make_updater
 from fresco_bridge.updating.ann import PRETRAIN_LM, AnnModel, pretrain
 from fresco_bridge.updating.base import Updater
 from fresco_bridge.updating.features import feature_rows
+from fresco_bridge.updating.registry import PAPER_BILINEAR
 from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 

@@ -46,12 +46,12 @@ import numpy as np
 
 from fresco_bridge import indicators
 from fresco_bridge.integrator import GroundMotion, JenningsEnvelope, kanai_tajimi
-from fresco_bridge.study.calibrate import calibrate_bilinear
-from fresco_bridge.study.constants import OFFLINE_SAMPLES, PAPER_BILINEAR
+from fresco_bridge.lawfit import calibrate_bilinear
+from fresco_bridge.study.constants import OFFLINE_SAMPLES
 from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating.base import Updater
 from fresco_bridge.updating.cli import parse_option
-from fresco_bridge.updating.registry import make_updater
+from fresco_bridge.updating.registry import PAPER_BILINEAR, make_updater
 from fresco_bridge.updating.replay import replay
 from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import make_model

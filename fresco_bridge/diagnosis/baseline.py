@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from fresco_bridge.lawfit import multi_start
+
 from .fit import Fit, fit_spec, predict
 from .model import Context, Spec, make_spec
 from .names import AUTO_FAMILIES
@@ -65,9 +67,9 @@ def fit_baseline(kind: str, cal: Context, given: Mapping[str, float],
     starts = [dict(given)]
     if not fixed:
         starts += [{**given, **extra} for extra in RESTARTS.get(kind, ())]
-    best = min((fit_spec(spec, cal, start, max_evaluations=SCOUT_EVALUATIONS)
-                for start in starts), key=lambda fit: fit.cost)
-    return spec, fit_spec(spec, cal, best.values, max_evaluations=60)
+    return spec, multi_start(lambda start, n: fit_spec(spec, cal, start, max_evaluations=n),
+                             starts, cost=lambda fit: fit.cost, resume=lambda fit: fit.values,
+                             scout=SCOUT_EVALUATIONS, final=60)
 
 
 def choose_baseline(cal: Context, families: Sequence[str] = AUTO_FAMILIES) -> Baseline:

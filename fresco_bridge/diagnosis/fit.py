@@ -5,12 +5,13 @@ prediction of the first samples needs nothing after them, and the withheld sampl
 the residual. Residuals are the two channels, each normalised by its RMS (force by the measured
 force, displacement by the command), so a 1 % displacement error weighs like a 1 % force error.
 
-The Jacobian is a forward difference in which every column that changes the law is one member
-of a population driven in parallel (``sim_actuator.models.paths.drive_many``); columns of output
-effects (friction, viscosity, offsets) reuse the base drive. Parameter uncertainty is the
-Gauss-Newton covariance ``s² (JᵀJ)⁻¹`` inflated by (1 + ρ)/(1 − ρ) for the lag-1
-autocorrelation ρ of the residual (correlated residuals carry less information than their
-count says).
+The solver is ``lawfit.bounded_least_squares``; the residual, the Jacobian and the uncertainty
+are the diagnosis' own. The Jacobian is a forward difference in which every column that changes
+the law is one member of a population driven in parallel (``drive_many`` of
+``sim_actuator.models.paths``); columns of output effects (friction, viscosity, offsets) reuse
+the base drive. Parameter uncertainty is the Gauss-Newton covariance ``s² (JᵀJ)⁻¹`` inflated by
+(1 + ρ)/(1 − ρ) for the lag-1 autocorrelation ρ of the residual (correlated residuals carry less
+information than their count says).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.lawfit import bounded_least_squares
 from sim_actuator.models.paths import drive_many
 
 from .model import DZ_MAX, Context, Param, Spec, _law_vector, finish, law_force, piston_path
@@ -135,13 +137,11 @@ def autocorrelation(r: FloatArray) -> float:
 def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None, *,
              max_evaluations: int = 60, tolerance: float = 1e-6) -> Fit:
     """Fit ``spec`` to the whole of ``ctx`` (give it the calibration part only)."""
-    from scipy.optimize import least_squares  # type: ignore[import-untyped]
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     problem = _Problem(spec, ctx)
     start = dict(start or {})
     x0 = np.array([start.get(p.name, p.init) for p in problem.free], dtype=np.float64)
-    x0 = np.clip(x0, problem.lo, problem.hi)
     if not problem.free:
         r = problem.fun(x0)
         return Fit(spec, problem.values(x0), {}, float(np.mean(r * r)), problem.evaluations,
@@ -149,17 +149,14 @@ def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None,
     # One BLAS thread: the SVD of a tall Jacobian took 18 ms with two threads on a loaded
     # 2-core machine and 2 ms with one (measured); records run in parallel processes instead.
     with threadpool_limits(1):
-        result = least_squares(problem.fun, x0, jac=problem.jac,
-                               bounds=(problem.lo, problem.hi), method="trf", x_scale="jac",
-                               max_nfev=max_evaluations, ftol=tolerance, xtol=tolerance,
-                               gtol=1e-8)
-    x = np.asarray(result.x, dtype=np.float64)
-    r = np.asarray(result.fun, dtype=np.float64)
-    jac = np.asarray(result.jac, dtype=np.float64)
+        result = bounded_least_squares(problem.fun, x0, problem.lo, problem.hi, scale="jac",
+                                       max_nfev=max_evaluations, jac=problem.jac,
+                                       tolerance=tolerance)  # fmt: skip
+    x, r, jac = result.x, result.residual, result.jacobian
     dof = max(r.size - x.size, 1)
     rho = min(max(autocorrelation(r), 0.0), 0.99)
     s2 = float(np.dot(r, r)) / dof * (1.0 + rho) / (1.0 - rho)
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     std = {p.name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, p in enumerate(problem.free)}
     return Fit(spec, problem.values(x), std, float(np.mean(r * r)), problem.evaluations,
-               bool(result.success), str(result.message))
+               result.success, result.message)

@@ -25,12 +25,12 @@ import numpy as np
 
 from fresco_bridge import indicators
 from fresco_bridge.integrator import GroundMotion
-from fresco_bridge.study.calibrate import calibrate_bilinear
-from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES, PAPER_BILINEAR
+from fresco_bridge.lawfit import calibrate_bilinear
+from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES
 from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_model
 from fresco_bridge.sweeps import run_sweep
 from fresco_bridge.updating.base import Updater
-from fresco_bridge.updating.registry import UPDATERS, make_updater
+from fresco_bridge.updating.registry import PAPER_BILINEAR, UPDATERS, make_updater
 from fresco_bridge.updating.updaters import FixedModelUpdater, online_lm_options
 from sim_actuator.models import make_model
 

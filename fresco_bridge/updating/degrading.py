@@ -32,8 +32,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.lawfit import FitSpace, LawFamily
 from fresco_bridge.updating.physics import data_scales
-from fresco_bridge.updating.refit import FitSpace, LawFamily, RefitUpdater
+from fresco_bridge.updating.refit import RefitUpdater
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.paths import LAW_BWBN, bwbn_vector, drive
 from sim_actuator.models.stepped import SteppedBaberNoori

@@ -9,16 +9,14 @@ parameters, n free) has no degradation and no pinching, so neither study specime
 BWBN with energy-driven degradation and pinching, Menegotto-Pinto with isotropic hardening and
 excursion-dependent curvature) lies in its family, nor in the family of law plus basis.
 
-The fit: least squares (scipy ``least_squares``, trust region, bounded) of the Bouc-Wen force
-along the offline displacement history, every second sample, from a start taken from the data
-(k_init of the first loading, the peak force, n = 2, beta = gamma = 0.5). The law's parameters
-stay fixed online; only the residual basis learns (the fit costs seconds, an online step does
-not), and its ridge pulls it towards zero, so the expert falls back on the law where recent
-data do not support a residual. Its law evaluations run through the JIT drive of
-``sim_actuator.models.paths`` (``LAW_BOUC_WEN``: the object's algorithm, bit for bit; stepping
-the object cost ~3 s of every ``online_improved`` build, the kernel leaves ~1.2 s for the whole
-build, BENCHMARKS.md updating part 11), and the online law steps through the same kernel
-(``stepped``: the same bits).
+The fit: ``lawfit.fit_law`` of the Bouc-Wen force along the offline displacement history,
+every second sample, from a start taken from the data (k_init of the first loading, the peak
+force, n = 2, beta = gamma = 0.5). The law's parameters stay fixed online; only the residual
+basis learns (the fit costs seconds, an online step does not), and its ridge pulls it towards
+zero, so the expert falls back on the law where recent data do not support a residual. Fit and
+online law run the JIT drive of ``sim_actuator.models.paths`` (``LAW_BOUC_WEN``, ``stepped``:
+the object's algorithm, bit for bit, at a fraction of the cost of stepping the object;
+BENCHMARKS.md, "Online updating").
 """
 
 from __future__ import annotations
@@ -30,9 +28,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.lawfit import FitSpace, LawFamily, fit_law, law_forces
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BasisTwin, BranchRls, initial_stiffness
-from fresco_bridge.updating.refit import FitSpace, LawFamily, fit_law, law_forces
 from sim_actuator.models.base import HysteresisModel
 from sim_actuator.models.bouc_wen import BoucWen
 from sim_actuator.models.paths import LAW_BOUC_WEN, bouc_wen_vector, drive
@@ -95,7 +93,7 @@ def _bouc_wen_space(disp: FloatArray, force: FloatArray) -> FitSpace:
 BOUC_WEN = LawFamily("bouc-wen", _PARAMS,
                      lambda p: BoucWen(**p, dz_max=BOUC_WEN_DZ_MAX), _bouc_wen_space,
                      forces=_jit_forces)
-"""The classic Bouc-Wen law, all six parameters free (``refit.LawFamily``)."""
+"""The classic Bouc-Wen law, all six parameters free (``lawfit.LawFamily``)."""
 
 
 def fit_bouc_wen(disp: FloatArray, force: FloatArray) -> dict[str, float]:

@@ -1,20 +1,16 @@
 """A hysteresis law identified online: periodic warm-started bounded least squares on the tested
 element's whole measured history, the twin running the same law with the latest parameters on
-its own history (issue 9: a law with a real internal state generalises across histories where
-its family is right, which weights of a basis on the recent past do not).
+its own history. Why: a law with a real internal state generalises across histories where its
+family is right, which weights of a basis on the recent past do not.
 
-The law is a parameter (:class:`LawFamily`): a builder of a virgin ``HysteresisModel`` from
-named parameters (any law of ``sim_actuator.models``), the names that are free and how to start
-and bound them from data. Everything else is generic:
+The law is a ``lawfit.LawFamily`` (any law of ``sim_actuator.models`` with named free
+parameters) and the fit is ``lawfit.fit_law``; this module adds what an online refit needs:
 
-* :func:`law_forces`: the law's force along a displacement history from the virgin state;
 * :func:`compress`: the samples a rate-independent law needs to reproduce a history's states —
   every ``stride``-th sample plus every reversal (local extremum of d) and the last sample. A
   law whose step is exact along a monotonic segment (closed-form return mapping) gives the same
   state from the compressed history as from the whole; one integrated in sub-steps of bounded
   size (Bouc-Wen's RK4) nearly so;
-* :func:`fit_law`: scipy ``least_squares`` (trust region, bounded, ``x_scale`` from the family)
-  of the law's force on one or several histories, each from the virgin state, each weighted;
 * :class:`RefitUpdater`: the Updater. ``observe`` steps the tested element's law (for
   ``predict``) and keeps the history; every ``every`` steps it refits, warm-started from the
   current parameters, ``max_nfev`` evaluations, on the compressed history so far (plus the
@@ -36,67 +32,20 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.lawfit import LawFamily, fit_law, law_forces
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import offline_data
-from sim_actuator.models.base import (
-    HysteresisModel,
-    ModelInputError,
-    ModelParameterError,
-    trial_input_error,
-)
+from sim_actuator.models.base import HysteresisModel, trial_input_error
 
-__all__ = ["FitSpace", "LawFamily", "MeasuredHistory", "RefitUpdater", "compress", "fit_law",
-           "law_forces"]
+__all__ = ["MeasuredHistory", "RefitUpdater", "compress"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
-
-
-@dataclass(frozen=True)
-class FitSpace:
-    """Start, bounds and scale of the free parameters (in ``LawFamily.free`` order)."""
-
-    start: tuple[float, ...]
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
-    scale: tuple[float, ...]
-    """Typical magnitude of each parameter (``least_squares``'s ``x_scale``)."""
-
-
-@dataclass(frozen=True)
-class LawFamily:
-    """A law with named free parameters: ``build(params)`` a virgin model from the free
-    parameters by name (the fixed ones closed over), ``space(disp, force)`` where to start and
-    the bounds, from a measured (d, F) history."""
-
-    name: str
-    free: tuple[str, ...]
-    build: Callable[[Mapping[str, float]], HysteresisModel]
-    space: Callable[[FloatArray, FloatArray], FitSpace]
-    forces: Callable[[Mapping[str, float], FloatArray], FloatArray] | None = None
-    """Optional fast form of ``law_forces(build(params), disp)`` for the fit (e.g. a JIT drive
-    of ``sim_actuator.models.paths``, the same algorithm); NaN where the law refuses."""
-
-    def params(self, x: Sequence[float] | FloatArray) -> dict[str, float]:
-        """The free parameters by name."""
-        return dict(zip(self.free, (float(v) for v in x), strict=True))
-
-
-def law_forces(model: HysteresisModel, disp: FloatArray) -> FloatArray:
-    """Force of ``model`` (moved along ``disp`` and committed step by step) at every sample."""
-    out = np.empty(disp.size)
-    trial, commit = model.set_trial, model.commit
-    for i, d in enumerate(disp.tolist()):
-        out[i] = trial(d)[0]
-        commit()
-    return out
 
 
 def compress(disp: FloatArray, stride: int) -> IntArray:
@@ -117,39 +66,6 @@ def compress(disp: FloatArray, stride: int) -> IntArray:
                                          0)]  # fmt: skip
             keep[1:-1] |= filled[1:] != filled[:-1]
     return np.flatnonzero(keep)
-
-
-def fit_law(family: LawFamily, histories: Sequence[tuple[FloatArray, FloatArray, float]],
-            space: FitSpace, start: Sequence[float] | FloatArray | None = None, max_nfev: int = 20,
-            penalty: float | None = None) -> FloatArray:
-    """Free parameters minimising sum over ``histories`` (disp, force, weight), each run from the
-    virgin state, of weight × squared force error; warm start ``start`` (``space.start`` when
-    None), clipped into the bounds. A parameter set the law rejects scores ``penalty`` at every
-    sample (default: 10 × the peak |force|)."""
-    from scipy.optimize import least_squares  # type: ignore[import-untyped]
-
-    lower, upper = np.array(space.lower), np.array(space.upper)
-    x0 = np.clip(np.array(space.start if start is None else start, dtype=np.float64),
-                 lower, upper)  # fmt: skip
-    roots = [np.sqrt(w) for _, _, w in histories]
-    size = sum(d.size for d, _, _ in histories)
-    peak = max((float(np.max(np.abs(f))) for _, f, _ in histories if f.size), default=1.0)
-    bad = np.full(size, 10.0 * peak if penalty is None else penalty)
-
-    def residual(x: FloatArray) -> FloatArray:
-        try:
-            params = family.params(x)
-            parts = [r * ((family.forces(params, d) if family.forces is not None
-                           else law_forces(family.build(params), d)) - f)
-                     for (d, f, _), r in zip(histories, roots, strict=True)]  # fmt: skip
-        except (ModelInputError, ModelParameterError):
-            return bad
-        out = np.concatenate(parts) if parts else np.zeros(0)
-        return out if np.all(np.isfinite(out)) else bad
-
-    fit: Any = least_squares(residual, x0, bounds=(lower, upper), max_nfev=max_nfev,
-                             x_scale=np.array(space.scale))  # fmt: skip
-    return np.asarray(fit.x, dtype=np.float64)
 
 
 class MeasuredHistory:

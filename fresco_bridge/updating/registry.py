@@ -14,11 +14,11 @@ import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy.typing as npt
 
-from fresco_bridge.study.constants import PAPER_BILINEAR
+from fresco_bridge.lawfit import calibrate_bilinear
 from sim_actuator.models import HysteresisModel, ModelParameterError, make_model
 
 from .base import Updater, UpdaterError
@@ -36,6 +36,9 @@ __all__ = [
     "updater_options",
 ]
 
+PAPER_BILINEAR: Final[dict[str, float]] = {"k0": 68.0, "fy": 35.0, "alpha": 0.008}
+"""The source paper's assumed Bilinear (Table 1: k0 68000 N/mm, Fy 35000 N, alpha 0.008) in kN
+and mm: the law of ``none`` and the start of ``online_ukf`` when no offline data are given."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,9 +146,8 @@ def make_none(*, model: str | HysteresisModel = "bilinear",
 
 def calibrated_bilinear(name: str, offline: tuple[npt.ArrayLike, npt.ArrayLike]
                         ) -> dict[str, float]:
-    """The Bilinear (k0, fy, alpha) fitted to an offline (d, F) history (``study.calibrate``)."""
-    from fresco_bridge.study.calibrate import calibrate_bilinear
-
+    """The Bilinear (k0, fy, alpha) fitted to an offline (d, F) history
+    (``lawfit.calibrate_bilinear``), its errors as UpdaterError naming updater ``name``."""
     try:
         return calibrate_bilinear(offline[0], offline[1])
     except ValueError as exc:

@@ -194,7 +194,7 @@ def test_replay_none_with_offline_is_the_calibrated_bilinear(
     files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``--updater none --offline`` is the baseline a lab compares an updater with."""
-    from fresco_bridge.study.calibrate import calibrate_bilinear
+    from fresco_bridge.lawfit import calibrate_bilinear
     from sim_actuator.models import make_model
 
     out = tmp_path / "cal.csv"

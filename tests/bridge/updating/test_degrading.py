@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
+from fresco_bridge.lawfit import fit_law, law_forces
 from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
 from fresco_bridge.updating.degrading import BABER_WEN, baber_wen_refit
 from fresco_bridge.updating.improved import OnlineImproved
-from fresco_bridge.updating.refit import fit_law, law_forces
 from tests.support.histories import ramped_sines as path
 from tests.support.material import assert_material_semantics
 

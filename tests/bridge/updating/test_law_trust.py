@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fresco_bridge.lawfit import law_forces
 from fresco_bridge.updating.base import UpdaterError
 from fresco_bridge.updating.degrading import BABER_WEN
 from fresco_bridge.updating.improved import LAW_TRUST, OnlineImproved
-from fresco_bridge.updating.refit import RefitUpdater, compress, law_forces
+from fresco_bridge.updating.refit import RefitUpdater, compress
 from sim_actuator.models import make_model
 from tests.support.histories import ramped_sines as path
 from tests.support.material import assert_material_semantics

@@ -10,15 +10,9 @@ from collections.abc import Mapping
 import numpy as np
 import pytest
 
+from fresco_bridge.lawfit import FitSpace, LawFamily, fit_law, law_forces
 from fresco_bridge.updating.base import Updater, UpdaterError, UpdaterInputError
-from fresco_bridge.updating.refit import (
-    FitSpace,
-    LawFamily,
-    RefitUpdater,
-    compress,
-    fit_law,
-    law_forces,
-)
+from fresco_bridge.updating.refit import RefitUpdater, compress
 from sim_actuator.models import Bilinear, HysteresisModel
 from tests.support.histories import ramped_sines
 from tests.support.material import assert_material_semantics

@@ -132,7 +132,7 @@ def test_none_is_the_paper_bilinear_or_any_law() -> None:
 
 def test_none_and_online_ukf_start_from_the_bilinear_calibrated_to_offline() -> None:
     """``offline`` gives the study's conventional_calibrated twin and the UKF's start values."""
-    from fresco_bridge.study.calibrate import calibrate_bilinear
+    from fresco_bridge.lawfit import calibrate_bilinear
 
     d = disp_history(600, seed=31, amp=8.0)
     f = force_history(d)
