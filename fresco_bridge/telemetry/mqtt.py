@@ -21,6 +21,7 @@ import contextlib
 import hmac
 import json
 import logging
+import math
 import ssl
 import time
 from collections import deque
@@ -67,6 +68,8 @@ _paho_log = logging.getLogger("fresco_bridge.telemetry.paho")  # per-packet chat
 MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
 BRIDGE_TOPIC = "_bridge/status"
+_LINGER = 0.02  # s the drain waits after waking, so a fast run's steps go out in bursts
+_BURST = 10  # publishes started together at most (aiomqtt warns past 10 pending)
 
 
 def _reraise_lost_cancel() -> None:
@@ -152,6 +155,7 @@ class MqttTelemetry:
         self._capacity = queue_size
         self._event_capacity = min(queue_size, 1024)
         self._steps: deque[StepSample] = deque()
+        self._sending = 0  # messages of the burst being published
         self._events: deque[SiteEvent] = deque()
         self._pending_status: dict[str, SiteStatus] = {}
         self._last_status: dict[str, SiteStatus] = {}
@@ -264,7 +268,8 @@ class MqttTelemetry:
         return TelemetryStats(
             published=self._published, dropped=self._dropped, reconnects=self._reconnects,
             connected=self._connected,
-            queued=len(self._steps) + len(self._events) + len(self._pending_status),
+            queued=len(self._steps) + len(self._events) + len(self._pending_status)
+            + self._sending,
             failures=self._failures,
             commands_accepted=self._accepted, commands_rejected=self._rejected,
         )
@@ -392,29 +397,48 @@ class MqttTelemetry:
         return json.dumps({"v": SCHEMA_VERSION, "online": online}, separators=(",", ":")).encode()
 
     async def _drain(self, client: aiomqtt.Client) -> None:
-        """Publish what is queued, in priority order, one awaited ``publish`` per message.
+        """Publish what is queued, in priority order, a burst of publishes at a time.
 
-        Each ``publish`` returns once paho has written the message (QoS 0) or the broker has
-        acknowledged it (QoS 1, 2), so ``published`` counts exactly what left, and every
-        message is an event-loop turn: a long backlog cannot starve the loop.
+        aiomqtt's one way to publish is an awaited ``publish`` per message (paho then writes
+        each with its own ``send``; nothing public writes several at once). Awaited one by
+        one, each message also costs its own loop turns and writer registration; a burst's
+        publishes run together instead, started in queue order, so paho writes them in that
+        order. The cost per step: BENCHMARKS.md, "Telemetry".
         """
         while True:
-            item = self._next_message()
-            if item is None:
+            burst = self._next_burst()
+            if not burst:
                 if self._stopping:
                     return
                 self._report_drops()
                 self._wake.clear()
                 await self._wake.wait()  # idle: nothing to publish, no peer involved
+                await asyncio.sleep(_LINGER)
                 continue
-            topic, payload, retain = item
+            self._sending = len(burst)
             try:
-                await client.publish(topic, payload, qos=self.qos, retain=retain,
-                                     timeout=self._timeout)
+                async with asyncio.timeout(self._timeout):  # one deadline for the burst
+                    results = await asyncio.gather(
+                        *(client.publish(topic, payload, qos=self.qos, retain=retain,
+                                         timeout=math.inf) for topic, payload, retain in burst),
+                        return_exceptions=True)
             except BaseException:
-                self._dropped += 1  # taken off the queue but not confirmed sent
+                self._dropped += len(burst)  # taken off the queue but not confirmed sent
                 raise
-            self._published += 1
+            finally:
+                self._sending = 0
+            failed = [r for r in results if isinstance(r, BaseException)]
+            self._published += len(burst) - len(failed)
+            self._dropped += len(failed)
+            if failed:
+                raise failed[0]
+
+    def _next_burst(self) -> list[tuple[str, bytes, bool]]:
+        """Up to ``_BURST`` messages off the queues, in priority order."""
+        burst: list[tuple[str, bytes, bool]] = []
+        while len(burst) < _BURST and (item := self._next_message()) is not None:
+            burst.append(item)
+        return burst
 
     def _next_message(self) -> tuple[str, bytes, bool] | None:
         """The next (topic, payload, retain) in priority order; bad records are logged, dropped."""
