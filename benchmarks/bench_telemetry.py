@@ -176,8 +176,9 @@ def isolated_cost(rounds: int, n: int = 20000) -> str:
         null, mqtt = [], []
         for _ in range(rounds):
             null.append(await _tap_cost(NullTelemetry(), n))
-            mqtt.append(await _tap_cost(MqttTelemetry(
-                host=BROKER[0], port=BROKER[1], prefix=f"fb-bench-{os.getpid()}"), n))
+            mqtt.append(await _tap_cost(MqttTelemetry(  # a queue for all: the cost, not drops
+                host=BROKER[0], port=BROKER[1], prefix=f"fb-bench-{os.getpid()}",
+                queue_size=n), n))
         return null, mqtt
 
     null, mqtt = asyncio.run(all_rounds())

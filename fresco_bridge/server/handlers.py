@@ -1,10 +1,10 @@
 """Protocol handlers: turn protocol events into site calls and replies.
 
-One handler per connection. ``dispatch`` sends the step's events (trial, force/daq, tangent,
-commit) to the site's ``*_eager`` requests, so with an in-process controller a request is
-answered inside ``data_received`` without a coroutine; what must wait comes back as a coroutine
-the connection finishes in a task. Every other event goes to ``handle``, a ``match`` over the
-protocol's typed event union (the h11-consumer style), driven eagerly the same way.
+One handler per connection, one method, ``dispatch``, for every event of its protocol. A request
+goes to the site's ``*_eager`` method, so with an in-process controller it is answered inside
+``data_received`` without a coroutine; what must wait comes back as a coroutine the connection
+finishes in a task. Session events (sizes, DIE, EOF, ignored codes) need no site I/O and are
+handled at once.
 """
 
 from __future__ import annotations
@@ -63,9 +63,8 @@ class ElementHandler:
         matrix several times per step): no controller call, no coroutine."""
 
     def dispatch(self, ev: ElementServerEvent) -> Coroutine[Any, Any, None] | None:
-        """Handle ``ev``: at once when it can be (None: done, replies sent), else the coroutine
-        that finishes it. The step's requests go to the site's ``*_eager`` methods, so with an
-        in-process controller a step runs without one coroutine; the rest goes to ``handle``."""
+        """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it.
+        The step's events come first, tested by exact type: they are 14 messages of 14."""
         if type(ev) is ReplyRequested:  # 10 of the 14 messages of an OpenSees step
             action = ev.action
             matrix = self._constant.get(action)
@@ -85,11 +84,14 @@ class ElementHandler:
                     return self._send_daq_later(out)
                 self.send(self.session.send_daq(out))
                 return None
-        elif type(ev) is TrialReceived:
+            # the one reply action left (the protocol's are 6..15): 12, the initial stiffness
+            return self._send_matrix_later(self.site.initial())
+        if type(ev) is TrialReceived:
             return self.site.set_trial_eager(ev.trial)
-        elif type(ev) is CommitReceived:
+        if type(ev) is CommitReceived:
             return self.site.commit_eager()
-        return self.handle(ev)
+        self._session_event(ev)
+        return None
 
     async def _send_matrix_later(self, k: Coroutine[Any, Any, tuple[float, ...]]) -> None:
         self.send(self.session.send_matrix(await k))
@@ -97,15 +99,9 @@ class ElementHandler:
     async def _send_daq_later(self, out: Coroutine[Any, Any, Signals]) -> None:
         self.send(self.session.send_daq(await out))
 
-    async def handle(self, ev: ElementServerEvent) -> None:
+    def _session_event(self, ev: ElementServerEvent) -> None:
         site = self.site
         match ev:
-            case TrialReceived(trial=trial):
-                await site.set_trial(trial)
-            case ReplyRequested(action=action):
-                await self._reply(action)
-            case CommitReceived():
-                await site.commit()
             case SizeReceived(size_id=sid):
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
                 site.open_session(self.peer)
@@ -126,21 +122,6 @@ class ElementHandler:
                 log.info("site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
                          site.name, code, self.peer)
 
-    async def _reply(self, action: Action) -> None:
-        site, session = self.site, self.session
-        if action is Action.GET_TANGENT_STIFF:
-            self.send(session.send_matrix(await site.tangent()))
-        elif action is Action.GET_DAMP:
-            self.send(session.send_matrix(site.damping))
-        elif action is Action.GET_INITIAL_STIFF:
-            self.send(session.send_matrix(await site.initial()))
-        elif action is Action.GET_MASS:
-            self.send(session.send_matrix(site.mass))
-        else:  # 6..11: measured signals
-            sid = session.size_id
-            assert sid is not None
-            self.send(session.send_daq(await site.out_signals(sid.daq)))
-
 
 class ActorHandler:
     """The site-level protocol: we play OpenFresco's ActorExpSite for a ShadowExpSite client."""
@@ -153,20 +134,20 @@ class ActorHandler:
         self.size_out: SignalSizes | None = None
         self.introduced = False
 
-    def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None]:
-        """The coroutine handling ``ev`` (driven eagerly by the connection)."""
-        return self.handle(ev)
-
-    async def handle(self, ev: ActorEvent) -> None:
+    def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None] | None:
+        """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it."""
         site, session = self.site, self.session
         match ev:
             case TrialReceived(trial=trial):
-                await site.set_trial(trial)
+                return site.set_trial_eager(trial)
             case DaqRequested():
                 assert self.size_out is not None
-                self.send(session.send_daq(await site.out_signals(self.size_out)))
+                out = site.out_signals_eager(self.size_out)
+                if not isinstance(out, Signals):
+                    return self._send_daq_later(out)
+                self.send(session.send_daq(out))
             case CommitReceived():
-                await site.commit()
+                return site.commit_eager()
             case ProbeReceived():
                 self.send(session.send_probe_reply())
             case OpenReceived(shadow_tag=shadow_tag, version=version):
@@ -189,3 +170,7 @@ class ActorHandler:
                 raise SiteError(f"shadow site {self.peer} closed the connection mid-message")
             case Ignored(code=code):
                 log.info("site %s: ignoring action code %r from %s", site.name, code, self.peer)
+        return None
+
+    async def _send_daq_later(self, out: Coroutine[Any, Any, Signals]) -> None:
+        self.send(self.session.send_daq(await out))

@@ -21,6 +21,7 @@ import contextlib
 import hmac
 import json
 import logging
+import math
 import ssl
 import time
 from collections import deque
@@ -28,7 +29,6 @@ from collections.abc import AsyncIterator
 from typing import Any, cast
 
 import aiomqtt
-from paho.mqtt.client import MQTTMessageInfo
 
 from fresco_bridge.backoff import Backoff
 from fresco_bridge.telemetry.base import (
@@ -41,7 +41,6 @@ from fresco_bridge.telemetry.base import (
     TelemetryConfigError,
     TelemetryStats,
 )
-from fresco_bridge.telemetry.mqtt_batch import Qos0Batch, hand_to_paho
 from fresco_bridge.telemetry.schema import (
     SCHEMA_VERSION,
     SiteEvent,
@@ -69,9 +68,8 @@ _paho_log = logging.getLogger("fresco_bridge.telemetry.paho")  # per-packet chat
 MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
 BRIDGE_TOPIC = "_bridge/status"
-_YIELD_EVERY = 32  # publishes between forced yields, so a long backlog cannot starve the loop
-_LINGER = 0.02  # s the drain waits after waking, so fast steps go out in batches
-_BATCH_BYTES = 65536  # a batch is handed to paho at this size, or when the queue is empty
+_LINGER = 0.02  # s the drain waits after waking, so a fast run's steps go out in bursts
+_BURST = 10  # publishes started together at most (aiomqtt warns past 10 pending)
 
 
 def _reraise_lost_cancel() -> None:
@@ -85,18 +83,6 @@ def _reraise_lost_cancel() -> None:
     task = asyncio.current_task()
     if task is not None and task.cancelling():
         raise asyncio.CancelledError
-
-
-def _force_close(client: aiomqtt.Client) -> None:
-    """Close a client's socket and settle its futures (aiomqtt has no public abort)."""
-    with contextlib.suppress(Exception):
-        client._client._sock_close()  # paho 2.x; removes the loop reader
-    with contextlib.suppress(Exception):
-        if not client._disconnected.done():
-            client._disconnected.set_result(None)
-    with contextlib.suppress(Exception):
-        if client._lock.locked():
-            client._lock.release()
 
 
 class _RateLimitedLog:
@@ -169,9 +155,7 @@ class MqttTelemetry:
         self._capacity = queue_size
         self._event_capacity = min(queue_size, 1024)
         self._steps: deque[StepSample] = deque()
-        self._in_flight: deque[tuple[MQTTMessageInfo, int]] = deque()  # QoS-0 batches unsent
-        self._in_flight_messages = 0
-        self._batch = Qos0Batch()  # encoded by the drain, not yet handed to paho
+        self._sending = 0  # messages of the burst being published
         self._events: deque[SiteEvent] = deque()
         self._pending_status: dict[str, SiteStatus] = {}
         self._last_status: dict[str, SiteStatus] = {}
@@ -285,7 +269,7 @@ class MqttTelemetry:
             published=self._published, dropped=self._dropped, reconnects=self._reconnects,
             connected=self._connected,
             queued=len(self._steps) + len(self._events) + len(self._pending_status)
-            + self._in_flight_messages + self._batch.count,
+            + self._sending,
             failures=self._failures,
             commands_accepted=self._accepted, commands_rejected=self._rejected,
         )
@@ -326,7 +310,6 @@ class MqttTelemetry:
                 reason = f"{type(exc).__name__}: {exc}"
             finally:
                 self._connected = False
-                self._settle(lost=True)
             self._failures += 1
             attempt += 1
             delay = self._backoff.failed()
@@ -339,11 +322,12 @@ class MqttTelemetry:
 
     @contextlib.asynccontextmanager
     async def _connection(self) -> AsyncIterator[aiomqtt.Client]:
-        """``async with aiomqtt.Client`` whose exit has a deadline too.
+        """``async with aiomqtt.Client`` whose exit has a deadline of its own.
 
-        aiomqtt 2.5's ``__aexit__`` waits for the broker's DISCONNECT acknowledgement with no
-        timeout; a lost packet hung ``run()`` forever (seen in CI after a cancel). Past the
-        deadline the socket is closed by force, which is what the broker sees on a crash.
+        A disconnect that never completes once hung ``run()`` (seen in CI after a cancel), so
+        the exit is bounded here whatever aiomqtt does. Past the deadline the connection is
+        left to paho, which closes a socket silent for ``keepalive`` seconds: aiomqtt has no
+        public abort, and reaching into either library's internals breaks silently on upgrade.
         """
         client = self._client()
         await client.__aenter__()
@@ -358,9 +342,8 @@ class MqttTelemetry:
                 async with asyncio.timeout(self._timeout):
                     await client.__aexit__(*exc_info)
             except TimeoutError:
-                log.warning("telemetry: MQTT disconnect not acknowledged in %.1f s; socket closed",
-                            self._timeout)
-                _force_close(client)
+                log.warning("telemetry: MQTT disconnect not completed in %.1f s; the socket "
+                            "closes at paho's keepalive (%d s)", self._timeout, self._keepalive)
             except (aiomqtt.MqttError, OSError):
                 pass  # the connection was already lost; the error that lost it is raised above
 
@@ -414,80 +397,48 @@ class MqttTelemetry:
         return json.dumps({"v": SCHEMA_VERSION, "online": online}, separators=(",", ":")).encode()
 
     async def _drain(self, client: aiomqtt.Client) -> None:
-        since_yield = 0
-        batch = self._batch = Qos0Batch()
-        try:
-            while True:
-                self._settle()
-                item = self._next_message()
-                if item is None:
-                    self._send_batch(client, batch)
-                    if self._stopping:
-                        await self._flush_in_flight()
-                        return
-                    if self._in_flight:  # paho writes them within a loop turn: settle then
-                        await asyncio.sleep(_LINGER)
-                        continue
-                    self._report_drops()
-                    self._wake.clear()
-                    await self._wake.wait()  # idle: nothing to publish, no peer involved
-                    await asyncio.sleep(_LINGER)  # let a burst of steps gather into one write
-                    continue
-                topic, payload, retain = item
-                if self.qos == 0 and not retain:
-                    batch.add(topic, payload)
-                else:
-                    self._send_batch(client, batch)  # keep the order across topics
-                    try:
-                        await client.publish(topic, payload, qos=self.qos, retain=retain,
-                                             timeout=self._timeout)
-                    except BaseException:
-                        self._dropped += 1  # taken off the queue but not confirmed sent
-                        raise
-                    self._published += 1
-                since_yield += 1
-                if since_yield >= _YIELD_EVERY:
-                    since_yield = 0
-                    if len(batch.buf) >= _BATCH_BYTES:
-                        self._send_batch(client, batch)
-                    await asyncio.sleep(0)
-        finally:
-            self._dropped += batch.count  # encoded but never handed to paho
-            batch.take()
+        """Publish what is queued, in priority order, a burst of publishes at a time.
 
-    def _send_batch(self, client: aiomqtt.Client, batch: Qos0Batch) -> None:
-        """Hand the gathered QoS-0 steps/events to paho as one write (see ``mqtt_batch``)."""
-        if not batch.count:
-            return
-        data, n = batch.take()
-        try:
-            info = hand_to_paho(client._client, data)
-        except aiomqtt.MqttCodeError:
-            self._dropped += n
-            raise
-        self._in_flight.append((info, n))
-        self._in_flight_messages += n
+        aiomqtt's one way to publish is an awaited ``publish`` per message (paho then writes
+        each with its own ``send``; nothing public writes several at once). Awaited one by
+        one, each message also costs its own loop turns and writer registration; a burst's
+        publishes run together instead, started in queue order, so paho writes them in that
+        order. The cost per step: BENCHMARKS.md, "Telemetry".
+        """
+        while True:
+            burst = self._next_burst()
+            if not burst:
+                if self._stopping:
+                    return
+                self._report_drops()
+                self._wake.clear()
+                await self._wake.wait()  # idle: nothing to publish, no peer involved
+                await asyncio.sleep(_LINGER)
+                continue
+            self._sending = len(burst)
+            try:
+                async with asyncio.timeout(self._timeout):  # one deadline for the burst
+                    results = await asyncio.gather(
+                        *(client.publish(topic, payload, qos=self.qos, retain=retain,
+                                         timeout=math.inf) for topic, payload, retain in burst),
+                        return_exceptions=True)
+            except BaseException:
+                self._dropped += len(burst)  # taken off the queue but not confirmed sent
+                raise
+            finally:
+                self._sending = 0
+            failed = [r for r in results if isinstance(r, BaseException)]
+            self._published += len(burst) - len(failed)
+            self._dropped += len(failed)
+            if failed:
+                raise failed[0]
 
-    def _settle(self, *, lost: bool = False) -> None:
-        """Count QoS-0 batches paho has written as published; with ``lost``, the rest as
-        dropped (the connection ended with them still in paho's buffer)."""
-        flight = self._in_flight
-        while flight and flight[0][0].is_published():
-            _, n = flight.popleft()
-            self._published += n
-            self._in_flight_messages -= n
-        if lost and flight:
-            self._dropped += self._in_flight_messages
-            self._in_flight_messages = 0
-            flight.clear()
-
-    async def _flush_in_flight(self) -> None:
-        """At stop: wait (bounded) until paho has written every queued QoS-0 message."""
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(self._timeout):
-                while self._in_flight:
-                    await asyncio.sleep(0.001)
-                    self._settle()
+    def _next_burst(self) -> list[tuple[str, bytes, bool]]:
+        """Up to ``_BURST`` messages off the queues, in priority order."""
+        burst: list[tuple[str, bytes, bool]] = []
+        while len(burst) < _BURST and (item := self._next_message()) is not None:
+            burst.append(item)
+        return burst
 
     def _next_message(self) -> tuple[str, bytes, bool] | None:
         """The next (topic, payload, retain) in priority order; bad records are logged, dropped."""

@@ -24,7 +24,7 @@ from tests.support.broker import HOST, OwnBroker, needs_mosquitto
 pytestmark = needs_mosquitto
 
 K = 10.0
-QUEUE = 500  # above what the 20 ms batching linger holds at full speed
+QUEUE = 500  # above what the drain holds back at full speed
 OUTAGE_END = 1500
 STALL_S = 1.0
 
