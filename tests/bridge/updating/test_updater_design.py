@@ -59,28 +59,3 @@ def test_bad_runs_are_refused(seeds: tuple[int, ...] | None, families: tuple[str
     with pytest.raises(ValueError, match="families must be of kt, soft, pulse, softpulse"):
         design_runs(seeds=seeds, families=families)
 
-
-def test_the_schedule_factory_is_design_h_until_told_otherwise() -> None:
-    """``baber_wen_schedule_mixture`` without options predicts exactly as the registry's
-    ``online_improved``; a schedule option reaches the law, the others the mixture; the residual
-    factory's law + residual expert is the one law trust can pick."""
-    from benchmarks.refit_families import baber_wen_residual_mixture, baber_wen_schedule_mixture
-    from fresco_bridge.updating.registry import make_updater
-    from tests.support.histories import force_history, ramped_sines
-
-    d = ramped_sines(600, 6.0, 1)
-    f = force_history(d)
-    offline = (d[:400], f[:400])
-    default = make_updater("online_improved", offline=offline)
-    same = baber_wen_schedule_mixture(*offline)
-    for upd in (default, same):
-        for di, fi in zip(d[400:], f[400:], strict=True):
-            upd.observe(float(di), float(fi))
-    for probe in (0.0, 1.5, -2.0):
-        assert same.twin.set_trial(probe) == default.twin.set_trial(probe)
-    other = baber_wen_schedule_mixture(*offline, every=100, mixing=0.95)
-    assert other.experts[-1].every == 100 and other.mixing == 0.95  # type: ignore[attr-defined]
-    assert other.expert_names[-1] == "baber-wen"
-    residual = baber_wen_residual_mixture(*offline)
-    assert residual.expert_names[-1] == "baber-wen+memory"
-    assert residual._laws == [len(residual.experts) - 1]
