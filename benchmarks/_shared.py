@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -12,6 +13,7 @@ MEASURED = SHARED / "data" / "measured"
 def require_shared(path: Path, benchmark: str) -> Path:
     """``path``, or exit with a message naming what is missing (exit status 2)."""
     if not path.exists():
-        raise SystemExit(f"{benchmark}: needs {path} from ../shared (not found; the benchmark "
-                         "reads measured data that only ../shared holds)")
+        print(f"{benchmark}: needs {path} from ../shared (not found; the benchmark reads "
+              "measured data that only ../shared holds)", file=sys.stderr)
+        raise SystemExit(2)
     return path

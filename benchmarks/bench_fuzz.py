@@ -20,7 +20,7 @@ is counted as a crash, and so is a bridge thread that died.
 
     .venv/bin/python -m benchmarks.bench_fuzz [--quick] --inputs 100000 --seed 2026
 
-Feeds BENCHMARKS.md, "Fuzz and soak". ``--quick``: 500 inputs, a smoke run. Exit status 1 when
+Feeds BENCHMARKS.md, "Fuzz and soak". ``--quick``: 5000 inputs, a smoke run. Exit status 1 when
 a command escaped the limits, the bridge crashed or an invariant was violated.
 """
 
@@ -195,10 +195,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--record-every", type=int, default=2000,
                     help="actions between two parses of the whole record")
     ap.add_argument("--json", type=Path, default=None, help="also write the summary here")
-    ap.add_argument("--quick", action="store_true", help="500 inputs")
+    ap.add_argument("--quick", action="store_true", help="5000 inputs")
     args = ap.parse_args(argv)
     if args.quick:
-        args.inputs, args.record_every = min(args.inputs, 500), min(args.record_every, 250)
+        args.inputs, args.record_every = min(args.inputs, 5000), min(args.record_every, 1000)
     summary = run(args.inputs, args.seed, args.check_every, args.record_every)
     text = json.dumps(summary, indent=2)
     print(text)

@@ -27,7 +27,7 @@ from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating.improved import OnlineImproved
 from fresco_bridge.updating.updaters import FixedModelUpdater
 
-DESIGN_F: dict[str, Any] = {
+FIFTH_EXPERT_SHADOW: dict[str, Any] = {
     "experts": "reversal,reversal+memory,bouc-wen+memory,reversal+stops,reversal+memory+hinges",
     "shadow": True,
 }
@@ -74,11 +74,12 @@ def main(argv: list[str] | None = None) -> None:
     tested, force, twin = run.tested_drift, run.tested_force, run.twin_drift
     rows: dict[str, list[tuple[float, float]]] = {"online_improved": [], "bwbn step": []}
     if args.design_f:
-        rows["online_improved, design F"] = []
+        rows["online_improved, fifth expert + shadow"] = []
     for _ in range(args.rounds):
         for name in rows:
-            times = _specimen(tested) if name == "bwbn step" else _improved(
-                tested, force, twin, DESIGN_F if name.endswith("F") else {})  # fmt: skip
+            options = FIFTH_EXPERT_SHADOW if name.endswith("shadow") else {}
+            times = (_specimen(tested) if name == "bwbn step"
+                     else _improved(tested, force, twin, options))
             ms = np.asarray(times, dtype=np.float64) * 1e3
             rows[name].append((float(np.median(ms)), float(np.percentile(ms, 99))))
     print(f"{tested.size} steps, {args.rounds} rounds (min / median over rounds), ms per step")

@@ -83,6 +83,9 @@ def main(argv: list[str] | None = None) -> int:
             rc = importlib.import_module(module_name(name)).main(["--quick"] if args.quick else [])
         except SystemExit as exc:  # argparse and the CLI-driving benchmarks exit
             rc = exc.code
+            if isinstance(rc, str):  # SystemExit("message"): exit status 1, as Python's
+                print(rc, file=sys.stderr)
+                rc = 1
         except Exception:  # one broken benchmark must not hide the others
             traceback.print_exc()
             rc = 1
