@@ -12,7 +12,7 @@ the file (partial data gives no verdict).
 
     nice -n 10 .venv/bin/python -m benchmarks.ann_equivalence [--quick] --workers 2 --out F.jsonl
 
-Feeds BENCHMARKS.md, "Online updating". ``--quick``: one pair, one seed, 100 steps, into a
+Feeds BENCHMARKS.md, "Online updating". ``--quick``: one pair, one seed, 40 steps, into a
 temporary file (partial: no verdict), a smoke run.
 """
 
@@ -344,7 +344,7 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     if args.quick:
         args.specimens, args.records, args.seeds = "bwbn", "2", "1"
-        args.steps, args.pretrain_iterations, args.workers, args.no_paper = 100, 30, 1, True
+        args.steps, args.pretrain_iterations, args.workers, args.no_paper = 40, 30, 1, True
         if args.out is None:
             args.out = Path(tempfile.mkdtemp(prefix="ann-equivalence-")) / "runs.jsonl"
     if args.out is None:

@@ -4,16 +4,16 @@ Routes for one 3000-step Bouc-Wen history (the unit of work of every fit): the s
 (``set_trial``/``commit`` in Python) and the JIT drive (``sim_actuator.models.paths``), at the
 models' default resolution and at the diagnosis' (``DZ_MAX``); alternated, >= 3 rounds,
 min/median. Then ``diagnose`` (every candidate, pairs when triggered) on a 3000-step rig record
-and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), plus one cold
-CLI run in a fresh process (imports, JIT cache load) and the JIT compile cost with an empty
-cache; then the MR damper's first 30 000 samples (``../shared``: a benchmark may read it), CPU
-time in a fresh process per round, optionally alternated with another source tree (the MR
-damper needs ``../shared`` and says so when it is missing). Run pinned:
+and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), one cold
+``fresco-bridge diagnose`` in a fresh process (imports, JIT cache load) and the JIT compile cost
+with an empty cache; then the MR damper's first 30 000 samples (needs ``../shared``; says so
+when it is missing), CPU time in a fresh process per round, optionally alternated with another
+source tree. Run pinned:
 
     taskset -c 1 python -m benchmarks.bench_diagnosis [--quick] [--only mr --against TREE]
 
 Feeds BENCHMARKS.md, "Diagnosis" (its speed). ``--quick``: one round, the 3000-step diagnosis
-only, no empty-cache compile, the MR damper's first 3000 samples, a smoke run.
+only, no empty-cache compile, the MR damper's first 1000 samples, a smoke run.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +94,12 @@ def diagnoses(rounds: int, long: bool = True) -> None:
               f"{len(result['pairs'])} pairs fitted)")
 
 
+def console_script() -> str:
+    """``module:function`` of the ``fresco-bridge`` console script (pyproject.toml)."""
+    with (Path(__file__).resolve().parents[1] / "pyproject.toml").open("rb") as fh:
+        return str(tomllib.load(fh)["project"]["scripts"]["fresco-bridge"])
+
+
 def cold(rounds: int, compile_cost: bool = True) -> None:
     record = synthetic_record("friction", 5, steps=3000).record
     with tempfile.TemporaryDirectory() as tmp:
@@ -101,24 +108,21 @@ def cold(rounds: int, compile_cost: bool = True) -> None:
         rows = zip(record.time, record.cmd, record.meas_disp, record.force, strict=True)
         csv.write_text("time,cmd_disp,meas_disp,meas_force\n"
                        + "".join(",".join(repr(float(x)) for x in r) + "\n" for r in rows))
-        # the console entry as it was (every command's module imported) and as it is
-        variants = {"cli.main (before)": "fresco_bridge.cli",
-                    "entry.main (now)": "fresco_bridge.entry"}
-        walls: dict[str, list[float]] = {k: [] for k in variants}
-        cpus: dict[str, list[float]] = {k: [] for k in variants}
+        # the ``fresco-bridge`` console script as pyproject.toml declares it, in a fresh process
+        module, _, func = console_script().partition(":")
+        exe = [sys.executable, "-c", f"import sys; from {module} import {func}; "
+               f"sys.exit({func}(sys.argv[1:]))", "diagnose", str(csv), "--no-progress"]
+        walls: list[float] = []
+        cpus: list[float] = []
         for _ in range(rounds):
-            for name, module in variants.items():
-                exe = [sys.executable, "-m", module, "diagnose", str(csv), "--no-progress"]
-                before = resource.getrusage(resource.RUSAGE_CHILDREN)
-                started = time.perf_counter()
-                subprocess.run(exe, check=True, capture_output=True)
-                walls[name].append(time.perf_counter() - started)
-                after = resource.getrusage(resource.RUSAGE_CHILDREN)
-                cpus[name].append(after.ru_utime - before.ru_utime
-                                  + after.ru_stime - before.ru_stime)
-        for name in variants:
-            print(f"cold CLI run via {name}, 3000 steps (fresh process, JIT cache warm): wall "
-                  f"{_stats(walls[name])}; CPU {_stats(cpus[name])}")
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            started = time.perf_counter()
+            subprocess.run(exe, check=True, capture_output=True)
+            walls.append(time.perf_counter() - started)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+        print(f"cold CLI run (fresco-bridge diagnose, {module}), 3000 steps (fresh process, JIT "
+              f"cache warm): wall {_stats(walls)}; CPU {_stats(cpus)}")
         if not compile_cost:
             return
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "empty-cache"))
@@ -196,7 +200,7 @@ def main(argv: list[str] | None = None) -> None:
         "routes": lambda: routes(rounds),
         "diagnoses": lambda: diagnoses(rounds, long=not args.quick),
         "cold": lambda: cold(rounds, compile_cost=not args.quick),
-        "mr": lambda: mr_damper(args.against, rounds, 3000 if args.quick else MR_SAMPLES),
+        "mr": lambda: mr_damper(args.against, rounds, 1000 if args.quick else MR_SAMPLES),
     }
     for name, run in sections.items():
         if args.only in (None, name):

@@ -3,7 +3,8 @@
     taskset -c 1 .venv/bin/python -m benchmarks.bench_online_ann [--quick] [--json FILE]
 
 Feeds BENCHMARKS.md, "Online updating" (online_ann's cost and the variants behind its default).
-``--quick``: one pair of 100 steps, two variants, one round, a smoke run.
+``--quick``: one pair of 60 steps, the default variant (two in the timing), one round, a
+smoke run.
 
 Data (the study's simulation, in process): the offline database is the tested damper of a
 conventional run (the paper's Bilinear twin) on synthetic record 1; evaluation pairs are
@@ -321,9 +322,9 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     if args.quick:
         args.specimens, args.records, args.layouts = "bwbn", "2", "generalisation"
-        args.steps, args.pretrain_iterations, args.rounds = 100, 30, 1
-        args.timing_steps, args.no_lag = 30, True
-        args.variants = args.timing_variants = "faithful (50 it),8 it f32"
+        args.steps, args.pretrain_iterations, args.rounds = 60, 30, 1
+        args.timing_steps, args.no_lag = 10, True
+        args.variants, args.timing_variants = "default", "faithful (50 it),8 it f32"
     info = machine()
     print("machine:", info, flush=True)
     result: dict[str, Any] = {"machine": info}
