@@ -60,8 +60,11 @@ test: $(VENV)/.test $(VENV)/.build apt-test-deps
 	$(BIN)/python -m pytest -q
 	FRESCO_BRIDGE_PURE=1 $(BIN)/python -m pytest -q -p no:cacheprovider $(PURE_TESTS)
 
+# Every benchmark as BENCHMARKS.md measured it (hours); `make bench BENCH=--quick` for the short
+# versions (a smoke run), `BENCH="--only NAME"` for one (benchmarks/run_all.py).
+BENCH ?=
 bench: $(VENV)/.test
-	$(BIN)/python -m benchmarks.run_all
+	$(BIN)/python -m benchmarks.run_all $(BENCH)
 
 clean:
 	rm -rf $(VENV) runs build

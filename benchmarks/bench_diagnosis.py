@@ -4,11 +4,16 @@ Routes for one 3000-step Bouc-Wen history (the unit of work of every fit): the s
 (``set_trial``/``commit`` in Python) and the JIT drive (``sim_actuator.models.paths``), at the
 models' default resolution and at the diagnosis' (``DZ_MAX``); alternated, >= 3 rounds,
 min/median. Then ``diagnose`` (every candidate, pairs when triggered) on a 3000-step rig record
-and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), plus one cold
-CLI run in a fresh process (imports, JIT cache load) and the JIT compile cost with an empty
-cache; then the MR damper's first 30 000 samples (``../shared``: a benchmark may read it), CPU
-time in a fresh process per round, optionally alternated with another source tree. Run pinned:
-``taskset -c 1 python -m benchmarks.bench_diagnosis [--only mr --against TREE]``.
+and a 30 000-sample one, >= 3 rounds each in process (JIT code already loaded), one cold
+``fresco-bridge diagnose`` in a fresh process (imports, JIT cache load) and the JIT compile cost
+with an empty cache; then the MR damper's first 30 000 samples (needs ``../shared``; says so
+when it is missing), CPU time in a fresh process per round, optionally alternated with another
+source tree. Run pinned:
+
+    taskset -c 1 python -m benchmarks.bench_diagnosis [--quick] [--only mr --against TREE]
+
+Feeds BENCHMARKS.md, "Diagnosis" (its speed). ``--quick``: one round, the 3000-step diagnosis
+only, no empty-cache compile, the MR damper's first 1000 samples, a smoke run.
 """
 
 from __future__ import annotations
@@ -20,10 +25,12 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks._shared import MEASURED, require_shared
 from fresco_bridge.diagnosis.model import DZ_MAX
 from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
@@ -46,13 +53,13 @@ def _stats(samples: list[float]) -> str:
     return f"min {min(samples):.4g} s, median {statistics.median(samples):.4g} s"
 
 
-def routes() -> None:
+def routes(rounds: int) -> None:
     record = synthetic_record("none", 1, steps=3000).record
     d = record.cmd
     law, vec = law_vector("bouc-wen", PARAMS)
     drive(law, vec, d, 0.0, DZ_MAX)
     times: dict[str, list[float]] = {}
-    for _ in range(ROUNDS):
+    for _ in range(rounds):
         for name, fn in (
             ("scalar Python, dz_max 0.01", lambda: _scalar(d, 0.01)),
             (f"scalar Python, dz_max {DZ_MAX}", lambda: _scalar(d, DZ_MAX)),
@@ -70,14 +77,15 @@ def routes() -> None:
     print(f"  JIT / scalar speed-up at dz_max {DZ_MAX}: {ratio:.0f}x")
 
 
-def diagnoses() -> None:
-    cases = [("3000 steps (friction)", synthetic_record("friction", 5, steps=3000).record),
-             ("30 000 samples (backlash, dt 1 ms)",
-              synthetic_record("backlash", 6, steps=30_000, dt=0.001).record)]
+def diagnoses(rounds: int, long: bool = True) -> None:
+    cases = [("3000 steps (friction)", synthetic_record("friction", 5, steps=3000).record)]
+    if long:
+        cases.append(("30 000 samples (backlash, dt 1 ms)",
+                      synthetic_record("backlash", 6, steps=30_000, dt=0.001).record))
     for name, record in cases:
         samples = []
         verdict = ""
-        for _ in range(ROUNDS):
+        for _ in range(rounds):
             started = time.perf_counter()
             result = diagnose(record)
             samples.append(time.perf_counter() - started)
@@ -86,7 +94,13 @@ def diagnoses() -> None:
               f"{len(result['pairs'])} pairs fitted)")
 
 
-def cold() -> None:
+def console_script() -> str:
+    """``module:function`` of the ``fresco-bridge`` console script (pyproject.toml)."""
+    with (Path(__file__).resolve().parents[1] / "pyproject.toml").open("rb") as fh:
+        return str(tomllib.load(fh)["project"]["scripts"]["fresco-bridge"])
+
+
+def cold(rounds: int, compile_cost: bool = True) -> None:
     record = synthetic_record("friction", 5, steps=3000).record
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "r.csv"
@@ -94,24 +108,23 @@ def cold() -> None:
         rows = zip(record.time, record.cmd, record.meas_disp, record.force, strict=True)
         csv.write_text("time,cmd_disp,meas_disp,meas_force\n"
                        + "".join(",".join(repr(float(x)) for x in r) + "\n" for r in rows))
-        # the console entry as it was (every command's module imported) and as it is
-        variants = {"cli.main (before)": "fresco_bridge.cli",
-                    "entry.main (now)": "fresco_bridge.entry"}
-        walls: dict[str, list[float]] = {k: [] for k in variants}
-        cpus: dict[str, list[float]] = {k: [] for k in variants}
-        for _ in range(ROUNDS):
-            for name, module in variants.items():
-                exe = [sys.executable, "-m", module, "diagnose", str(csv), "--no-progress"]
-                before = resource.getrusage(resource.RUSAGE_CHILDREN)
-                started = time.perf_counter()
-                subprocess.run(exe, check=True, capture_output=True)
-                walls[name].append(time.perf_counter() - started)
-                after = resource.getrusage(resource.RUSAGE_CHILDREN)
-                cpus[name].append(after.ru_utime - before.ru_utime
-                                  + after.ru_stime - before.ru_stime)
-        for name in variants:
-            print(f"cold CLI run via {name}, 3000 steps (fresh process, JIT cache warm): wall "
-                  f"{_stats(walls[name])}; CPU {_stats(cpus[name])}")
+        # the ``fresco-bridge`` console script as pyproject.toml declares it, in a fresh process
+        module, _, func = console_script().partition(":")
+        exe = [sys.executable, "-c", f"import sys; from {module} import {func}; "
+               f"sys.exit({func}(sys.argv[1:]))", "diagnose", str(csv), "--no-progress"]
+        walls: list[float] = []
+        cpus: list[float] = []
+        for _ in range(rounds):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            started = time.perf_counter()
+            subprocess.run(exe, check=True, capture_output=True)
+            walls.append(time.perf_counter() - started)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+        print(f"cold CLI run (fresco-bridge diagnose, {module}), 3000 steps (fresh process, JIT "
+              f"cache warm): wall {_stats(walls)}; CPU {_stats(cpus)}")
+        if not compile_cost:
+            return
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "empty-cache"))
         code = ("import time, numpy as np; t=time.perf_counter();"
                 "from sim_actuator.models.paths import drive, drive_many, law_vector;"
@@ -127,8 +140,7 @@ def cold() -> None:
               f"{float(out):.2f} s")
 
 
-MR_DAMPER = (Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
-             / "mr_damper_dyke_nees2012_1158" / "ransim_u_converted.csv.gz")
+MR_DAMPER = MEASURED / "mr_damper_dyke_nees2012_1158" / "ransim_u_converted.csv.gz"
 MR_SAMPLES = 30_000
 _MR_CODE = """
 import csv, gzip, io, sys, time
@@ -148,38 +160,52 @@ print(time.process_time() - started, result['baseline']['kind'], result['verdict
 """
 
 
-def mr_damper(against: str | None) -> None:
+def mr_damper(against: str | None, rounds: int, samples: int = MR_SAMPLES) -> None:
     """The MR damper's first 30 000 samples (cm, N -> mm, kN), every candidate, in a fresh
     process per round (CPU time of the diagnosis alone); with ``against`` (a source tree, e.g.
     ``git archive main``) the same in that tree, alternated round by round."""
+    require_shared(MR_DAMPER, "benchmarks.bench_diagnosis mr")
     variants = {"this tree": str(Path(__file__).resolve().parents[1])}
     if against is not None:
         variants["against " + against] = against
     cpus: dict[str, list[float]] = {k: [] for k in variants}
-    for _ in range(ROUNDS):
+    for _ in range(rounds):
         for name, tree in variants.items():
             env = dict(os.environ, PYTHONPATH=tree)
             out = subprocess.run([sys.executable, "-c", _MR_CODE, str(MR_DAMPER),
-                                  str(MR_SAMPLES)], env=env, cwd=tree, check=True,
+                                  str(samples)], env=env, cwd=tree, check=True,
                                  capture_output=True, text=True).stdout.split()
             cpus[name].append(float(out[0]))
             print(f"  {name}: {float(out[0]):.1f} s CPU (baseline {out[1]}, verdict {out[2]})",
                   flush=True)
     for name in variants:
-        print(f"MR damper ransim_u, first {MR_SAMPLES} samples, diagnosis CPU via {name}: "
+        print(f"MR damper ransim_u, first {samples} samples, diagnosis CPU via {name}: "
               f"{_stats(cpus[name])}")
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> None:
     import argparse
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="benchmarks.bench_diagnosis",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=("routes", "diagnoses", "cold", "mr"), default=None)
     parser.add_argument("--against", default=None, metavar="TREE",
                         help="mr: also run this source tree, alternated (e.g. git archive main)")
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true",
+                        help="one round, short records, no empty-cache compile")
+    args = parser.parse_args(argv)
+    rounds = 1 if args.quick else ROUNDS
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()}")
-    for name, run in (("routes", routes), ("diagnoses", diagnoses), ("cold", cold),
-                      ("mr", lambda: mr_damper(args.against))):
+    sections = {
+        "routes": lambda: routes(rounds),
+        "diagnoses": lambda: diagnoses(rounds, long=not args.quick),
+        "cold": lambda: cold(rounds, compile_cost=not args.quick),
+        "mr": lambda: mr_damper(args.against, rounds, 1000 if args.quick else MR_SAMPLES),
+    }
+    for name, run in sections.items():
         if args.only in (None, name):
             run()
+
+
+if __name__ == "__main__":
+    main()

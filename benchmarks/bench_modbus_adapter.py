@@ -13,7 +13,10 @@
    2000 steps, timed inside the OpenSeesPy process; the same frame against a bridge serving
    both sites in-process is the baseline of the same run.
 
-    python -m benchmarks.bench_modbus_adapter [--blocks 40] [--cycles 100] [--steps 2000]
+    python -m benchmarks.bench_modbus_adapter [--quick] [--blocks 40] [--cycles 100] [--steps 2000]
+
+Feeds BENCHMARKS.md, "Modbus adapter". ``--quick``: 4 blocks of 20 cycles and a 200-step lab,
+a smoke run.
 """
 
 from __future__ import annotations
@@ -297,7 +300,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--blocks", type=int, default=40)
     parser.add_argument("--cycles", type=int, default=100)
     parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument("--quick", action="store_true", help="4 blocks of 20 cycles, 200 steps")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.blocks, args.cycles, args.steps = 4, 20, 200
     if args.command == "client":
         _opensees_client_main(args.ports, args.steps)
         return

@@ -5,6 +5,9 @@ of the bridge's step loop does), this tree against another source tree, alternat
 (``PYTHONPATH`` = the tree), pinned with ``taskset -c 1`` when available, variants alternating,
 ``--rounds`` rounds, and prints min/median ns per step and the ratio. Without ``--baseline`` it
 only times this tree. ``DIR`` is e.g. ``git archive main | tar -x -C /tmp/base``.
+
+Feeds BENCHMARKS.md, "Step cost and scaling" (the specimen's share of a step). ``--quick``: one
+round of 20 000 steps, a smoke run.
 """
 
 from __future__ import annotations
@@ -72,7 +75,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=200_000)
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--quick", action="store_true", help="one round of 20 000 steps")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.rounds, args.steps = 1, min(args.steps, 20_000)
     if args.child:
         _child(args.steps)
         return

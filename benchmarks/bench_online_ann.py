@@ -1,6 +1,10 @@
 """online_ann: update time per step and accuracy, the paper's 50 LM iterations vs early stopping.
 
-Run pinned to one CPU: ``taskset -c 1 .venv/bin/python -m benchmarks.bench_online_ann``.
+    taskset -c 1 .venv/bin/python -m benchmarks.bench_online_ann [--quick] [--json FILE]
+
+Feeds BENCHMARKS.md, "Online updating" (online_ann's cost and the variants behind its default).
+``--quick``: one pair of 60 steps, the default variant (two in the timing), one round, a
+smoke run.
 
 Data (the study's simulation, in process): the offline database is the tested damper of a
 conventional run (the paper's Bilinear twin) on synthetic record 1; evaluation pairs are
@@ -314,7 +318,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--no-lag", action="store_true",
                    help="accuracy without the one-step-ahead replay (half the time)")
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument("--quick", action="store_true", help="one short pair, two variants")
     args = p.parse_args(argv)
+    if args.quick:
+        args.specimens, args.records, args.layouts = "bwbn", "2", "generalisation"
+        args.steps, args.pretrain_iterations, args.rounds = 60, 30, 1
+        args.timing_steps, args.no_lag = 10, True
+        args.variants, args.timing_variants = "default", "faithful (50 it),8 it f32"
     info = machine()
     print("machine:", info, flush=True)
     result: dict[str, Any] = {"machine": info}

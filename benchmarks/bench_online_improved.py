@@ -4,8 +4,13 @@ one step of the simulated tested damper (BWBN, the baseline), same process, same
 The histories are those of a study run (demo frame, synthetic record, generalisation layout,
 the reference twin). Rounds alternate the variants; per round the median and p99 of the
 per-step wall time are taken; the table gives min / median over rounds. ``--design-f`` adds
-design F (BENCHMARKS.md, issue 9 part 7: a fifth expert and shadow scoring) as a third variant.
-``taskset -c 1 python -m benchmarks.bench_online_improved``.
+``online_improved`` with a fifth expert and shadow scoring (options, not its default) as a third
+variant.
+
+    taskset -c 1 python -m benchmarks.bench_online_improved [--quick] [--rounds 3] [--design-f]
+
+Feeds BENCHMARKS.md, "Online updating" (cost per step). ``--quick``: one round on a 5 s record,
+a smoke run.
 """
 
 from __future__ import annotations
@@ -22,11 +27,11 @@ from fresco_bridge.study.simulate import simulate_case, specimen_model
 from fresco_bridge.updating.improved import OnlineImproved
 from fresco_bridge.updating.updaters import FixedModelUpdater
 
-DESIGN_F: dict[str, Any] = {
+FIFTH_EXPERT_SHADOW: dict[str, Any] = {
     "experts": "reversal,reversal+memory,bouc-wen+memory,reversal+stops,reversal+memory+hinges",
     "shadow": True,
 }
-"""Design F of ``online_improved`` (an option, not the default)."""
+"""``online_improved`` with a fifth expert and shadow scoring (options, not the default)."""
 
 
 def _improved(tested: np.ndarray, force: np.ndarray, twin: np.ndarray,
@@ -58,19 +63,23 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--design-f", action="store_true",
-                        help="also time design F (a fifth expert, shadow scoring)")
+                        help="also time a fifth expert with shadow scoring")
+    parser.add_argument("--quick", action="store_true", help="one round on a 5 s record")
     args = parser.parse_args(argv)
-    motion = kanai_tajimi(3.0, duration=20.0, dt=0.01, seed=1)
+    if args.quick:
+        args.rounds = 1
+    motion = kanai_tajimi(3.0, duration=5.0 if args.quick else 20.0, dt=0.01, seed=1)
     run = simulate_case("generalisation", "bwbn",
                         FixedModelUpdater("reference", specimen_model("bwbn")), motion)
     tested, force, twin = run.tested_drift, run.tested_force, run.twin_drift
     rows: dict[str, list[tuple[float, float]]] = {"online_improved": [], "bwbn step": []}
     if args.design_f:
-        rows["online_improved, design F"] = []
+        rows["online_improved, fifth expert + shadow"] = []
     for _ in range(args.rounds):
         for name in rows:
-            times = _specimen(tested) if name == "bwbn step" else _improved(
-                tested, force, twin, DESIGN_F if name.endswith("F") else {})  # fmt: skip
+            options = FIFTH_EXPERT_SHADOW if name.endswith("shadow") else {}
+            times = (_specimen(tested) if name == "bwbn step"
+                     else _improved(tested, force, twin, options))
             ms = np.asarray(times, dtype=np.float64) * 1e3
             rows[name].append((float(np.median(ms)), float(np.percentile(ms, 99))))
     print(f"{tested.size} steps, {args.rounds} rounds (min / median over rounds), ms per step")

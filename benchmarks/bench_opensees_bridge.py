@@ -1,9 +1,9 @@
 """Step cost: the bridge against the fastest simple server, same run, pinned and unpinned.
 
-Why: the bridge must not be the bottleneck of a hybrid test (issue 8: within 1.3× of a bare
+Why: the bridge must not be the bottleneck of a hybrid test (targets: within 1.3× of a bare
 socket server in ms/step and 2.0× in server CPU per step, record on with the default
 durability; a 64-DOF element within 1.5×; ≤ 500 record bytes per committed step; flat memory
-over 200 000 steps). Every party is its own process (``benchmarks/step_peers.py``): a real
+over 200 000 steps). Every party is its own process (``benchmarks/_step_peers.py``): a real
 OpenSeesPy ``genericClient`` or a scripted client, and either ``fresco-bridge serve`` or the
 blocking reference server.
 
@@ -17,9 +17,13 @@ medians and the median of the per-round ratios. Each round also times a fixed pu
 workload pinned to CPU 1 (``calibration``, the machine's fast or slow mode) and the load
 average, since this machine is shared.
 
-    python -m benchmarks.bench_opensees_bridge [--rounds 3] [--unpinned-rounds 5]
+    python -m benchmarks.bench_opensees_bridge [--quick] [--rounds 3] [--unpinned-rounds 5]
         [--steps 2000] [--no-64] [--profile FILE]
     python -m benchmarks.bench_opensees_bridge rss [--rss-steps 200000]
+
+Feeds BENCHMARKS.md, "Step cost and scaling" (and the RSS mode), "Multi-DOF elements" (the
+64-DOF variants), "Record size and durability" (record bytes per step). ``--quick``: one pinned
+round of 200 steps (100 at 64 DOF; RSS over 2000 steps), a smoke run.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-PEERS = "benchmarks.step_peers"
+PEERS = "benchmarks._step_peers"
 STEPS = 2000
 STEPS_64 = 300
 RSS_STEPS = 200_000
@@ -472,7 +476,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rss-steps", type=int, default=RSS_STEPS)
     parser.add_argument("--profile", type=Path, default=None,
                         help="also run the primary bridge variant once under cProfile")
+    parser.add_argument("--quick", action="store_true", help="one short pinned round")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.rounds, args.unpinned_rounds = 1, 0
+        args.steps, args.steps_64 = min(args.steps, 200), min(args.steps_64, 100)
+        args.rss_steps = min(args.rss_steps, 2000)
     info = machine_info()
     print("step cost; " + "; ".join(f"{k}: {v}" for k, v in info.items()), flush=True)
     if args.mode == "rss":

@@ -2,7 +2,11 @@
 without limits vs. with every limit configured, same process, same trajectory (all within limits).
 
 The site is driven directly (no sockets, no record), with the in-process elastic specimen, so the
-difference is the cost of the checks themselves. ``python -m benchmarks.bench_safety``.
+difference is the cost of the checks themselves.
+
+    python -m benchmarks.bench_safety [--quick] [--steps 5000] [--repeats 7]
+
+Feeds BENCHMARKS.md, "Safety layer". ``--quick``: 500 steps, one repeat, a smoke run.
 """
 
 from __future__ import annotations
@@ -79,7 +83,10 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=5000)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--quick", action="store_true", help="500 steps, one repeat")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = min(args.steps, 500), 1
     results: dict[str, list[float]] = {"no limits": [], "all limits": []}
     for _ in range(args.repeats):  # interleaved, so drift of a shared machine hits both
         for name, limits in (("no limits", False), ("all limits", True)):

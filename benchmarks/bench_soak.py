@@ -1,6 +1,6 @@
 """Soak: a real ``fresco-bridge serve`` with 32 sites, one paced client each, for minutes.
 
-Question (issue 11): does a long run leak? Targets: bridge RSS growth <= 10 % after warm-up,
+Question: does a long run leak? Targets: bridge RSS growth <= 10 % after warm-up,
 file descriptors flat, p99 per-message latency stable (per-minute windows).
 
 Method: the bridge is its own process (``python -m fresco_bridge.cli serve``), 32 TCP sites
@@ -8,9 +8,13 @@ with an in-process elastic specimen, recording on (fsync ``background``), online
 (the defaults). One asyncio client per site in this process steps at ``--rate`` steps/s: trial
 (code 3), getForce (10, timed from send to full reply), commit (5); every force is checked
 against k·d. Every ``--sample`` s the bridge's VmRSS and open fds are read from ``/proc``.
-Also the CI test ``tests/e2e/test_soak.py`` (60 s).
+``tests/e2e/test_soak.py`` runs it for 60 s (as a subprocess) and checks the summary.
 
-    .venv/bin/python -m benchmarks.bench_soak --minutes 10
+    .venv/bin/python -m benchmarks.bench_soak [--quick] [--minutes 10] [--sites 32]
+        [--warmup 60] [--sample 2] [--workdir DIR] [--json FILE]
+
+Feeds BENCHMARKS.md, "Fuzz and soak". ``--quick``: 20 s, 8 sites, 5 s warm-up, a smoke run.
+``--workdir`` keeps the bridge's run directory and log there (default: a temporary directory).
 """
 
 from __future__ import annotations
@@ -220,12 +224,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sites", type=int, default=32)
     ap.add_argument("--rate", type=float, default=20.0, help="steps/s per client")
     ap.add_argument("--warmup", type=float, default=60.0, help="s")
+    ap.add_argument("--sample", type=float, default=2.0, help="s between two RSS/fd samples")
+    ap.add_argument("--workdir", type=Path, default=None,
+                    help="keep the bridge's config, log and run directory here")
     ap.add_argument("--json", type=Path, default=None, help="also write the summary here")
+    ap.add_argument("--quick", action="store_true", help="20 s, 8 sites, 5 s warm-up")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.minutes, args.sites, args.warmup = min(args.minutes, 1 / 3), 8, 5.0
+        args.sample = min(args.sample, 1.0)
+    if args.workdir is not None:
+        args.workdir.mkdir(parents=True, exist_ok=True)
     load_start = os.getloadavg()
     result, run_dir = soak(60.0 * args.minutes, sites=args.sites, rate=args.rate,
-                           warmup=args.warmup)
+                           warmup=args.warmup, sample=args.sample, workdir=args.workdir)
     summary = result.summary()
+    summary["run_dir"] = str(run_dir)
     summary["record_bytes"] = (run_dir / "record.jsonl").stat().st_size
     summary["load_average_start"] = load_start
     summary["load_average_end"] = os.getloadavg()

@@ -3,12 +3,14 @@
 Why: ``bench_opensees_bridge`` measures the whole step (sockets, event loop, two processes); this
 one attributes the server's CPU. It starts a real ``Bridge`` (the daemon's own assembly: record,
 taps, monitors) from the same TOML, then feeds a session's bytes straight into the connection
-pump, in process, with the scripted genericClient's message sequence (``step_peers.STEP_CODES``).
+pump, in process, with the scripted genericClient's message sequence (``_step_peers.STEP_CODES``).
 No socket, no event-loop round trip: what is left is exactly the code a ``data_received`` runs.
 
-    python -m benchmarks.bench_step_path [--dofs 1] [--steps 20000] [--no-record]
+    python -m benchmarks.bench_step_path [--quick] [--dofs 1] [--steps 20000] [--no-record]
         [--limits] [--whole-steps] [--set SECTION.KEY=VALUE ...] [--profile FILE]
         [--sort tottime]
+
+Feeds BENCHMARKS.md, "Step cost and scaling". ``--quick``: 200 steps, one repeat (a smoke run).
 
 Each message is fed on its own, as a socket delivers a genericClient's requests (it waits for
 every reply); ``--whole-steps`` feeds a step's 14 messages as one chunk instead. ``--set``
@@ -33,7 +35,7 @@ from pathlib import Path
 
 from protocol import SizeID
 
-from .step_peers import DT, STEP_CODES
+from ._step_peers import DT, STEP_CODES
 
 
 def config_text(run_dir: Path, dofs: int, record: bool, limits: bool,
@@ -161,7 +163,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="override a TOML key (the value in TOML syntax)")
     parser.add_argument("--profile", type=Path, default=None)
     parser.add_argument("--sort", default="tottime")
+    parser.add_argument("--quick", action="store_true", help="200 steps, one repeat")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.repeats = min(args.steps, 200), 1
     overrides: dict[str, dict[str, str]] = {}
     for item in args.set:
         key, sep, value = item.partition("=")

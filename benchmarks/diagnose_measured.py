@@ -7,9 +7,12 @@ invisible) and the diagnosis speaks for the specimen and sensor layers only. Qua
 without a time column (RC column, braces) get a sample index as time (dt = 1 s), so rate
 effects cannot be judged there.
 
-    python -m benchmarks.diagnose_measured [-o out/measured] [--only NAME]
+    python -m benchmarks.diagnose_measured [--quick] [-o out/measured] [--only NAME]
 
-Writes one CSV, one JSON and one report directory per test, and prints a table.
+Writes one CSV, one JSON and one report directory per test, and prints a table. Needs
+``../shared`` (exits with a message naming the missing directory). Feeds BENCHMARKS.md,
+"Diagnosis" (measured devices). ``--quick``: the RC column alone, into a temporary directory
+(not ``-o``), a smoke run.
 """
 
 from __future__ import annotations
@@ -19,15 +22,15 @@ import csv
 import gzip
 import io
 import json
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks._shared import MEASURED, require_shared
 from fresco_bridge.cli import main as cli_main
-
-MEASURED = Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
 
 
 def _write(path: Path, t: np.ndarray, d: np.ndarray, f: np.ndarray) -> Path:
@@ -39,10 +42,15 @@ def _write(path: Path, t: np.ndarray, d: np.ndarray, f: np.ndarray) -> Path:
     return path
 
 
-def tests(out: Path) -> Iterator[tuple[str, Path, str, str]]:
-    """(name, csv, --units, note) for every measured test."""
+def tests(out: Path, only: str | None = None) -> Iterator[tuple[str, Path, str, str]]:
+    """(name, csv, --units, note) for every measured test (whose name contains ``only``)."""
+    def wanted(name: str) -> bool:
+        return only is None or only in name
+
     brfd = MEASURED / "rotary_friction_damper_BRFD"
     for gz in sorted(brfd.glob("*.json.gz")):
+        if not wanted("BRFD " + gz.name.removesuffix(".json.gz")):
+            continue
         data = np.array(json.loads(gzip.decompress(gz.read_bytes()))["data"], dtype=float)
         name = "BRFD " + gz.name.removesuffix(".json.gz")
         # dataset-3: t, disp [in], friction force [kip]; dataset-4: t, MTS disp [in], force
@@ -51,6 +59,8 @@ def tests(out: Path) -> Iterator[tuple[str, Path, str, str]]:
         yield name, path, "disp=in,force=kip", "friction damper with backlash (README)"
     mr = MEASURED / "mr_damper_dyke_nees2012_1158"
     for gz in sorted(mr.glob("*.csv.gz")):
+        if not wanted(f"MR damper {gz.name.removesuffix('_converted.csv.gz')}"):
+            continue
         rows = list(csv.reader(io.StringIO(gzip.decompress(gz.read_bytes()).decode())))
         header = rows[0]
         cols = {h: i for i, h in enumerate(header)}
@@ -59,28 +69,37 @@ def tests(out: Path) -> Iterator[tuple[str, Path, str, str]]:
         path = _write(out / f"{gz.name.removesuffix('.csv.gz')}.csv", *body.T)
         yield (f"MR damper {gz.name.removesuffix('_converted.csv.gz')}", path,
                "disp=cm,force=N", "MR damper, random voltage 0-2.25 V")
-    rc = np.loadtxt(MEASURED / "rc_column_gill1979_peer_spd" / "experimental_data.csv",
-                    delimiter=",", skiprows=1)
-    yield ("RC column Gill 1979", _write(out / "rc_column.csv", np.arange(rc.shape[0], dtype=float),
-                                          rc[:, 0], rc[:, 1]),
-           "disp=m", "force is the normalised lateral load (read as kN)")
+    if wanted("RC column Gill 1979"):
+        rc = np.loadtxt(MEASURED / "rc_column_gill1979_peer_spd" / "experimental_data.csv",
+                        delimiter=",", skiprows=1)
+        yield ("RC column Gill 1979", _write(out / "rc_column.csv",
+                                             np.arange(rc.shape[0], dtype=float),
+                                             rc[:, 0], rc[:, 1]),
+               "disp=m", "force is the normalised lateral load (read as kN)")
     for js in sorted((MEASURED / "steel_brace_cyclic_simcenter").glob("*.json")):
+        if not wanted(f"brace {js.stem}"):
+            continue
         test = json.loads(js.read_text())["test"]
         d, f = np.array(test["axialDef"], float), np.array(test["axialForce"], float)
         yield (f"brace {js.stem}", _write(out / f"{js.stem}.csv", np.arange(d.size, dtype=float),
                                           d, f), "disp=in,force=kip", "quasi-static, no time")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="benchmarks.diagnose_measured",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--out", type=Path, default=Path("out/measured"))
     parser.add_argument("--only", default=None, help="substring of the test names to run")
-    args = parser.parse_args()
+    parser.add_argument("--quick", action="store_true",
+                        help="the RC column alone, into a temporary directory")
+    args = parser.parse_args(argv)
+    require_shared(MEASURED, parser.prog)
+    if args.quick:
+        args.only = args.only or "RC column"
+        args.out = Path(tempfile.mkdtemp(prefix="diagnose-measured-"))
     args.out.mkdir(parents=True, exist_ok=True)
     rows: list[tuple[str, ...]] = []
-    for name, path, units, note in tests(args.out):
-        if args.only and args.only not in name:
-            continue
+    for name, path, units, note in tests(args.out, args.only):
         out_json = path.with_suffix(".json")
         started, cpu_started = time.perf_counter(), time.process_time()
         rc = cli_main(["diagnose", str(path), "--units", units, "--json", str(out_json),

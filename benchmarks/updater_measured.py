@@ -1,4 +1,4 @@
-"""Every updater on a *measured* device (issue 9): the banded rotary friction damper (BRFD).
+"""Every updater on a *measured* device: the banded rotary friction damper (BRFD).
 
 The study's specimens are simulated, and one of them (BWBN) is the rig's own law. A real device
 lies in nobody's family, so this is the out-of-family test a lab cares about most. The BRFD
@@ -27,12 +27,14 @@ size of the study's records). Cases, each the registry's defaults, run as a user
   at the calibrated Bilinear, the paper's covariances);
 * ``online_improved`` (``--offline``).
 
-    python -m benchmarks.updater_measured [-o out/updater_measured] [--workers 2]
+    python -m benchmarks.updater_measured [--quick] [-o out/updater_measured] [--workers 2]
         [--only SUBSTRING] [--decimate 8] [--lag] [--self] [--cases a,b]
 
 Prints one table per pair and a summary, and writes ``summary.json``. Nothing is tuned to these
-data: they were first run with the options above, decided before (BENCHMARKS.md "updating part
-17").
+data: they were first run with the options above, decided before. Needs ``../shared`` (exits
+with a message naming the missing directory). Feeds BENCHMARKS.md, "Online updating" (the
+measured friction damper). ``--quick``: one pair, every 128th sample, one worker, into a
+temporary directory (not ``-o``), a smoke run.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ import gzip
 import io
 import json
 import math
+import tempfile
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -53,11 +56,11 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks._shared import MEASURED, require_shared
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.updating.histories import Units
 
-BRFD = (Path(__file__).resolve().parents[2] / "shared" / "data" / "measured"
-        / "rotary_friction_damper_BRFD")
+BRFD = MEASURED / "rotary_friction_damper_BRFD"
 UNITS = "in,kip"
 KN_PER_FORCE_UNIT = Units.parse(UNITS).to_kn
 OFFLINE_RECORD = "0.25Hz30lbtension1amplitude"
@@ -217,7 +220,14 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--lag", action="store_true", help="the twin knows the source to i-1")
     parser.add_argument("--self", dest="self_pairs", action="store_true",
                         help="also each history as its own twin (the paper layout)")
+    parser.add_argument("--quick", action="store_true",
+                        help="one pair, every 128th sample, one worker, a temporary directory")
     args = parser.parse_args(argv)
+    require_shared(BRFD, "benchmarks.updater_measured")
+    if args.quick:
+        args.decimate, args.workers = max(args.decimate, 128), 1
+        args.only = args.only or pair_name(KO_DBE, KO_MCE)
+        args.out = Path(tempfile.mkdtemp(prefix="updater-measured-"))
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = sorted(set(cases) - set(CASES))
     if unknown or args.decimate < 1:

@@ -264,7 +264,7 @@ def calibration_ms(repeats: int = 5) -> float:
 def main(argv: list[str]) -> None:
     import argparse
 
-    p = argparse.ArgumentParser(prog="benchmarks.step_peers")
+    p = argparse.ArgumentParser(prog="benchmarks._step_peers")
     p.add_argument("role", choices=("reference-server", "opensees-client", "scripted-client",
                                     "calibrate"))
     p.add_argument("--port", type=int, default=None)
