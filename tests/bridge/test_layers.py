@@ -1,5 +1,5 @@
 """Dependencies run one way: no import cycle in ``fresco_bridge/``, between its modules or
-between its layers, the protocol below everything, the numerics below the daemon.
+between its layers (``ABOVE``: the intended direction), the protocol below everything.
 
 Read from the sources with ``ast``, not from ``sys.modules``: every import counts, at module
 level, inside a function, or under ``if TYPE_CHECKING:`` (a type-only cycle is still two
@@ -14,13 +14,26 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+import pytest
+
 from tests.support.paths import REPO
 
 ROOT = "fresco_bridge"
 PROTOCOL = "protocol"
-OURS = (ROOT, PROTOCOL, "sim_actuator")
-NUMERICS = ("updating", "diagnosis", "integrator")
-DAEMON_LAYERS = ("server", "sites", "telemetry", "daemon")
+DAEMON = ("server", "sites", "telemetry", "daemon")
+ABOVE: dict[str, tuple[str, ...]] = {
+    # the numerics are testable alone
+    "updating": DAEMON,
+    "diagnosis": DAEMON,
+    "integrator": DAEMON,
+    # the daemon, bottom up: what a site hands its listeners, the record, telemetry (which
+    # writes the monitors into the record), the sites, the transports serving them
+    "site_output": ("record", "telemetry", *DAEMON),
+    "record": ("telemetry", *DAEMON),
+    "telemetry": ("sites", "server", "daemon"),
+    "sites": ("server", "daemon"),
+}
+"""``{layer: the layers above it}``, which it must not import (``fresco_bridge``'s)."""
 IO_MODULES = ("asyncio", "socket", "selectors", "ssl")
 
 
@@ -57,7 +70,7 @@ def _absolute(module: str, is_package: bool, node: ast.ImportFrom) -> str:
 
 def imports_of(module: str, path: Path, known: Iterable[str]) -> list[Import]:
     """Every import in *path*, as the module it names: ``from a import b`` is ``a.b`` when that
-    is a module, else ``a``. Names outside our packages are kept as written (their top level)."""
+    is a module, else ``a``."""
     known = set(known)
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
@@ -69,7 +82,7 @@ def imports_of(module: str, path: Path, known: Iterable[str]) -> list[Import]:
                 submodule = f"{base}.{alias.name}"
                 found.append(Import(module, submodule if submodule in known else base,
                                     node.lineno))
-    return found
+    return list(dict.fromkeys(found))  # ``from a import b, c``: one import of ``a``
 
 
 def import_graph(package: str) -> dict[str, list[Import]]:
@@ -219,11 +232,11 @@ def test_the_protocol_knows_no_bridge_and_does_no_io() -> None:
     assert not bad, "protocol/ imports what it must not:\n  " + "\n  ".join(map(str, bad))
 
 
-def test_the_numerics_know_nothing_of_the_daemon() -> None:
-    """``updating/``, ``diagnosis/`` and ``integrator/`` are testable alone: no server, site,
-    telemetry or daemon."""
-    below = {f"{ROOT}.{name}" for name in NUMERICS}
-    daemon = {f"{ROOT}.{name}" for name in DAEMON_LAYERS}
+@pytest.mark.parametrize("below", sorted(ABOVE))
+def test_a_layer_imports_nothing_above_it(below: str) -> None:
+    """The intended direction, not only the absence of cycles (``ABOVE``)."""
+    assert below not in ABOVE[below]
+    above = {f"{ROOT}.{name}" for name in ABOVE[below]}
     bad = [imp for imports in import_graph(ROOT).values() for imp in imports
-           if layer(imp.source) in below and layer(imp.target) in daemon]
-    assert not bad, "numerics import the daemon:\n  " + "\n  ".join(map(str, bad))
+           if layer(imp.source) == f"{ROOT}.{below}" and layer(imp.target) in above]
+    assert not bad, f"{below} imports from above it:\n  " + "\n  ".join(map(str, bad))
