@@ -106,8 +106,8 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
               overrides: dict[str, dict[str, str]] | None = None) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
-    from fresco_bridge.server.access import Allowlist
     from fresco_bridge.server.connection import SessionPump, SiteListener
+    from fresco_bridge.sites.access import Allowlist
 
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:

@@ -1,4 +1,5 @@
-"""``fresco-bridge``: serve, demo, export. The only place that turns errors into exit codes."""
+"""``fresco-bridge``: every command's parser, and serve, check, demo. What a command raises
+becomes an exit code in ``exit_codes.py`` (as for the light entry, ``entry.py``)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
 from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
 from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
-from .entry import reader_gone
+from .exit_codes import exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
@@ -119,58 +120,45 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
     _warn_if_stale()
-    try:
-        if args.command == "serve":
-            resume = None
-            if args.resume is not None:
-                cfg, _ = load_config(args.config)
-                resume = check_resumable(resolve_run(args.resume, cfg.bridge.run_dir))
-            return _serve_on_its_loop(args.config, resume)
-        if args.command == "runs" and args.runs_command == "resume":
-            run = check_resumable(resolve_run(args.run, args.runs))
-            return _serve_on_its_loop(args.config, run)
-        if args.command == "check":
+    return exit_code(lambda: _run(args), (ConfigError, LabError, RunDirError, ControlError))
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command ``args`` names; its exit code (errors: ``exit_code``)."""
+    if args.command == "serve":
+        resume = None
+        if args.resume is not None:
             cfg, _ = load_config(args.config)
-            print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
-                  + ", ".join(f"{s.name} {s.transport}:{s.port}" for s in cfg.sites) + ")")
-            return 0
-        if args.command == "demo":
-            from .demo import run_demo
+            resume = check_resumable(resolve_run(args.resume, cfg.bridge.run_dir))
+        return _serve_on_its_loop(args.config, resume)
+    if args.command == "runs" and args.runs_command == "resume":
+        run = check_resumable(resolve_run(args.run, args.runs))
+        return _serve_on_its_loop(args.config, run)
+    if args.command == "check":
+        cfg, _ = load_config(args.config)
+        print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
+              + ", ".join(f"{s.name} {s.transport}:{s.port}" for s in cfg.sites) + ")")
+        return 0
+    if args.command == "demo":
+        from .demo import run_demo
 
-            run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
-                     runs=args.runs, transport=args.transport, mqtt=args.mqtt,
-                     mqtt_prefix=args.mqtt_prefix, metrics_port=args.metrics_port)
-            return 0
-        if args.command == "lab":
-            return lab_command(args)
-        if args.command == "ctl":
-            return ctl_command(args)
-        if args.command == "study":
-            return study_command(args)
-        if args.command == "updater":
-            return updater_command(args)
-        if args.command in REPORT_COMMANDS:
-            return report_command(args)
-        if args.command in DIAGNOSIS_COMMANDS:
-            return diagnosis_command(args)
-    except (ConfigError, LabError, RunDirError, ControlError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    except BrokenPipeError:
-        return reader_gone()
-    except OSError as exc:  # a port in use, a run directory that cannot be written, …
-        logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
-        where = f" ({exc.filename})" if exc.filename else ""
-        print(f"error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 1
-    except Exception as exc:  # the CLI boundary: a clear line, no traceback
-        logging.getLogger("fresco_bridge").debug("fatal", exc_info=True)
-        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 1
+        run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
+                 runs=args.runs, transport=args.transport, mqtt=args.mqtt,
+                 mqtt_prefix=args.mqtt_prefix, metrics_port=args.metrics_port)
+        return 0
+    if args.command == "lab":
+        return lab_command(args)
+    if args.command == "ctl":
+        return ctl_command(args)
+    if args.command == "study":
+        return study_command(args)
+    if args.command == "updater":
+        return updater_command(args)
+    if args.command in REPORT_COMMANDS:
+        return report_command(args)
+    if args.command in DIAGNOSIS_COMMANDS:
+        return diagnosis_command(args)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

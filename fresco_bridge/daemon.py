@@ -27,13 +27,13 @@ from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
 from .record import RunRecord
 from .record.recovery import LastCommit, flag_interrupted, last_commits
-from .server.access import Allowlist
 from .server.connection import SiteListener
 from .server.tcp import TcpConnection
 from .server.tls import TlsConfigError, server_context
 from .server.udp import UdpSiteEndpoint
 from .setups import make_setup
 from .sites import ExperimentalSite
+from .sites.access import Allowlist
 from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
 from .telemetry.taps import MonitorBatch, SiteTaps

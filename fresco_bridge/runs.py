@@ -31,7 +31,7 @@ from .record.export import (
 )
 from .record.lines import RecordFormatError
 from .record.recovery import open_sessions, run_state
-from .record.writer import CONFIG_FILE, META_FILE, RECORD_FILE
+from .record.rundir import CONFIG_FILE, META_FILE, RECORD_FILE
 
 DEFAULT_DT = 0.01  # TelemetryConfig.monitor_dt's default, for records without integrator time
 XCORR_MAX_LAG = 50  # samples either side for the cross-correlation delay estimate

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .lines import RecordFormatError, expand
-from .writer import RECORD_FILE
+from .rundir import RECORD_FILE
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .lines import expand
-from .writer import META_FILE, RECORD_FILE, update_meta
+from .rundir import META_FILE, RECORD_FILE, update_meta
 
 log = logging.getLogger("fresco_bridge.record")
 

@@ -2,9 +2,9 @@
 
 Trials and measurements are recorded as they happen and reach the file with the site's next
 commit or event (a committed step is one line, ``record/lines.py``); committed steps and events
-arrive as a listener (``sites/listeners.py``); monitor samples from the telemetry taps (after
-the commit: they go out with the next one); refused connections from the transport, through
-the site.
+arrive as a listener (``sites/listeners.py``; the values: ``site_output.py``); monitor samples
+from the telemetry taps (after the commit: they go out with the next one); refused connections
+from the transport, through the site.
 """
 
 from __future__ import annotations
@@ -17,9 +17,7 @@ from .writer import PENDING_LIMIT, RunRecord
 
 if TYPE_CHECKING:
     from ..indicators import MonitorSample
-    from ..sites.listeners import SiteNotice
-    from ..steps import CommittedStep
-    from ..telemetry.schema import SiteStatus
+    from ..site_output import CommittedStep, SiteNotice
 
 __all__ = ["SiteRecorder"]
 
@@ -60,7 +58,8 @@ class SiteRecorder:
         """``step_committed`` without the ``CommittedStep`` (``StepValuesListener``)."""
         self._commit(self.site, self._pending, session, step, time_)
 
-    def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
+    def site_event(self, notice: SiteNotice, status: object) -> None:
+        """The event (``status``, telemetry's retained message, is not the record's)."""
         if self.before_event is not None:
             self.before_event()
         self.event(notice.session, notice.kind, notice.reason, **notice.extra)

@@ -39,14 +39,13 @@ from typing import Literal
 from mypy_extensions import mypyc_attr
 
 from .lines import DAQ, FORMAT_VERSION, MONITOR, TRIAL, Item, LineEncoder
+from .recovery import cut_torn_tail, last_seq_and_time, run_state
+from .rundir import CONFIG_FILE, META_FILE, RECORD_FILE, update_meta, write_private
 from .syncer import Syncer
 
 _monotonic = time.monotonic
 _os_write = os.write
 
-RECORD_FILE = "record.jsonl"
-CONFIG_FILE = "config.toml"
-META_FILE = "run.json"
 DEFAULT_SYNC_INTERVAL = 0.05
 """Group commit: at most one fdatasync per this many seconds (events sync at once). Why 50 ms,
 not 10: every sync wakes the syncer thread several times (timer, GIL hand-offs, three I/O
@@ -61,37 +60,6 @@ keeps its trials out of the file)."""
 @mypyc_attr(native_class=False)  # mypyc: a native class cannot derive from OSError
 class RecordError(OSError):
     """The run record could not be created or written."""
-
-
-def write_private(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` readable by this user only (0600), atomically."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    try:
-        os.fchmod(fd, 0o600)
-        data = text.encode("utf-8")
-        view = memoryview(data)
-        while view:
-            written = os.write(fd, view)  # not inside the slice: mypyc evaluates it twice
-            view = view[written:]
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
-
-
-def update_meta(directory: Path, **changes: object) -> dict[str, object]:
-    """Rewrite ``run.json`` with ``changes`` applied (atomic; 0600)."""
-    path = directory / META_FILE
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        meta = {}
-    if not isinstance(meta, dict):
-        meta = {}
-    meta.update(changes)
-    write_private(path, json.dumps(meta, indent=2))
-    return meta
 
 
 class RunRecord:
@@ -174,8 +142,6 @@ class RunRecord:
     ) -> RunRecord:
         """Continue the record of an interrupted run: a torn last line is moved aside, the
         sequence numbers and times go on from the last complete line."""
-        from .recovery import cut_torn_tail, last_seq_and_time, run_state
-
         state = run_state(directory)
         if state == "running":
             raise RecordError(f"{directory}: the run is in use by another running bridge")

@@ -29,7 +29,7 @@ from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel
 
 from ..eager import Suspended, start_eager
 from ..sites import Site, SiteError
-from .access import Allowlist, RejectionLog
+from ..sites.access import Allowlist, RejectionLog
 from .handlers import ActorHandler, ElementHandler, SessionEnded
 
 log = logging.getLogger("fresco_bridge.server")

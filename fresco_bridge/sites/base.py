@@ -16,8 +16,8 @@ from protocol import Signals, SignalSizes
 from ..config import SiteConfig
 
 if TYPE_CHECKING:
-    from ..server.access import RejectionLog
     from ..telemetry.metrics import SiteMetrics
+    from .access import RejectionLog
 
 __all__ = ["Later", "Site", "SiteError"]
 

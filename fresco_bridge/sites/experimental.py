@@ -37,17 +37,17 @@ from ..safety import (
     next_state,
 )
 from ..setups import LinearSetup, make_setup
-from ..steps import CommittedStep
+from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
 from .guard import ControllerGuard
-from .listeners import EventListener, SiteNotice, StepListener
+from .listeners import EventListener, StepListener
 from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
-    from ..server.access import RejectionLog
     from ..telemetry.metrics import SiteMetrics
+    from .access import RejectionLog
 
 log = logging.getLogger("fresco_bridge.site")
 

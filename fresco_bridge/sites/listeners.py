@@ -1,4 +1,5 @@
-"""What leaves a site: committed steps and events, to a list of listeners.
+"""Who takes what leaves a site: its committed steps and events (the values:
+``site_output.py``), to a list of listeners.
 
 A site holds an ordered list of listeners (``Site.add_listener``): the run record's writer
 (``record/site.py``), the telemetry taps with the online monitors (``telemetry/taps.py``), and
@@ -10,28 +11,12 @@ append, a buffered line, a counter).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from ..steps import CommittedStep
+from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 
-__all__ = ["CommittedStep", "EventListener", "SiteNotice", "StepListener", "StepValuesListener"]
-
-
-@dataclass(frozen=True, slots=True)
-class SiteNotice:
-    """An event of a site (``hold``, ``limit``, ``session-open``, …) with its reason; ``extra``
-    is what the record keeps with it (telemetry publishes its scalar entries)."""
-
-    site: str
-    session: int
-    step: int
-    time: float
-    kind: str
-    reason: str
-    extra: Mapping[str, object]
+__all__ = ["EventListener", "StepListener", "StepValuesListener"]
 
 
 @runtime_checkable

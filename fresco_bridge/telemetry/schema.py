@@ -18,7 +18,7 @@ from types import MappingProxyType
 from typing import Any
 
 from fresco_bridge.indicators import MonitorSample
-from fresco_bridge.steps import CommittedStep
+from fresco_bridge.site_output import CommittedStep
 
 SCHEMA_VERSION = 1
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")

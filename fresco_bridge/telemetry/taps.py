@@ -19,8 +19,7 @@ from fresco_bridge.telemetry.schema import SiteEvent, SiteStatus, StepSample
 if TYPE_CHECKING:
     from fresco_bridge.indicators import OnlineMonitor
     from fresco_bridge.record.site import SiteRecorder
-    from fresco_bridge.sites.listeners import SiteNotice
-    from fresco_bridge.steps import CommittedStep
+    from fresco_bridge.site_output import CommittedStep, SiteNotice
     from fresco_bridge.telemetry.metrics import SiteMetrics
 
 __all__ = ["MONITOR_BATCH_DELAY", "MONITOR_BATCH_STEPS", "MonitorBatch", "SiteTaps"]

@@ -13,7 +13,7 @@ import pytest
 
 from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.synth import synthetic_record
-from fresco_bridge.record.writer import META_FILE, RECORD_FILE
+from fresco_bridge.record.rundir import META_FILE, RECORD_FILE
 
 
 def _write_csv(path: Path, rows: list[list[float]],

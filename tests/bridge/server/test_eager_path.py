@@ -19,9 +19,9 @@ from fresco_bridge.controls.base import Controller, Daq, InlineController
 from fresco_bridge.controls.sim import SimController
 from fresco_bridge.eager import start_eager
 from fresco_bridge.record import RunRecord, read_record
-from fresco_bridge.server.access import Allowlist
 from fresco_bridge.server.connection import SessionPump, SiteListener
 from fresco_bridge.sites import ExperimentalSite
+from fresco_bridge.sites.access import Allowlist
 from protocol import SizeID
 
 DOFS = 2

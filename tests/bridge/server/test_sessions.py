@@ -24,10 +24,10 @@ from fresco_bridge.cli import main as cli_main
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink, LinkError
 from fresco_bridge.record import read_record
-from fresco_bridge.server.access import Allowlist, RejectionLog
 from fresco_bridge.server.connection import WRITE_HIGH_WATER
 from fresco_bridge.server.tcp import KEEPALIVE_COUNT, KEEPALIVE_IDLE, KEEPALIVE_INTERVAL
 from fresco_bridge.sites import SiteState
+from fresco_bridge.sites.access import Allowlist, RejectionLog
 from protocol import Action, ElementClientSession, SizeID
 from tests.support.bridge import RunningBridge
 from tests.support.spied_bridge import refused, wait_for

@@ -24,8 +24,7 @@ from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.record.export import monitor_lines
 from fresco_bridge.record.lines import RecordFormatError, expand
 from fresco_bridge.record.site import SiteRecorder
-from fresco_bridge.sites.listeners import SiteNotice
-from fresco_bridge.steps import CommittedStep
+from fresco_bridge.site_output import CommittedStep, SiteNotice
 from fresco_bridge.telemetry.schema import SiteStatus
 from fresco_bridge.telemetry.taps import MONITOR_BATCH_STEPS, MonitorBatch, SiteTaps
 from tests.support.recorded_run import LAB_TOML, raw_lines

@@ -7,7 +7,7 @@ import dataclasses
 
 import pytest
 
-from fresco_bridge.steps import CommittedStep
+from fresco_bridge.site_output import CommittedStep
 from fresco_bridge.telemetry.schema import StepSample
 
 

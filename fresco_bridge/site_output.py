@@ -1,11 +1,18 @@
-"""A committed step: the one value a site hands its listeners (record, telemetry, monitors, an
-updater) and the base of the telemetry step message."""
+"""What leaves a site for its listeners (the run record, telemetry, the monitors, an updater):
+each committed step (``CommittedStep``, also the base of the telemetry step message) and each
+event (``SiteNotice``).
+
+Below the sites and below their listeners, so the listeners need nothing of a site to take what
+it hands them, and any kind of site hands them the same values. Which listeners a site has, and
+the methods they implement, are the site's own (``sites/listeners.py``).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-__all__ = ["CommittedStep"]
+__all__ = ["CommittedStep", "SiteNotice"]
 
 
 @dataclass(frozen=True, slots=True, init=False)
@@ -45,3 +52,17 @@ class CommittedStep:
 _SET = tuple(CommittedStep.__dict__[name].__set__ for name in (
     "site", "session", "step", "time", "trial", "ctrl", "daq_disp", "daq_force", "state"))
 """The slots' setters, in field order (``CommittedStep.__init__``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SiteNotice:
+    """An event of a site (``hold``, ``limit``, ``session-open``, …) with its reason; ``extra``
+    is what the record keeps with it (telemetry publishes its scalar entries)."""
+
+    site: str
+    session: int
+    step: int
+    time: float
+    kind: str
+    reason: str
+    extra: Mapping[str, object]

@@ -1,4 +1,6 @@
-"""Who may open a session, and a bounded account of those refused (pure: clock injected).
+"""Who may open a session of a site, and a bounded account of those refused (pure: clock
+injected). A site's own: the transports (``server/``) enforce it, the site reports the refusals
+(``ctl status``), so it sits with the sites, below the transports.
 
 ``Allowlist`` matches a client address against the configured addresses and CIDR networks
 (empty = anyone, which the config only allows with ``allow_any_client = true``).
