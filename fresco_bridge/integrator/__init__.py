@@ -2,13 +2,19 @@
 
 Pure numerics (no I/O besides reading record files and the genericClient ``link``): story
 elements (hysteresis models, updater twins, bridge sites) are coupled to the frame in one place,
-``coupling.py`` (``StoryCoupling``, ``coupled_integrator``, ``run_coupled``).
+``coupling.py`` (``StoryCoupling``, ``coupled_integrator``, ``run_coupled``; a learning twin's
+causality, ``same-step`` or ``previous-step``, is stated there).
 """
 
 from fresco_bridge.integrator.coupling import (
+    CAUSALITIES,
+    Causality,
+    LearningElement,
+    MeasuredElement,
     Placement,
     StoryCoupling,
     StoryElement,
+    UpdatingTwin,
     coupled_integrator,
     frame_integrator,
     run_coupled,
@@ -56,6 +62,7 @@ from fresco_bridge.integrator.shear_building import (
 )
 
 __all__ = [
+    "CAUSALITIES",
     "DEMO_DAMPER",
     "DEMO_DT",
     "DEMO_EXPERIMENTAL_STORIES",
@@ -65,6 +72,7 @@ __all__ = [
     "DEMO_ZETA",
     "G_MM_S2",
     "G_M_S2",
+    "Causality",
     "EnergyBalance",
     "ExperimentalForce",
     "ExplicitNewmark",
@@ -72,6 +80,8 @@ __all__ = [
     "GroundMotionFormatError",
     "IntegrationError",
     "JenningsEnvelope",
+    "LearningElement",
+    "MeasuredElement",
     "Modes",
     "Placement",
     "Response",
@@ -81,6 +91,7 @@ __all__ = [
     "StoryElement",
     "TrialStep",
     "UnstableTimeStepError",
+    "UpdatingTwin",
     "coupled_integrator",
     "demo_damper_story_stiffness",
     "demo_frame_integrator",

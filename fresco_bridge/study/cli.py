@@ -41,7 +41,9 @@ def _positive_int(text: str) -> int:
 
 def add_study_parser(sub: Any) -> None:
     """``study paper`` and its options."""
-    from fresco_bridge.updating.cli import parse_option  # here: updating imports study.constants
+    # Imported when the parser is built, not when `cli` is: the command line stays light to load.
+    from fresco_bridge.integrator.coupling import CAUSALITIES
+    from fresco_bridge.updating.cli import parse_option
 
     p_study = sub.add_parser("study", help="reproducible studies (the source paper's case study)")
     studies = p_study.add_subparsers(dest="study", required=True)
@@ -65,6 +67,11 @@ def add_study_parser(sub: Any) -> None:
                         "noise-free reference run (default 0); repeatable")
     p.add_argument("--seed", type=int, action="append", default=None,
                    help="noise, synthetic record and updater seed (default 1); repeatable")
+    p.add_argument("--causality", choices=CAUSALITIES, action="append", default=None,
+                   help="what the twin's step i may learn from: same-step (the tested damper's "
+                        "step i, the paper's order, default) or previous-step (only through "
+                        "step i-1, what a twin served live under OpenSees can honour); "
+                        "repeatable; recorded in study.json")
     p.add_argument("--cases", default=None,
                    help=f"comma-separated subset of {','.join(CASES)} (default: all available)")
     p.add_argument("--steps", type=_positive_int, default=None,
@@ -161,10 +168,11 @@ def _run(args: argparse.Namespace) -> int:
                          f"{', '.join(CASES)}")  # fmt: skip
     runs = [
         RunSpec(label, motion, specimen, noise, seed, args.steps, args.ann_iterations,
-                args.pretrain_iterations, _ann_options(args.ann_option))
+                args.pretrain_iterations, _ann_options(args.ann_option), causality)
         for label, motion, seed in _motions(args, seeds)
         for specimen in (args.specimen or ["bwbn"])
         for noise in (args.noise or [0.0])
+        for causality in dict.fromkeys(args.causality or ["same-step"])
     ]
     try:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,9 @@ A *run* is one (record, specimen, noise, seed). Each run has two phases, each a 
    the tested damper's peak force in it); a conventional run (paper layout, the paper's
    Bilinear twin) is the offline database, as in the paper (first ``OFFLINE_SAMPLES`` measured
    steps); the calibrated Bilinear is fitted to it;
-2. *cases*: every (layout, case) simulated independently.
+2. *cases*: every (layout, case) simulated independently, with the run's ``causality``
+   (``same-step``, the paper's order, or ``previous-step``: see ``study.simulate``); the fixed
+   models of phase 1 learn nothing, so it does not depend on it.
 
 Scores (``fresco_bridge.indicators``): paper layout against the tested damper's *measured*
 force (the paper's Table 3); generalisation layout against the twin's *true* force. MAESD is
@@ -24,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from fresco_bridge import indicators
-from fresco_bridge.integrator import GroundMotion
+from fresco_bridge.integrator import Causality, GroundMotion
 from fresco_bridge.lawfit import calibrate_bilinear
 from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES
 from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_model
@@ -70,6 +72,9 @@ class RunSpec:
     """LM iterations of the offline pre-training (MATLAB ``trainlm``'s default epochs)."""
     ann_options: tuple[tuple[str, Any], ...] = ()
     """Further ``online_ann`` options (``divide``, ``rtol``, …); none: its defaults."""
+    causality: Causality = "same-step"
+    """What the twin's step i may learn from: the tested damper's step i (``same-step``, the
+    paper's order) or only through step i - 1 (``previous-step``, a twin served live)."""
 
     def online_ann_options(self) -> dict[str, Any]:
         """The options ``online_ann`` gets in this run (``--ann-option`` wins over the cap)."""
@@ -82,7 +87,9 @@ class RunSpec:
     @property
     def label(self) -> str:
         noise = f"{self.noise_pct:g}".replace(".", "p")
-        return f"{self.record.removesuffix('.AT2')}_{self.specimen}_noise{noise}_seed{self.seed}"
+        order = "" if self.causality == "same-step" else f"_{self.causality}"
+        return (f"{self.record.removesuffix('.AT2')}_{self.specimen}_noise{noise}_seed{self.seed}"
+                f"{order}")  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,7 +169,7 @@ def _run_case(task: _CaseTask) -> CaseHistory:
     updater = make_case_updater(task.case, task.prepared)
     return simulate_case(task.layout, run.specimen, updater, run.motion,
                          noise_std=task.prepared.noise_std, noise_seed=run.seed,
-                         steps=run.steps)  # fmt: skip
+                         steps=run.steps, causality=run.causality)  # fmt: skip
 
 
 def case_metrics(layout: str, history: CaseHistory, reference: CaseHistory) -> dict[str, Any]:
@@ -225,6 +232,7 @@ def run_study(
             "noise_pct": p.run.noise_pct,
             "noise_std_kN": p.noise_std,
             "seed": p.run.seed,
+            "causality": p.run.causality,
             "steps": int(per_layout["paper"]["reference"].tested_drift.size),
             "offline": {"samples": int(p.offline_disp.size), "calibrated_bilinear": p.calibrated,
                         "paper_bilinear": dict(PAPER_BILINEAR),

@@ -20,11 +20,18 @@ def _f(value: float) -> str:
     return f"{value:.3f}"
 
 
+_CAUSALITY = {
+    "same-step": "the twin's step i learned from the tested damper's step i",
+    "previous-step": "the twin's step i knew the tested damper through step i-1",
+}
+
+
 def markdown_tables(document: Mapping[str, Any]) -> str:
     """Both layouts of one run as markdown, one table each, the paper's rows and columns."""
     head = (f"Run: record {document['record']}, specimen {document['specimen']}, noise "
             f"{document['noise_pct']:g} % ({document['noise_std_kN']:.3f} kN), seed "
-            f"{document['seed']}, {document['steps']} steps\n")  # fmt: skip
+            f"{document['seed']}, {document['steps']} steps, causality "
+            f"{document['causality']} ({_CAUSALITY[document['causality']]})\n")  # fmt: skip
     parts = [head]
     for layout, body in document["layouts"].items():
         parts.append(f"\n### {layout} layout (scored against the {body['scored_against']})\n")
@@ -134,11 +141,11 @@ def summary_table(documents: Sequence[Mapping[str, Any]]) -> str:
     our RMSETH reduction (no target: beside MAETH); the paper layout's MAETH ordering beside its
     one-step-ahead ordering."""
     lines = [
-        "| record | specimen | noise % | seed | MAETH generalisation (kN): "
+        "| record | specimen | noise % | seed | causality | MAETH generalisation (kN): "
         + " / ".join(_SHORT.values()) + " | online_improved vs calibrated | target | beats "
         "ukf & ann | RMSETH vs calibrated | paper layout MAETH order | paper layout one-step "
         "order |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for doc in documents:
         gen = doc["layouts"]["generalisation"]["cases"]
@@ -164,8 +171,8 @@ def summary_table(documents: Sequence[Mapping[str, Any]]) -> str:
         by_step = " < ".join(_SHORT[c] for c in sorted(learning,
                                                         key=lambda c: paper[c]["one_step_rmse"]))
         lines.append(f"| {doc['record']} | {doc['specimen']} | {doc['noise_pct']:g} | "
-                     f"{doc['seed']} | {maeths} | {reduction} | {target} | {beats} | "
-                     f"{rms_reduction} | {by_maeth} | {by_step} |")  # fmt: skip
+                     f"{doc['seed']} | {doc['causality']} | {maeths} | {reduction} | {target} | "
+                     f"{beats} | {rms_reduction} | {by_maeth} | {by_step} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

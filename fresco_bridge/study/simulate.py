@@ -1,22 +1,24 @@
 """One case of the study: the two-story frame, the tested damper, its updatable twin.
 
-In process, the built-in explicit Newmark integrator (no iteration: each step's trial drift is
-imposed once, so the material semantics of the twin are exercised by the one-step-ahead probe
-below, not by Newton). Per step ``i``, in this order:
+The case runs through the one coupling loop (``fresco_bridge.integrator.coupling``): the built-in
+explicit Newmark (no iteration: each step's trial drift is imposed once, so the material
+semantics of the twin are exercised by the one-step-ahead probe, not by Newton) with two story
+elements, in this order:
 
-1. the tested damper (story 1) is moved to its drift and committed; its measured force is the
-   true force plus load-cell noise (one seeded stream per run: every case of a run sees the
-   same noise, common random numbers);
-2. the twin is *probed* at its drift before the updater sees step ``i`` (``set_trial`` only:
-   the one-step-ahead prediction, never committed);
-3. ``updater.observe(d_i, F_i)``; the twin's force at its drift is then computed and committed:
-   that is what the structure gets, as in the paper, where the twin's step ``i`` uses what was
-   learned from step ``i``;
-4. a noise-free copy of the true law follows the twin's drift: the twin's true force.
+* ``tested`` (story 1): the specimen's true law read through a load cell, the true force plus
+  seeded noise (one stream per run: every case of a run sees the same noise, common random
+  numbers); the structure gets the reading and the updater observes it;
+* ``twin`` (story 1 in the paper layout, story 2 in the generalisation layout): the updater's
+  twin, learning from ``tested`` with the run's ``causality``. ``same-step`` (the default, the
+  paper's order: the twin's step ``i`` uses what was learned from step ``i``) or
+  ``previous-step`` (the twin's step ``i`` knows the tested damper only through step ``i - 1``,
+  what a twin served live under OpenSees can always honour). A study copied onto a served twin
+  must say which it reproduces.
 
-The integrator gets the *measured* tested force (noise included) and the twin's prediction.
-Actuator dynamics are left out on purpose, as the paper assumes ("a very small control error"):
-the study isolates model error.
+The one-step-ahead force is the twin's answer before the updater saw step ``i`` (under
+``previous-step``, the twin's answer itself). Afterwards a noise-free copy of the true law is
+driven along the twin's drifts: the twin's true force. Actuator dynamics are left out on
+purpose, as the paper assumes ("a very small control error"): the study isolates model error.
 """
 
 from __future__ import annotations
@@ -30,12 +32,20 @@ import numpy.typing as npt
 from fresco_bridge.integrator import (
     DEMO_DT,
     DEMO_ZETA,
-    ExplicitNewmark,
+    Causality,
     GroundMotion,
+    MeasuredElement,
+    Placement,
+    StoryCoupling,
+    UpdatingTwin,
+    coupled_integrator,
     paper_two_story_frame,
+    run_coupled,
 )
+from fresco_bridge.lawfit import law_forces
 from fresco_bridge.study.constants import MENEGOTTO_PINTO_DAMPER, SPECIMEN_PRESET
 from fresco_bridge.updating.base import Updater
+from sim_actuator.effects import Sensor
 from sim_actuator.models import HysteresisModel, make_model
 
 __all__ = ["CaseHistory", "simulate_case", "specimen_model", "specimen_params"]
@@ -90,58 +100,31 @@ def simulate_case(
     noise_std: float = 0.0,
     noise_seed: int = 0,
     steps: int | None = None,
+    causality: Causality = "same-step",
 ) -> CaseHistory:
     """Run one case to the end of the record (or ``steps`` steps after step 0)."""
     if layout not in ("paper", "generalisation"):
         raise ValueError(f"unknown layout {layout!r}; known: paper, generalisation")
-    tested = specimen_model(specimen)
-    truth = specimen_model(specimen)
-    k0 = tested.initial_tangent
-    frame = paper_two_story_frame()
-    paper = layout == "paper"
-    extra = np.array([2.0 * k0, 0.0]) if paper else np.array([k0, k0])
-    _, _, damping = frame.rayleigh(DEMO_ZETA, (1, 2), extra_story_stiffness=extra)
-    rng = np.random.default_rng(noise_seed)
-    twin = updater.twin
-    rows: list[tuple[float, ...]] = []
-
-    def forces(step: int, t: float, drift: FloatArray) -> list[float]:
-        d_tested = float(drift[0])
-        d_twin = d_tested if paper else float(drift[1])
-        f_true, _ = tested.set_trial(d_tested)
-        tested.commit()
-        f_meas = f_true + noise_std * float(rng.standard_normal()) if noise_std else f_true
-        f_ahead, _ = twin.set_trial(d_twin)
-        updater.observe(d_tested, f_meas)
-        f_twin, _ = twin.set_trial(d_twin)
-        twin.commit()
-        f_twin_true, _ = truth.set_trial(d_twin)
-        truth.commit()
-        rows.append((d_tested, f_meas, d_twin, f_twin, f_twin_true, f_ahead,
-                     updater.last_update_seconds))  # fmt: skip
-        return [f_meas + f_twin] if paper else [f_meas, f_twin]
-
-    if motion.dt != DEMO_DT:
-        motion = motion.resampled(DEMO_DT)
-    integrator = ExplicitNewmark(
-        frame.mass_matrix(),
-        damping,
-        frame.stiffness_matrix(),
-        DEMO_DT,
-        motion,
-        forces,
-        (0,) if paper else (0, 1),
-        experimental_stiffness=[2.0 * k0] if paper else [k0, k0],
-    )
-    response = integrator.run(steps)
-    table = np.array(rows, dtype=np.float64)
+    model = specimen_model(specimen)
+    k0 = model.initial_tangent
+    load_cell = Sensor(noise_std=noise_std, rng=np.random.default_rng(noise_seed))
+    twin = UpdatingTwin(updater, causality)
+    coupling = StoryCoupling({
+        "tested": Placement(0, MeasuredElement(model, load_cell)),
+        "twin": Placement(0 if layout == "paper" else 1, twin, stiffness=k0,
+                          learns_from="tested"),
+    })  # fmt: skip
+    integrator = coupled_integrator(paper_two_story_frame(), coupling, motion, dt=DEMO_DT,
+                                    zeta=DEMO_ZETA)  # fmt: skip
+    response = run_coupled(integrator, coupling, steps=steps)
+    twin_drift = coupling.drift("twin")
     return CaseHistory(
-        tested_drift=table[:, 0],
-        tested_force=table[:, 1],
-        twin_drift=table[:, 2],
-        twin_force=table[:, 3],
-        twin_true_force=table[:, 4],
-        twin_ahead_force=table[:, 5],
-        update_seconds=table[:, 6],
+        tested_drift=coupling.drift("tested"),
+        tested_force=coupling.force("tested"),
+        twin_drift=twin_drift,
+        twin_force=coupling.force("twin"),
+        twin_true_force=law_forces(specimen_model(specimen), twin_drift),
+        twin_ahead_force=twin.ahead_force(),
+        update_seconds=twin.update_seconds(),
         floor_displacement=response.displacement,
     )

@@ -10,7 +10,9 @@ always starts from the twin's last commit, so Newton iterations never advance it
 Order within one step ``i`` of a hybrid test: the tested element's step ``i`` is committed and
 measured -> ``observe(d_i, F_i)``; then the twin is asked ``set_trial(d_twin_i)`` (any number of
 times) and ``commit()``. Whether the twin's step ``i`` may use what was learned from step ``i``
-or only through ``i - 1`` is the caller's choice (replay's ``--lag`` flag), not the updater's.
+or only through ``i - 1`` is the caller's choice, not the updater's: the *causality*
+(``same-step`` / ``previous-step``) of ``integrator/coupling.py`` and of ``study paper
+--causality``; replay's ``--lag`` is ``previous-step``.
 """
 
 from __future__ import annotations

@@ -40,6 +40,8 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     check = (out / "summary.md").read_text()
     assert "synthetic-seed3 | menegotto-pinto | 1 | 3 |" in check and "≥ 80 %" in check
     assert "RMSETH vs calibrated" in check
+    assert "| 3 | same-step |" in check  # the default causality, named in every row
+    assert ", causality same-step (" in (runs[0] / "table.md").read_text()
     return document
 
 
@@ -54,6 +56,7 @@ def test_json_has_exactly_the_issue_keys_per_case(study: dict[str, object]) -> N
             assert len(metrics["maesd"]) == 2
             assert set(metrics["update_time_ms"]) == {"median", "p99"}
     assert study["steps"] == STEPS + 1
+    assert study["causality"] == "same-step"
     assert study["noise_pct"] == 1.0 and 0.05 < study["noise_std_kN"] < 0.5
     assert study["online_ann_max_iterations"] == 2
     assert study["online_ann_single_precision_hessian"] is True  # the default fit's
