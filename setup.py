@@ -4,7 +4,7 @@ The same source runs compiled (the default install) or pure: with ``FRESCO_BRIDG
 when mypyc or a C compiler is missing or fails, nothing is compiled and the install still
 succeeds (a message says so). Every build first removes extensions it will not rebuild (a
 pure install, a module taken off the list), so no old build shadows a source. What the
-compiled step path saves: BENCHMARKS.md, issue 8, session 7.
+compiled step path saves: BENCHMARKS.md, "Step cost and scaling".
 """
 
 from __future__ import annotations

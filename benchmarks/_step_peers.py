@@ -140,7 +140,7 @@ def opensees_client_main(port: int | None, steps: int) -> None:
         ops.uniaxialMaterial("Elastic", 1, K_REFERENCE)
         ops.element("zeroLength", 1, 0, 1, "-mat", 1, "-dir", 1)
     # UniformExcitation integrates the series over its whole span when it is built: a span of
-    # the run only (a 1e6-s span took 40 s here before the first step).
+    # the run only (a span of 1e6 s delays the first step by tens of seconds).
     t_end = (steps + 10) * DT
     ops.timeSeries("Trig", 1, 0.0, t_end, 1.0 / ACCEL_FREQUENCY, "-factor", ACCEL_AMPLITUDE)
     ops.pattern("UniformExcitation", 1, 1, "-accel", 1)

@@ -28,8 +28,8 @@ from pathlib import Path
 from types import ModuleType
 
 # Paths relative to the repository root, roughly in the order of a step (transport → reply →
-# record). Left interpreted on purpose: ``steps.py`` (``CommittedStep`` is subclassed and sets its
-# slots through descriptors, which a native class lacks), ``controls/sim.py`` and
+# record). Left interpreted on purpose: ``site_output.py`` (``CommittedStep`` is subclassed and
+# sets its slots through descriptors, which a native class lacks), ``controls/sim.py`` and
 # ``sim_actuator/models/`` (base classes of every controller kind and law, shared with the numba
 # drives), ``indicators.py`` (runs per batch, not per step), ``record/syncer.py`` (a compiled
 # ``threading.Thread`` subclass crashed the garbage collector). Figures: ``BENCHMARKS.md``,

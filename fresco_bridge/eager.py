@@ -2,9 +2,10 @@
 
 The hot path of a site (decode a request, ask the controller, encode the reply) completes
 without ever suspending when the controller is in-process. Running it as a task per message
-would add a scheduler round trip (~10 µs) to every request; instead the connection steps the
-handler coroutine directly and only hands it to a task when it really waits on something
-(a network controller). Python 3.12's eager task factory does the same; we are on 3.11.
+would add a scheduler round trip to every request (a visible share of an in-process step:
+BENCHMARKS.md, "Step cost and scaling"); instead the connection steps the handler coroutine
+directly and only hands it to a task when it really waits on something (a network controller).
+Python 3.12's eager task factory does the same; we are on 3.11.
 """
 
 from __future__ import annotations

@@ -374,7 +374,7 @@ class OnlineMonitor:
             raise IndicatorError(f"OnlineMonitor: fei_every must be >= 1, got {self.fei_every}")
         self.warn_tracking_error = warn_tracking_error
         self.warn_ti_rate = warn_ti_rate
-        # rings of C doubles: a store is a few ns (a numpy scalar store ~0.1 µs, once a step),
+        # rings of C doubles: a store is far cheaper than a numpy scalar store (once a step),
         # no float object is kept alive per slot, and the FEI reads them without a copy
         self._cmd = array("d", bytes(8 * window))
         self._meas = array("d", bytes(8 * window))

@@ -14,7 +14,7 @@ the calibration samples the fits use. The residual's autocorrelation is delibera
 discounted (N_eff = N (1 − ρ)/(1 + ρ)): the correlated part of a baseline's residual is the
 misfit being compared, not noise — with an effect in the record (pinching, a gap) ρ reaches
 0.98-0.99 and the discounted N_eff of 10-20 samples let the 3-parameter bilinear win over a
-Bouc-Wen law that fitted 25 % better (measured on development records). Families within
+Bouc-Wen law that fitted clearly better (BENCHMARKS.md, "Diagnosis"). Families within
 :data:`BIC_EVIDENCE` of the lowest are not distinguished by the data: the simplest of them
 (fewest parameters, then the order of :data:`AUTO_FAMILIES`) is kept.
 """

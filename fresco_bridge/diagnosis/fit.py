@@ -146,8 +146,9 @@ def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None,
         r = problem.fun(x0)
         return Fit(spec, problem.values(x0), {}, float(np.mean(r * r)), problem.evaluations,
                    True, "nothing to fit")
-    # One BLAS thread: the SVD of a tall Jacobian took 18 ms with two threads on a loaded
-    # 2-core machine and 2 ms with one (measured); records run in parallel processes instead.
+    # One BLAS thread: on a loaded 2-core machine the SVD of a tall Jacobian is many times
+    # slower with two threads than with one (BENCHMARKS.md, "Diagnosis"); records run in
+    # parallel processes instead.
     with threadpool_limits(1):
         result = bounded_least_squares(problem.fun, x0, problem.lo, problem.hi, scale="jac",
                                        max_nfev=max_evaluations, jac=problem.jac,

@@ -64,7 +64,7 @@ REALISM: dict[str, str] = {
     "sensor_bias": "as the plain bench",
     "sensor_noise": "as the plain bench",
 }
-"""What the realism records draw (the bench's definition, printed in BENCHMARKS.md)."""
+"""What the realism records draw (the bench's definition, printed in BENCHMARKS.md, "Diagnosis")."""
 
 
 def _specimen(rng: np.random.Generator) -> tuple[str, dict[str, float]]:

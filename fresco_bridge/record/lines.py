@@ -1,8 +1,9 @@
-"""The record's line format: a lean encoder (format 3) and one decoder for every format.
+"""The record's line format: a lean encoder (format 4) and one decoder for every format.
 
-Format 1 (until issue 8) wrote every field on every line: ``seq``, ``t``, ``kind``, ``site``,
-``session`` and the values, 8 lines and ~1160 bytes per committed 1-DOF step, most of it
-repeated. Format 2 writes each line as a JSON object too, but only what changed:
+Format 1 (the oldest; still read) wrote every field on every line: ``seq``, ``t``, ``kind``,
+``site``, ``session`` and the values, 8 lines per committed 1-DOF step, most of it repeated
+(BENCHMARKS.md, "Record size and durability"). Format 2 writes each line as a JSON object too,
+but only what changed:
 
 - no ``seq``: a line's sequence number is its position (the previous line's + 1);
 - ``site`` and ``session`` only when they differ from the line before;
@@ -16,7 +17,7 @@ repeated. Format 2 writes each line as a JSON object too, but only what changed:
 - numbers in the shortest form that reads back to the same double (``repr``); non-finite
   values as the strings ``"nan"``/``"inf"``/``"-inf"``, as in format 1.
 
-Format 3 (issue 8, the default since) is format 2 plus the **step line**: a committed step's
+Format 3 is format 2 plus the **step line**: a committed step's
 trial and daq lines, its commit line and the monitor line of the step before, folded into one
 line written at the commit (one line per step instead of eight; the Python formatting of the
 lines was the largest cost left on the step path)::
@@ -37,9 +38,10 @@ lines was the largest cost left on the step path)::
 - ``site``/``session`` as on every line; ``t`` is when the line was written (the commit), and
   the lines it stands for read back with that ``t``.
 
-Format 4 (issue 8, session 5) is format 3 plus the **monitors line**, the monitor lines of
-consecutive committed steps of a site in one line, written when the online monitors run for the
-record alone (no MQTT, no metrics: the telemetry taps then batch them, ``telemetry/taps.py``)::
+Format 4 (``FORMAT_VERSION``, what this version writes) is format 3 plus the **monitors line**,
+the monitor lines of consecutive committed steps of a site in one line, written when the online
+monitors run for the record alone (no MQTT, no metrics: the telemetry taps then batch them,
+``telemetry/taps.py``)::
 
     {"t":…,"kind":"monitors","step":S,"v":[V1,V2,…]}
 
@@ -94,7 +96,7 @@ def opt(v: float | None) -> str:
 
 
 class LineEncoder:
-    """Format-3 lines; remembers what the file already says (not thread-safe).
+    """Format-4 lines; remembers what the file already says (not thread-safe).
 
     Every line it returns must reach the file in order: the next lines are written relative
     to it.
@@ -109,8 +111,9 @@ class LineEncoder:
         self._nums_of: tuple[float, ...] | None = None
         self._nums = ""
         """The last vector formatted and its text: an in-process specimen measures the very
-        command tuple it was sent, so its daq disp is formatted once, not twice (~0.5 µs a
-        number: 64 DOFs)."""
+        command tuple it was sent, so its daq disp is formatted once, not twice (formatting
+        numbers is a large share of the record's cost at 64 DOFs: BENCHMARKS.md, "Multi-DOF
+        elements")."""
         # per site: (session, step, time, trial, ctrl); (session, step, disp, force);
         # (session, step, time); (session, step, (err, ti, nrms, fei_amp, fei_delay))
         self._trial: dict[str, tuple[int, int, float, tuple[float, ...], tuple[float, ...]]] = {}

@@ -1,8 +1,8 @@
 """The run record's group-commit thread (``RunRecord``'s fdatasync, beside the step loop).
 
 Its own module, not compiled: ``record/writer.py`` is compiled with mypyc (setup.py), and a
-compiled subclass of ``threading.Thread`` crashed the garbage collector (mypy 2.4.1; BENCHMARKS.md
-issue 8, session 7). It runs once per sync, not per step.
+compiled subclass of ``threading.Thread`` crashed the garbage collector (mypyc 2.4.1;
+BENCHMARKS.md, "Step cost and scaling"). It runs once per sync, not per step.
 """
 
 from __future__ import annotations

@@ -11,8 +11,8 @@ against a power loss:
   ``fdatasync`` for every commit written since the last one, at most once per
   ``sync_interval`` (default 50 ms); an event (hold, fault, session change) asks for a sync at
   once. A power loss can cost the commits of the last ``sync_interval`` plus the duration of
-  one ``fdatasync`` (typically < 1 ms on a local SSD, 2–7 ms measured on a virtio disk): at
-  most ≈ 60 ms of steps; the step loop never waits for the disk.
+  one ``fdatasync`` in flight (BENCHMARKS.md, "Record size and durability", gives the window
+  measured); the step loop never waits for the disk.
   ``sync_interval = 0`` syncs after every commit (still off the step loop).
 - ``fsync="inline"``: the bridge waits for ``fdatasync`` at every commit and event.
 - ``fsync="off"``: the kernel writes back when it likes (30 s on Linux by default).
@@ -49,8 +49,8 @@ _os_write = os.write
 DEFAULT_SYNC_INTERVAL = 0.05
 """Group commit: at most one fdatasync per this many seconds (events sync at once). Why 50 ms,
 not 10: every sync wakes the syncer thread several times (timer, GIL hand-offs, three I/O
-completions on ext4) on the CPU the step loop runs on; at 10 ms that cost ≈ 3–10 % of a
-0.45 ms step, at 50 ms a fifth of it (BENCHMARKS.md issue 8, session 4)."""
+completions on ext4) on the CPU the step loop runs on; at 10 ms that is a measurable share of
+a fast OpenSees step, at 50 ms a fifth of it (BENCHMARKS.md, "Record size and durability")."""
 PENDING_LIMIT = 256
 """A site's trials waiting for its commit past this many items are written as format-2 lines
 (an integrator iterating for ever without committing neither grows the bridge's memory nor

@@ -71,9 +71,9 @@ class TcpConnection(asyncio.Protocol):
             _keepalive(sock)
             if _QUICKACK is not None:
                 sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
-                # uvloop's transport socket builds a socket object for every call (~2 µs, up to
-                # 4 re-arms a step): re-arm through our own handle of the same connection (a
-                # duplicate descriptor, closed with the connection)
+                # uvloop's transport socket builds a socket object for every call, up to 4
+                # re-arms a step on the step path: re-arm through our own handle of the same
+                # connection (a duplicate descriptor, closed with the connection)
                 self._ack_sock = socket.socket(sock.family, sock.type, sock.proto,
                                                fileno=os.dup(sock.fileno()))
                 self._quickack = self._ack_sock.setsockopt

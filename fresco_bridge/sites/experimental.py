@@ -330,7 +330,7 @@ class ExperimentalSite(CommandGate):
         """From now on this session's answers are NaN, until the client sends DIE or leaves.
 
         Closing the connection cannot stop OpenSees: its genericClient ignores a failed recv
-        and spins at full CPU forever (measured). A NaN force can: Newton fails to converge
+        and spins at full CPU forever (observed). A NaN force can: Newton fails to converge
         (``analyze`` returns < 0, the script stops and sends DIE), a non-iterative scheme ends
         with NaN results — never a plausible run built on forces the specimen did not give.
         """

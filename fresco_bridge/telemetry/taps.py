@@ -96,10 +96,10 @@ class MonitorBatch:
     and runs the monitor over them in batches, one monitors line (``record/lines.py``, format
     4) per batch.
 
-    Why: per step, the monitor's update, its sample and its share of the step line cost
-    ≈ 7 µs of the step loop's CPU in process, more between the client's context switches
-    (BENCHMARKS.md, issue 8, session 5); in a batch they run in a warm loop, and a step costs
-    one append and three comparisons.
+    Why: per step, the monitor's update, its sample and its share of the step line are a
+    visible share of the step loop's CPU, more between the client's context switches
+    (BENCHMARKS.md, "Telemetry"); in a batch they run in a warm loop, and a step costs one
+    append and three comparisons.
 
     The same samples, warnings and record values as ``SiteTaps`` (the same ``OnlineMonitor``
     fed the same pairs in the same order). What changes is *when* a sample is computed and

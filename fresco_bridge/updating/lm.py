@@ -131,7 +131,8 @@ _CONTROLLER: ThreadpoolController | None = None
 
 
 def one_blas_thread() -> Any:
-    """A context that limits every loaded BLAS pool to one thread (~0.1 ms to enter)."""
+    """A context that limits every loaded BLAS pool to one thread. Entering it calls into every
+    loaded BLAS library, so it wraps a whole fit, never one iteration."""
     global _CONTROLLER
     if _CONTROLLER is None:
         _CONTROLLER = ThreadpoolController()

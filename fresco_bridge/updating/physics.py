@@ -49,7 +49,8 @@ FloatArray = npt.NDArray[np.float64]
 
 BOUC_WEN_DZ_MAX = 0.05
 """RK4 step of the law in z (fit and online alike): 5x the specimen default, a model not a
-reference (the fit absorbs the integration error; keeps an online step well under 1 ms)."""
+reference (the fit absorbs the integration error; keeps an online step cheap: BENCHMARKS.md,
+"Online updating")."""
 
 _FIT_STRIDE = 2
 _FIT_EVALUATIONS = 60
@@ -164,8 +165,8 @@ class PhysicsResidual(OwnsTwin):
                  law: dict[str, float] | None = None, shrink: bool = True,
                  **rls: Any) -> None:
         """``law``: Bouc-Wen parameters (fitted to ``offline`` when None); ``shrink``: the
-        residual's ridge pulls towards zero (BENCHMARKS.md: the residual learned on the tested
-        element otherwise transfers to the twin where the law alone was right)."""
+        residual's ridge pulls towards zero (the residual learned on the tested element otherwise
+        transfers to the twin where the law alone was right: BENCHMARKS.md, "Online updating")."""
         disp = np.asarray(offline[0], dtype=np.float64)
         force = np.asarray(offline[1], dtype=np.float64)
         self.law = fit_bouc_wen(disp, force) if law is None else dict(law)

@@ -229,12 +229,12 @@ def make_online_ann(*, model: Any = None, model_file: str | Path | None = None,
                     max_fail: int | None = None, single_precision_hessian: bool | None = None,
                     seed: int = 0, pretrain_iterations: int = 1000) -> Updater:
     """The paper's online ANN: LM every step, by default 8 iterations with a float32 J^T W J
-    (``ONLINE_ANN_LM``: equal in accuracy to the paper's 50 in float64, BENCHMARKS.md updating
-    part 12); ``max_iterations=50, single_precision_hessian=False`` is the paper's exact fit.
+    (``ONLINE_ANN_LM``: equal in accuracy to the paper's 50 in float64, BENCHMARKS.md, "Online
+    updating"); ``max_iterations=50, single_precision_hessian=False`` is the paper's exact fit.
 
     ``rtol`` adds a relative-decrease stop, ``divide``/``max_fail`` MATLAB's validation stop
-    (BENCHMARKS.md part 6 measures what they change). ``seed`` drives both the pre-training
-    start (with ``offline``) and the random choice of offline samples.
+    (BENCHMARKS.md, "Online updating", measures what they change). ``seed`` drives both the
+    pre-training start (with ``offline``) and the random choice of offline samples.
     """
     from .updaters import ONLINE_ANN_DIVIDE, ONLINE_ANN_LM, OnlineAnnUpdater, online_lm_options
 

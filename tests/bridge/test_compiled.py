@@ -1,7 +1,7 @@
 """The compiled step path (setup.py, ``fresco_bridge/_compiled.py``): what is installed really is
 compiled (or, with ``FRESCO_BRIDGE_PURE=1``, really pure), no build is stale, a pure build
 compiles nothing and removes old extensions, and the compiled sources avoid the three mypyc
-pitfalls found when they were compiled (BENCHMARKS.md issue 8, session 7)."""
+pitfalls found when they were compiled (BENCHMARKS.md, "Step cost and scaling")."""
 
 from __future__ import annotations
 

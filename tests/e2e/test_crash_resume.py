@@ -1,4 +1,4 @@
-"""kill -9 of a real ``fresco-bridge serve``, then restart and resume (issue 11, defect 10).
+"""kill -9 of a real ``fresco-bridge serve``, then restart and resume.
 
 The restart reports the interrupted run (log, ``runs list`` state, ``run.json``), removes its
 stale control socket; ``export`` reports the torn last line; ``runs resume`` continues the

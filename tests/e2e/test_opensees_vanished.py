@@ -1,7 +1,7 @@
-"""A real OpenSeesPy ``genericClient -udp`` killed mid-analysis (no DIE) must not lock its site
-(issue 11, defect 3): after ``bridge.session_idle_timeout`` the site is free and the next
-OpenSees process is served. Before the fix the second one waited for the handshake reply
-forever (its own deadline here: the harness timeout).
+"""A real OpenSeesPy ``genericClient -udp`` killed mid-analysis (no DIE) must not lock its site:
+after ``bridge.session_idle_timeout`` the site is free and the next OpenSees process is served.
+A site that stayed locked would leave the second one waiting for the handshake reply forever
+(its own deadline here: the harness timeout).
 """
 
 from __future__ import annotations

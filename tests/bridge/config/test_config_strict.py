@@ -1,5 +1,5 @@
-"""Strict config (issue 11, defects 2, 6, 9): every number finite, every value its exact type,
-allowlists explicit and valid, a non-UTF-8 file named in a clear error.
+"""Strict config: every number finite, every value its exact type, allowlists explicit and
+valid, a non-UTF-8 file named in a clear error.
 
 The finiteness test walks every float and int field of every config model (bridge, record,
 telemetry, site, limits and each controller kind), so a field added later is covered too.

@@ -2,7 +2,7 @@
 
 What is checked is the generator's contract (the truth it reports is what the rig was given,
 the forms differ from the candidates', the specimen law varies) and that the bench runs the
-mode end to end; its accuracy is a benchmark (BENCHMARKS.md), not a test.
+mode end to end; its accuracy is a benchmark (BENCHMARKS.md, "Diagnosis"), not a test.
 """
 
 from __future__ import annotations

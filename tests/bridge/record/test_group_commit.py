@@ -1,4 +1,4 @@
-"""Group commit (issue 8): each commit reaches the kernel at once, fdatasync at most every
+"""Group commit: each commit reaches the kernel at once, fdatasync at most every
 ``sync_interval`` for all commits since the last one, events synced at once.
 
 ``kill -9`` of a real bridge right after its last commit loses nothing even when no

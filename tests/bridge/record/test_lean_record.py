@@ -1,6 +1,6 @@
-"""The lean record (issue 8): format 2 says each value once, and reads back as format 1 did.
+"""The lean record: format 2 says each value once, and reads back as format 1 did.
 
-A format-1 run made by the bridge before this change (``data/format1-run``: 12 Newton steps on a
+A format-1 run made by a bridge that wrote format 1 (``data/format1-run``: 12 Newton steps on a
 bilinear spring, monitor lines, a HOLD) is replayed through today's writer: the format-2 file
 must read back to exactly the same lines (only ``t`` differs), at well under half the bytes.
 The format-1 run itself is read unchanged by ``export``, ``runs show``, ``report`` and the HDF5

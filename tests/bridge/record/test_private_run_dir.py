@@ -1,4 +1,4 @@
-"""Secrets and file modes of the run directory (issue 11, defect 7), and its live/closed state.
+"""Secrets and file modes of the run directory, and its live/closed state.
 
 The config snapshot never holds a secret (every ``SecretStr`` of the validated config is
 redacted from the text, comments included); the run directory is 0700 and its files 0600

@@ -1,6 +1,6 @@
-"""Format 3 (issue 8): a committed step is one line, and reads back as the lines it stands for.
+"""Format 3: a committed step is one line, and reads back as the lines it stands for.
 
-A real format-2 run made by the bridge before format 3 (``data/format2-run``: 40 Newton steps of
+A real format-2 run made by a bridge that wrote format 2 (``data/format2-run``: 40 Newton steps of
 four iterations on a bilinear spring, monitor lines with FEI values, a HOLD) is replayed
 through today's writer and must read back to exactly the same lines (only ``t`` differs); it
 is read unchanged by every reader, and resumed by today's bridge it reads as one record.

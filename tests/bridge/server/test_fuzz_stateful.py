@@ -1,8 +1,8 @@
-"""Hypothesis stateful fuzzing of a live bridge (issue 11): mixed sessions, malformed and
-adversarial frames, interleavings, vanishing peers, operator commands; after every step the
-invariants of ``FuzzTarget.check`` hold (a good client is served correctly, no non-finite or
-out-of-limit command reached a controller, memory and file descriptors bounded, the record
-parses). The long run (>= 100 000 inputs) is ``benchmarks/bench_fuzz.py``.
+"""Hypothesis stateful fuzzing of a live bridge: mixed sessions, malformed and adversarial
+frames, interleavings, vanishing peers, operator commands; after every step the invariants of
+``FuzzTarget.check`` hold (a good client is served correctly, no non-finite or out-of-limit
+command reached a controller, memory and file descriptors bounded, the record parses). The
+long run (>= 100 000 inputs) is ``benchmarks/bench_fuzz.py``.
 """
 
 from __future__ import annotations

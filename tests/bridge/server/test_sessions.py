@@ -1,4 +1,4 @@
-"""Sessions cannot lock, exhaust or flood a site (issue 11, defects 1, 3, 4, 5, 8).
+"""Sessions cannot lock, exhaust or flood a site.
 
 A real bridge in a thread, real TCP/UDP sockets on loopback: a UDP client that vanishes
 without DIE, a re-handshake from the same peer, an idle or half-open TCP connection, an idle

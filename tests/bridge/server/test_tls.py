@@ -1,4 +1,4 @@
-"""Mutual TLS as OpenFresco's SSL channel (issue 11): certificates made at test time with the
+"""Mutual TLS as OpenFresco's SSL channel: certificates made at test time with the
 ``openssl`` CLI; a Python ``ssl`` client and ``openssl s_client`` speak the element protocol.
 
 Refused and logged: a client certificate from another CA, an expired one, one issued through an

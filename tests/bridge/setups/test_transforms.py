@@ -1,8 +1,9 @@
-"""Setup transforms (issue 8): identity costs nothing, any other T is one BLAS product.
+"""Setup transforms: identity costs nothing, any other T is one BLAS product.
 
-``Tᵀ k T`` used to be a pure-Python O(n³) loop on every stiffness request (18 ms at 64 DOFs);
-the identity now passes values through untouched and a general T goes through numpy. Both are
-checked against the explicit sum, and a 64-DOF element is served end to end.
+``Tᵀ k T`` on every stiffness request as a pure-Python O(n³) loop would dominate a 64-DOF step
+(BENCHMARKS.md, "Multi-DOF elements"): the identity passes values through untouched and a
+general T goes through numpy. Both are checked against the explicit sum, and a 64-DOF element
+is served end to end.
 """
 
 from __future__ import annotations

@@ -23,7 +23,8 @@ STEPS = 200
 def study(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     out = tmp_path_factory.mktemp("study")
     # online_ann capped at 2 LM iterations and a short pre-training: the paper's 50 would cost
-    # minutes here (BENCHMARKS.md); the faithful default is exercised in tests/bridge/updating.
+    # minutes here (BENCHMARKS.md, "Online updating"); the faithful default is exercised in
+    # tests/bridge/updating.
     code = main(["study", "paper", "--specimen", "menegotto-pinto", "--steps", str(STEPS),
                  "--noise", "1", "--seed", "3", "--workers", "1", "--ann-iterations", "2",
                  "--ann-option", "divide=none",

@@ -1,10 +1,10 @@
-"""The online monitor in batches (issue 8, session 5): when the run record is its only consumer,
-``MonitorBatch`` runs it over several committed steps at once and writes one monitors line
-(format 4). The record must read back exactly as with ``SiteTaps`` (the monitor fed every
-step), a warning must be raised at the commit of the step that trips it (never later), the
-samples a batch holds must reach the file before the site's next event, within
-``MONITOR_BATCH_STEPS`` steps and within ``MONITOR_BATCH_DELAY`` s, and the daemon must batch
-only when nothing else (MQTT, metrics) needs each step's sample at once.
+"""The online monitor in batches: when the run record is its only consumer, ``MonitorBatch``
+runs it over several committed steps at once and writes one monitors line (format 4). The
+record must read back exactly as with ``SiteTaps`` (the monitor fed every step), a warning
+must be raised at the commit of the step that trips it (never later), the samples a batch
+holds must reach the file before the site's next event, within ``MONITOR_BATCH_STEPS`` steps
+and within ``MONITOR_BATCH_DELAY`` s, and the daemon must batch only when nothing else (MQTT,
+metrics) needs each step's sample at once.
 """
 
 from __future__ import annotations

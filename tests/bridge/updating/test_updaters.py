@@ -219,7 +219,7 @@ def _feed_same(u: Updater, d: np.ndarray, f: np.ndarray) -> list[float]:
 def test_online_ann_default_is_the_papers_method_at_8_iterations(small_ann: AnnModel) -> None:
     """No options: 500 offline + 200 window samples (mu 0.1), LM damping 1e-5, momentum 0.1,
     no relative-decrease stop; 8 iterations with a float32 J^T W J (equal in accuracy to the
-    paper's 50, BENCHMARKS.md updating part 12). The paper's exact fit is two options away."""
+    paper's 50: BENCHMARKS.md, "Online updating"). The paper's exact fit is two options away."""
     from fresco_bridge.updating.updaters import ONLINE_ANN_LM, PAPER_ONLINE_LM
 
     u = make_updater("online_ann", model=small_ann)
