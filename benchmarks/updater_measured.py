@@ -30,7 +30,9 @@ size of the study's records). Cases, each the registry's defaults, run as a user
     python -m benchmarks.updater_measured [--quick] [-o out/updater_measured] [--workers 2]
         [--only SUBSTRING] [--decimate 8] [--lag] [--self] [--cases a,b]
 
-Prints one table per pair and a summary, and writes ``summary.json``. Nothing is tuned to these
+Prints one table per pair, a summary and the verdict on the measured friction damper's target
+(``online_improved``'s RMS below the calibrated Bilinear's on every pair, the bad pairs named),
+and writes ``summary.json`` (the verdict under ``target``). Nothing is tuned to these
 data: they were first run with the options above, decided before. Needs ``../shared`` (exits
 with a message naming the missing directory). Feeds BENCHMARKS.md, "Online updating" (the
 measured friction damper). ``--quick``: one pair, every 128th sample, one worker, into a
@@ -210,6 +212,28 @@ def table(rows: list[dict[str, Any]], key: str = "maeth_kN") -> str:
     return "\n".join(lines)
 
 
+def rms_target(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The target: ``online_improved``'s RMS below the calibrated Bilinear's on every pair run
+    with both (the ``--self`` pairs are the paper layout, not scored); a failed case is bad."""
+    by_pair: dict[str, dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        by_pair.setdefault(r["pair"], {})[r["case"]] = r
+    own = {pair_name(*p) for p in SELF_PAIRS}
+    scored, bad = 0, []
+    for pair, got in by_pair.items():
+        mine, base = got.get("online_improved"), got.get("calibrated_bilinear")
+        if pair in own or mine is None or base is None:
+            continue
+        scored += 1
+        if "error" in mine or "error" in base:
+            bad.append(f"{pair} ({mine.get('error') or base.get('error')})")
+        elif not mine["rms_kN"] < base["rms_kN"]:
+            bad.append(f"{pair} (RMS {mine['rms_kN']:.3f} kN, Bilinear {base['rms_kN']:.3f} kN)")
+    verdict = "not run" if not scored else ("missed" if bad else "met")
+    return {"target": "online_improved RMS below the calibrated Bilinear on every pair",
+            "verdict": verdict, "pairs": scored, "meeting": scored - len(bad), "bad": bad}
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--out", type=Path, default=Path("out/updater_measured"))
@@ -253,11 +277,15 @@ def main(argv: Sequence[str] | None = None) -> None:
             print(f"{r['pair']:40s} {r['case']:22s} MAETH {r['maeth_kN']:7.3f} kN  RMS "
                   f"{r['rms_kN']:6.3f} kN  update median {r['update_ms']['median']:7.3f} ms  "
                   f"p99 {r['update_ms']['p99']:7.3f} ms  wall {r['wall_s']:6.1f} s")
+    target = rms_target(rows)
     summary = {"decimate": args.decimate, "lag": args.lag,
                "offline": OFFLINE_RECORD, "offline_steps": OFFLINE_STEPS, "rows": rows,
-               "wall_s": time.perf_counter() - start}
+               "target": target, "wall_s": time.perf_counter() - start}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     print(f"wrote {args.out / 'summary.json'} ({summary['wall_s']:.0f} s)")
+    print(f"target: {target['target']}: {target['verdict']}"
+          + (f", {target['meeting']} of {target['pairs']} pair(s)" if target["pairs"] else "")
+          + "".join(f"\n  bad: {b}" for b in target["bad"]))
 
 
 if __name__ == "__main__":

@@ -1,4 +1,7 @@
-"""``fresco-bridge study paper``: parser and handler (registered by ``fresco_bridge.cli``)."""
+"""``fresco-bridge study paper``: parser and handler (registered by ``fresco_bridge.cli``).
+
+It writes every run's tables and a summary, and ends its output with the verdicts on the
+restated updating targets (BENCHMARKS.md, "Online updating")."""
 
 from __future__ import annotations
 
@@ -78,7 +81,8 @@ def add_study_parser(sub: Any) -> None:
                    help="stop after this many steps (default: the whole record)")
     p.add_argument("--ann-iterations", type=_positive_int, default=None, metavar="N",
                    help="cap online_ann's LM at N iterations per step (default 8, equal in "
-                        "accuracy to the paper's 50 in BENCHMARKS.md; recorded in study.json)")
+                        "accuracy to the paper's 50: BENCHMARKS.md, 'Online updating'; "
+                        "recorded in study.json)")
     p.add_argument("--ann-option", type=parse_option, action="append", default=[],
                    metavar="KEY=VALUE",
                    help="an online_ann option (JSON value), repeatable, e.g. divide=dividerand "
@@ -157,7 +161,13 @@ def _motions(args: argparse.Namespace, seeds: list[int]) -> list[tuple[str, Any,
 def _run(args: argparse.Namespace) -> int:
     from fresco_bridge.progress import ProgressBar
     from fresco_bridge.study.paper import RunSpec, StudyError, available_cases, run_study
-    from fresco_bridge.study.report import markdown_tables, summary_table, write_figures
+    from fresco_bridge.study.report import (
+        markdown_tables,
+        score_targets,
+        summary_table,
+        targets_markdown,
+        write_figures,
+    )
 
     seeds = args.seed or [1]
     cases = available_cases() if args.cases is None else tuple(
@@ -194,12 +204,15 @@ def _run(args: argparse.Namespace) -> int:
             write_figures(document, histories, run_dir)
         print(table)
         documents.append(document)
-    (args.out / "summary.json").write_text(json.dumps({"runs": documents}, indent=2),
-                                           encoding="utf-8")  # fmt: skip
+    targets = score_targets(documents)
+    (args.out / "summary.json").write_text(
+        json.dumps({"runs": documents, "targets": targets}, indent=2), encoding="utf-8")
     summary = summary_table(documents)
-    (args.out / "summary.md").write_text(summary, encoding="utf-8")
+    verdicts = targets_markdown(targets)
+    (args.out / "summary.md").write_text(f"{summary}\n{verdicts}", encoding="utf-8")
     print(summary)
     print(f"wrote {args.out}/summary.json, summary.md and one directory per run (study.json, "
           f"table.md"
           f"{', PNGs' if not args.no_plots else ''})", file=sys.stderr)
+    print(verdicts)
     return 0

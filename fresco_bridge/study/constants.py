@@ -10,7 +10,8 @@ docstring says why.
 
 from __future__ import annotations
 
-from typing import Final
+from dataclasses import dataclass
+from typing import Final, Literal
 
 CASES: Final = (
     "reference",
@@ -47,3 +48,45 @@ MENEGOTTO_PINTO_DAMPER: Final[dict[str, float]] = {
 hardening per yield excursion unit; illustrative, not calibrated to a test."""
 
 SPECIMENS: Final = ("bwbn", "menegotto-pinto")
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """One restated updating target, scored per causality over the runs it applies to.
+
+    Every target is about ``TARGET_SUBJECT`` in ``TARGET_LAYOUT``. ``kind``: ``reduction``
+    (each of ``reductions``, (metric, minimum % below ``TARGET_BASELINE``), on every run; with
+    ``median_pct``, also the median over the runs of the first metric's reduction), ``below``
+    (MAETH below the case ``rival`` on every run where it ran) or ``bounded`` (see
+    ``BOUNDED_PEAK_RATIO``). ``specimen`` / ``noise_pct`` None: every specimen / noise level.
+    """
+
+    name: str
+    kind: Literal["reduction", "below", "bounded"]
+    specimen: str | None = None
+    noise_pct: float | None = None
+    reductions: tuple[tuple[str, float], ...] = ()
+    median_pct: float | None = None
+    rival: str | None = None
+
+
+TARGET_SUBJECT: Final = "online_improved"
+TARGET_BASELINE: Final = "conventional_calibrated"
+TARGET_LAYOUT: Final = "generalisation"
+
+BOUNDED_PEAK_RATIO: Final = 2.0
+"""A run is *bounded* when the subject's metrics are finite and its peak |twin force| is at most
+this multiple of the peak true force. Our choice: a twofold overshoot is far beyond any fitted
+law's error, yet it flags a twin that has left the physics before its force diverges."""
+
+TARGETS: Final[tuple[TargetSpec, ...]] = (
+    TargetSpec("bwbn_noise0", "reduction", "bwbn", 0.0, (("maeth", 85.0), ("rmseth", 90.0))),
+    TargetSpec("bwbn_noise1", "reduction", "bwbn", 1.0, (("maeth", 80.0),)),
+    TargetSpec("menegotto_pinto", "reduction", "menegotto-pinto", None, (("maeth", 25.0),),
+               median_pct=50.0),
+    TargetSpec("below_online_ukf", "below", rival="online_ukf"),
+    TargetSpec("below_online_ann", "below", rival="online_ann"),
+    TargetSpec("bounded", "bounded"),
+)
+"""The updating targets, restated (BENCHMARKS.md, "Online updating"): what ``study paper``'s
+summary scores. A (specimen, noise) that no ``reduction`` target covers has no target."""
