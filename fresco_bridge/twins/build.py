@@ -1,0 +1,50 @@
+"""From the lab config to learners and twin controllers: one learner per source site, one
+twin controller per updatable site."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..config import ConfigError, LabConfig, SiteConfig
+from ..updating.base import UpdaterError
+from ..updating.histories import read_history
+from .controller import TwinController
+from .learner import Learner
+from .worker import LearnerSpec, TwinSpec
+
+__all__ = ["build_twins", "twin_spec"]
+
+
+def twin_spec(cfg: SiteConfig) -> TwinSpec:
+    """The updater of updatable site ``cfg`` with its data read (paths already resolved)."""
+    assert cfg.updater is not None
+    options: dict[str, Any] = dict(cfg.updater_options)
+    try:
+        if cfg.offline is not None:
+            history = read_history(cfg.offline)
+            options["offline"] = (history.disp, history.force)
+    except UpdaterError as exc:
+        raise ConfigError(f"site {cfg.name}: offline: {exc}") from None
+    if cfg.model is not None:
+        options["model_file"] = str(cfg.model)
+    return TwinSpec(cfg.name, cfg.updater, options)
+
+
+def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinController]]:
+    """``({source site: its learner}, {updatable site: its controller})`` (not started)."""
+    groups: dict[str, list[SiteConfig]] = {}
+    for scfg in config.sites:
+        if scfg.kind == "updatable":
+            assert scfg.learns_from is not None
+            groups.setdefault(scfg.learns_from, []).append(scfg)
+    learners: dict[str, Learner] = {}
+    controllers: dict[str, TwinController] = {}
+    for source, twins in groups.items():
+        spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
+        learner = learners[source] = Learner(source, spec,
+                                             deadline=min(t.learner_deadline for t in twins))
+        for t in twins:
+            assert t.updater is not None
+            controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
+                                                 causality=t.causality)
+    return learners, controllers

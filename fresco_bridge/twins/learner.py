@@ -1,0 +1,349 @@
+"""The learner of one source site, on the bridge's side: its worker process, the messages to
+it and its answers, never blocking the event loop.
+
+Messages go out through a bounded queue with ``put_nowait``; when it is full they wait in a
+local backlog that a flush task drains, in order (training data is never dropped). Answers come
+back through a reader thread and ``call_soon_threadsafe``. Every wait has a deadline; a missed
+deadline or a dead worker is a *learner loss*: pending and further requests fail
+(``LearnerError``: the twin site HOLDs), the worker is replaced and caught up by replaying the
+ordered log of what changes its state (the source's steps, each twin's committed trial), and
+the learner is live again once the new worker has answered past the end of that log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import math
+import multiprocessing
+import multiprocessing.queues
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable
+from multiprocessing.process import BaseProcess
+from typing import Any
+
+from ..site_output import CommittedStep
+from .worker import LearnerSpec, Message, Reply, worker_main
+
+log = logging.getLogger("fresco_bridge.twins")
+
+START_DEADLINE = 120.0
+"""Seconds a new worker may take to import, read its data and build its updaters."""
+QUEUE_SIZE = 4096
+"""Messages in flight to the worker before the local backlog takes them."""
+FLUSH_PAUSE = 0.002
+"""Seconds the flush task waits for room in the queue between two attempts."""
+STOP_DEADLINE = 5.0
+"""Seconds a worker is given to end after the stop message, then it is killed."""
+
+EventSink = Callable[[str, str, dict[str, object]], None]
+"""``(kind, reason, extra)``: an event for the twin sites of this learner."""
+
+
+class LearnerError(Exception):
+    """The learner cannot answer (lost, catching up, or the twin refused the trial)."""
+
+
+class Learner:
+    """One source site's learner: a worker process with one updater per twin."""
+
+    def __init__(self, source: str, spec: LearnerSpec, *, deadline: float) -> None:
+        self.source = source
+        self.spec = spec
+        self.deadline = deadline
+        self.state = "stopped"
+        """``starting``, ``live``, ``lost``, ``catching-up`` or ``stopped``."""
+        self.reason = ""
+        self.source_step = 0
+        self.trained_through = 0
+        self.not_trained = 0
+        """Source steps with a non-finite measurement, never sent for training."""
+        self.losses = 0
+        self.log: list[Message] = []
+        """What changed the worker's state, in order: replayed to a new worker."""
+        self._last_trial: dict[str, float] = {}
+        self._sinks: list[EventSink] = []
+        self._ids = itertools.count(1)
+        self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._backlog: deque[Message | None] = deque()
+        self._flush: asyncio.Task[None] | None = None
+        self._restart: asyncio.Task[None] | None = None
+        self._proc: BaseProcess | None = None
+        self._inbox: multiprocessing.queues.Queue[Message | None] | None = None
+        self._reader: threading.Thread | None = None
+        self._generation = 0
+        self._ready: asyncio.Future[None] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._closing = False
+
+    def add_event_sink(self, sink: EventSink) -> None:
+        self._sinks.append(sink)
+
+    def _event(self, kind: str, reason: str, **extra: object) -> None:
+        for sink in self._sinks:
+            sink(kind, reason, extra)
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._proc is None else self._proc.pid
+
+    # -- the worker's life ------------------------------------------------------------------
+    async def start(self) -> None:
+        """Start the worker and wait (``START_DEADLINE``) until its updaters are built."""
+        self._loop = asyncio.get_running_loop()
+        self.state = "starting"
+        await self._spawn()
+        self.state = "live"
+        log.info("learner of %s: worker %s live (twins %s)", self.source, self.pid,
+                 ", ".join(f"{t.name}: {t.updater}" for t in self.spec.twins))
+
+    async def _spawn(self) -> None:
+        assert self._loop is not None
+        ctx = multiprocessing.get_context("spawn")
+        inbox: multiprocessing.queues.Queue[Message | None] = ctx.Queue(QUEUE_SIZE)
+        outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
+        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
+                           name=f"fresco-learner-{self.source}", daemon=True)
+        self._generation += 1
+        self._ready = self._loop.create_future()
+        self._backlog.clear()
+        await self._loop.run_in_executor(None, proc.start)
+        self._proc, self._inbox = proc, inbox
+        self._reader = threading.Thread(target=self._read, args=(proc, outbox, self._generation),
+                                        name=f"learner-reader-{self.source}", daemon=True)
+        self._reader.start()
+        try:
+            await asyncio.wait_for(asyncio.shield(self._ready), START_DEADLINE)
+        except TimeoutError:
+            raise LearnerError(f"learner of {self.source}: the worker was not ready within "
+                               f"{START_DEADLINE:g} s") from None
+
+    def _read(self, proc: BaseProcess, outbox: multiprocessing.queues.Queue[Reply],
+              generation: int) -> None:
+        """The reader thread of one worker: its answers to the loop, then its end."""
+        while not self._closing and generation == self._generation:
+            try:
+                reply = outbox.get(timeout=0.2)
+            except queue.Empty:
+                if not proc.is_alive():
+                    self._call(self._died, generation, proc.exitcode)
+                    return
+                continue
+            except (EOFError, OSError):
+                self._call(self._died, generation, proc.exitcode)
+                return
+            self._call(self._answer, generation, reply)
+
+    def _call(self, fn: Callable[..., None], *args: Any) -> None:
+        loop = self._loop
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop closed: the bridge has stopped
+                loop.call_soon_threadsafe(fn, *args)
+
+    def _died(self, generation: int, code: int | None) -> None:
+        if generation != self._generation or self._closing:
+            return
+        reason = f"the worker process exited (code {code})"
+        if self._ready is not None and not self._ready.done():
+            self._ready.set_exception(LearnerError(reason))
+        else:
+            self._lose(reason)
+
+    def _answer(self, generation: int, reply: Reply) -> None:
+        if generation != self._generation:
+            return
+        kind = reply[0]
+        if kind == "ready":
+            if self._ready is not None and not self._ready.done():
+                self._ready.set_result(None)
+            return
+        if kind == "fatal":
+            if self._ready is not None and not self._ready.done():
+                self._ready.set_exception(LearnerError(reply[1]))
+            else:
+                self._lose(reply[1])
+            return
+        fut = self._pending.pop(reply[1], None)
+        if fut is None or fut.done():
+            if kind == "error":
+                log.error("learner of %s: %s", self.source, reply[2])
+            return  # an answer to a replayed message, or one whose wait ended
+        if kind == "error":
+            fut.set_exception(LearnerError(reply[2]))
+        else:
+            fut.set_result(reply[2:])
+
+    def _lose(self, reason: str) -> None:
+        """The worker is gone or silent: fail what waits, tell the twins, replace it."""
+        if self.state in ("lost", "stopped") or self._closing:
+            return
+        self.state, self.reason = "lost", reason
+        self.losses += 1
+        log.error("learner of %s LOST: %s; its twins HOLD, a new worker catches up",
+                  self.source, reason)
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(LearnerError(f"learner lost: {reason}"))
+        self._pending.clear()
+        self._event("learner-lost", f"learner of {self.source} lost: {reason}",
+                    losses=self.losses)
+        assert self._loop is not None
+        self._restart = self._loop.create_task(self._replace(), name=f"learner.{self.source}")
+
+    async def _replace(self) -> None:
+        """A new worker, caught up by replaying the log, then live again."""
+        await self._stop_worker(kill=True)
+        try:
+            await self._spawn()
+        except LearnerError as exc:
+            self.reason = str(exc)
+            log.error("learner of %s: no new worker: %s", self.source, exc)
+            return
+        self.state = "catching-up"
+        for msg in self.log:
+            self._put(msg)
+        try:
+            await self._request(("sync",), START_DEADLINE)
+        except LearnerError as exc:
+            self._lose(f"catching up failed: {exc}")
+            return
+        self.state, self.reason = "live", ""
+        log.warning("learner of %s: a new worker (%s) caught up over %d message(s); live",
+                    self.source, self.pid, len(self.log))
+        self._event("learner-restored", f"learner of {self.source} live again (worker "
+                    f"restarted, {len(self.log)} message(s) replayed)", losses=self.losses)
+
+    async def _stop_worker(self, *, kill: bool) -> None:
+        proc, inbox, reader = self._proc, self._inbox, self._reader
+        self._proc = self._inbox = self._reader = None
+        if proc is None:
+            return
+        self._generation += 1  # the old reader and its answers are ignored from now on
+        loop = asyncio.get_running_loop()
+        if not kill and inbox is not None:
+            with contextlib.suppress(queue.Full, ValueError, OSError):
+                inbox.put_nowait(None)
+            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
+        if proc.is_alive():
+            proc.kill()
+            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
+        if inbox is not None:
+            inbox.cancel_join_thread()
+            inbox.close()
+        if reader is not None:
+            await loop.run_in_executor(None, reader.join, 1.0)
+
+    async def close(self) -> None:
+        """Stop the worker (a clean end, then a kill past ``STOP_DEADLINE``)."""
+        self._closing = True
+        self.state = "stopped"
+        for task in (self._restart, self._flush):
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        await self._stop_worker(kill=False)
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(LearnerError("the bridge is stopping"))
+
+    # -- messages -----------------------------------------------------------------------------
+    def _put(self, msg: Message) -> None:
+        """``msg`` to the worker, after everything before it; never blocks."""
+        inbox = self._inbox
+        if inbox is None:
+            return
+        if not self._backlog:
+            try:
+                inbox.put_nowait(msg)
+                return
+            except queue.Full:
+                pass
+        self._backlog.append(msg)
+        if self._flush is None or self._flush.done():
+            assert self._loop is not None
+            self._flush = self._loop.create_task(self._drain(), name=f"learner.{self.source}")
+
+    async def _drain(self) -> None:
+        while self._backlog:
+            inbox = self._inbox
+            if inbox is None:
+                return
+            try:
+                inbox.put_nowait(self._backlog[0])
+            except queue.Full:
+                await asyncio.sleep(FLUSH_PAUSE)
+                continue
+            self._backlog.popleft()
+
+    def _send(self, msg: Message) -> None:
+        """A message that changes the worker's state: logged, and sent unless a new worker
+        is being started (the replay of the log will carry it)."""
+        self.log.append(msg)
+        if self.state in ("live", "catching-up"):
+            self._put(msg)
+
+    async def _request(self, msg: Message, deadline: float) -> tuple[Any, ...]:
+        assert self._loop is not None
+        rid = next(self._ids)
+        fut: asyncio.Future[tuple[Any, ...]] = self._loop.create_future()
+        self._pending[rid] = fut
+        self._put((msg[0], rid, *msg[1:]))
+        try:
+            return await asyncio.wait_for(fut, deadline)
+        except TimeoutError:
+            self._pending.pop(rid, None)
+            reason = f"no answer to {msg[0]} within {deadline:g} s"
+            self._lose(reason)
+            raise LearnerError(f"learner lost: {reason}") from None
+
+    def _check_live(self) -> None:
+        if self.state != "live":
+            raise LearnerError(f"learner of {self.source} is {self.state}"
+                               + (f" ({self.reason})" if self.reason else ""))
+
+    def step_committed(self, step: CommittedStep) -> None:
+        """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
+        d, f = step.daq_disp[0], step.daq_force[0]
+        self.source_step = step.step
+        if not (math.isfinite(d) and math.isfinite(f)):
+            self.not_trained += 1
+            log.warning("learner of %s: step %d has a non-finite measurement (d %r, F %r); not "
+                        "trained on", self.source, step.step, d, f)
+            self._event("not-trained", f"source {self.source} step {step.step}: non-finite "
+                        f"measurement (d {d!r} mm, F {f!r} kN) not trained on",
+                        source_step=step.step)
+            return
+        self._send(("observe", step.step, d, f))
+
+    async def trial(self, twin: str, d: float) -> tuple[float, float, int]:
+        """The twin's (force, tangent) at ``d`` and the source step it learned through."""
+        self._check_live()
+        self._last_trial[twin] = d
+        force, tangent, through = await self._request(("trial", twin, d), self.deadline)
+        self.trained_through = int(through)
+        return float(force), float(tangent), self.trained_through
+
+    def commit(self, twin: str) -> None:
+        """The twin's last trial becomes its committed state."""
+        self._check_live()
+        # the live worker has this trial already; a replay needs it before the commit
+        self.log.append(("trial", 0, twin, self._last_trial.get(twin, 0.0)))
+        self._send(("commit", twin))
+
+    async def initial(self, twin: str) -> float:
+        self._check_live()
+        (tangent,) = await self._request(("initial", twin), self.deadline)
+        return float(tangent)
+
+    def status(self) -> dict[str, object]:
+        behind = self.source_step - self.trained_through - 1
+        shown = self.state if self.state != "live" or behind <= 0 else f"behind {behind}"
+        return {"learner": shown, "learner_reason": self.reason or None,
+                "steps_trained": self.trained_through, "source_step": self.source_step,
+                "not_trained": self.not_trained, "learner_losses": self.losses,
+                "worker_pid": self.pid}

@@ -1,0 +1,94 @@
+"""An updatable site served to a real OpenSeesPy genericClient: the two-story frame with its
+story-1 damper on an experimental site (the in-process sim law) and its story-2 damper on an
+updatable site learning from it in a worker process, causality ``previous-step``."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from fresco_bridge.updating.histories import read_history
+from fresco_bridge.updating.registry import make_updater
+from fresco_bridge.updating.replay import replay
+from tests.support.bridge import RunningBridge, run_opensees
+from tests.support.opensees_frame import BILINEAR, frame_params, rel_diff
+
+pytest.importorskip("openseespy")
+
+STORY2 = {"k0": 15.0, "fy": 10.0, "alpha": 0.05}
+NSTEPS = 150
+
+
+def _params(d: dict[str, float]) -> str:
+    return "{ " + ", ".join(f"{k} = {v!r}" for k, v in d.items()) + " }"
+
+
+def frame_toml(twin: str) -> str:
+    """story1: the tested damper (sim bilinear); story2: the updatable site ``twin`` (TOML)."""
+    return (
+        '[bridge]\nrun_name = "twin"\n'
+        '[[sites]]\nname = "story1"\nport = 0\ndofs = 2\nsetup = "OneActuator"\n'
+        f'[sites.controller]\nmodel = "bilinear"\nparams = {_params(BILINEAR)}\n'
+        '[[sites]]\nname = "story2"\nport = 0\ndofs = 2\nsetup = "OneActuator"\n'
+        'kind = "updatable"\nlearns_from = "story1"\n' + twin
+    )
+
+
+def run_frame(toml: str, tmp_path: Path, **extra: Any) -> tuple[dict[str, Any], Path]:
+    with RunningBridge(toml, tmp_path) as bridge:
+        ports = [bridge.ports["story1"], bridge.ports["story2"]]
+        result = run_opensees("frame2", **frame_params(ports=ports, nsteps=NSTEPS, **extra))
+        run_dir = bridge.run_dir
+    return result["runs"][0], run_dir
+
+
+def test_twin_none_with_the_true_law_equals_pure_opensees(tmp_path: Path) -> None:
+    toml = frame_toml(f'updater = "none"\n[sites.updater_options]\nmodel = "bilinear"\n'
+                      f'params = {_params(STORY2)}\n')
+    served, _ = run_frame(toml, tmp_path)
+    story2 = ["Steel01", 2, STORY2["fy"], STORY2["k0"], STORY2["alpha"]]
+    pure = run_opensees("frame2", **frame_params(nsteps=NSTEPS, story2=story2))["runs"][0]
+    assert max(abs(x) for x in pure["u3"]) > 0.5  # the frame moved (story 1 yields)
+    assert rel_diff(served["u2"], pure["u2"]) < 1e-9
+    assert rel_diff(served["u3"], pure["u3"]) < 1e-9
+
+
+def write_offline_csv(path: Path, n: int = 400) -> Path:
+    """A short conventional test of the tested law: a growing sine, as ``time,disp,force``."""
+    from sim_actuator.models import make_model
+
+    law = make_model("bilinear", **BILINEAR)
+    lines = ["time,disp,force"]
+    for i in range(n):
+        d = 3.0 * (i / n) * np.sin(2 * np.pi * i / 50)
+        f, _ = law.set_trial(float(d))
+        law.commit()
+        lines.append(f"{0.01 * (i + 1)!r},{float(d)!r},{f!r}")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_twin_online_improved_equals_the_in_process_previous_step_coupling(
+        tmp_path: Path) -> None:
+    offline = write_offline_csv(tmp_path / "char-test.csv")
+    toml = frame_toml(f'updater = "online_improved"\noffline = "{offline}"\n')
+    served, run_dir = run_frame(toml, tmp_path)
+    assert all(np.isfinite(served["u3"])) and max(abs(x) for x in served["u3"]) < 100.0
+    source = read_history(run_dir, site="story1")
+    twin = read_history(run_dir, site="story2")
+    assert source.disp.size == twin.disp.size == NSTEPS
+    data = read_history(offline)
+    updater = make_updater("online_improved", offline=(data.disp, data.force))
+    expected = replay(updater, source.disp, source.force, twin.disp, lag=True).force_pred
+    assert twin.force is not None
+    scale = float(np.max(np.abs(expected)))
+    assert scale > 1.0
+    assert float(np.max(np.abs(twin.force - expected))) / scale < 1e-9
