@@ -4,7 +4,6 @@ updatable site learning from it in a worker process, causality ``previous-step``
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import threading
@@ -15,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fresco_bridge.runs import load_run
 from fresco_bridge.updating.histories import read_history
 from fresco_bridge.updating.registry import make_updater
 from fresco_bridge.updating.replay import replay
@@ -92,3 +92,71 @@ def test_twin_online_improved_equals_the_in_process_previous_step_coupling(
     scale = float(np.max(np.abs(expected)))
     assert scale > 1.0
     assert float(np.max(np.abs(twin.force - expected))) / scale < 1e-9
+
+
+def _wait(what: str, check: Any, deadline: float = 60.0) -> None:
+    """Poll ``check()`` until true; fail naming ``what`` past ``deadline`` s."""
+    end = time.monotonic() + deadline
+    while not check():
+        if time.monotonic() > end:
+            raise AssertionError(f"{what}: not within {deadline:g} s")
+        time.sleep(0.01)
+
+
+class PauseAt:
+    """A step listener of the source site that pauses it at a chosen step (deterministic
+    mid-run: the integrator's next trial to the source waits for the operator)."""
+
+    def __init__(self, site: Any, step: int) -> None:
+        self.site, self.step = site, step
+
+    def step_committed(self, step: Any) -> None:
+        if step.step == self.step:
+            self.site.operator_pause("test")
+
+
+def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Path) -> None:
+    toml = frame_toml('updater = "none"\non_learner_loss = "hold"\n'
+                      f'[sites.updater_options]\nmodel = "bilinear"\nparams = {_params(STORY2)}\n')
+    with RunningBridge(toml, tmp_path) as bridge:
+        sites = bridge.bridge.sites
+        learner = bridge.bridge.learners["story1"]
+        bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 40)))
+        ports = [bridge.ports["story1"], bridge.ports["story2"]]
+        failure: list[BaseException] = []
+
+        def frame() -> None:
+            try:
+                run_opensees("frame2", **frame_params(ports=ports, nsteps=NSTEPS))
+            except BaseException as exc:  # the NaN answers stop OpenSees: expected
+                failure.append(exc)
+
+        client = threading.Thread(target=frame, daemon=True)
+        client.start()
+        _wait("source paused at step 40", lambda: bridge.call(
+            lambda: str(sites["story1"].state)) == "PAUSED")
+        old_pid = learner.pid
+        assert old_pid is not None
+        os.kill(old_pid, signal.SIGKILL)
+        _wait("twin site HOLD", lambda: bridge.call(lambda: str(sites["story2"].state)) == "HOLD")
+        bridge.call(lambda: sites["story1"].operator_resume("test"))
+        client.join(120)
+        assert not client.is_alive()
+        assert failure, "OpenSees finished although its twin was in HOLD"
+        _wait("learner live again", lambda: bridge.call(lambda: learner.state) == "live")
+        status = bridge.call(lambda: sites["story2"].status())
+        source = bridge.call(lambda: sites["story1"].status())
+        run_dir = bridge.run_dir
+    assert learner.pid is None  # the worker was stopped with the bridge
+    assert status["learner_losses"] == 1 and status["worker_pid"] != old_pid
+    assert status["holds"] == 1 and status["learner"] == "live"
+    events = load_run(run_dir).events
+    holds = {e["site"]: e["reason"] for e in events if e["event"] == "hold"}
+    kinds = [(e["site"], e["event"]) for e in events]
+    assert ("story2", "learner-lost") in kinds and ("story2", "learner-restored") in kinds
+    assert "learner of story1 lost" in holds["story2"]
+    # The source is never touched by the loss: OpenSees turns the twin's NaN into NaN trials
+    # for every element, and the source's NaN stop refuses to forward them (its HOLD is the
+    # integrator's, its actuator keeps the last finite command).
+    assert source["step"] == 40 and all(np.isfinite(source["ctrl"]))
+    assert "story1" not in holds or "non-finite trial" in holds["story1"]
