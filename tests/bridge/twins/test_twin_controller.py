@@ -84,3 +84,17 @@ def test_non_finite_source_data_is_never_sent_for_training() -> None:
     assert [(k, x["source_step"]) for k, _, x in events] == [("not-trained", 2),
                                                              ("not-trained", 3)]
     assert learner.status()["not_trained"] == 2
+
+
+def test_ctl_status_says_what_the_twin_is() -> None:
+    from fresco_bridge.ctl import format_answer
+
+    site = {"site": "twin1", "kind": "updatable", "state": "RUNNING", "reason": "",
+            "session": 1, "peer": None, "step": 12, "time": 0.12, "ctrl": [0.1],
+            "target": [0.1], "daq_disp": [0.1], "daq_force": [1.0], "holds": 0,
+            "limit_events": {}, "limits": [], "pending": None,
+            **controller(FakeLearner()).status_fields(), "learner_reason": None,
+            "source_step": 12, "not_trained": 0, "learner_losses": 0}
+    text = format_answer({"sites": [site]})
+    assert ("updatable: learns from damper  updater online_ukf  causality previous-step  "
+            "learner live  trained through source step 7 (source at 12)") in text
