@@ -124,14 +124,6 @@ class SiteConfig(_Strict):
                              "previous-step")
         return v
 
-    @field_validator("on_learner_loss")
-    @classmethod
-    def _served_loss_rule(cls, v: str) -> str:
-        if v == "freeze":
-            raise ValueError("freeze is not yet served by updatable sites; use hold (the twin "
-                             "site HOLDs, the integrator stops)")
-        return v
-
     @field_validator("limits", mode="before")
     @classmethod
     def _single_limits_table(cls, v: Any) -> Any:

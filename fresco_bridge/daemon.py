@@ -76,11 +76,11 @@ def _secret(value: SecretStr | None) -> str | None:
 
 
 def _event_sink(site: ExperimentalSite) -> Callable[[str, str, dict[str, object]], None]:
-    """A learner's events as events of one of its twin sites; a lost learner HOLDs the twin
-    at once (``on_learner_loss = "hold"``), not only at its next request."""
+    """A learner's events as events of one of its twin sites; a lost learner HOLDs a ``hold``
+    twin at once, not only at its next request (a ``freeze`` twin answers from its snapshot)."""
     def sink(kind: str, reason: str, extra: dict[str, object]) -> None:
         site.event(kind, reason, **extra)
-        if kind == "learner-lost" and site.in_session:
+        if kind == "learner-lost" and site.in_session and site.cfg.on_learner_loss == "hold":
             site.enter_hold(reason)
     return sink
 

@@ -27,7 +27,7 @@ def twin_spec(cfg: SiteConfig) -> TwinSpec:
         raise ConfigError(f"site {cfg.name}: offline: {exc}") from None
     if cfg.model is not None:
         options["model_file"] = str(cfg.model)
-    return TwinSpec(cfg.name, cfg.updater, options)
+    return TwinSpec(cfg.name, cfg.updater, options, cfg.on_learner_loss)
 
 
 def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinController]]:

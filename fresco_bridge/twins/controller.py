@@ -62,4 +62,4 @@ class TwinController(Controller):
 
     def status_fields(self) -> dict[str, object]:
         return {"kind": "updatable", "source": self.learner.source, "updater": self.updater,
-                "causality": self.causality, **self.learner.status()}
+                "causality": self.causality, **self.learner.status(self.twin)}

@@ -4,10 +4,12 @@ it and its answers, never blocking the event loop.
 Messages go out through a bounded queue with ``put_nowait``; when it is full they wait in a
 local backlog that a flush task drains, in order (training data is never dropped). Answers come
 back through a reader thread and ``call_soon_threadsafe``. Every wait has a deadline; a missed
-deadline or a dead worker is a *learner loss*: pending and further requests fail
-(``LearnerError``: the twin site HOLDs), the worker is replaced and caught up by replaying the
-ordered log of what changes its state (the source's steps, each twin's committed trial), and
-the learner is live again once the new worker has answered past the end of that log.
+deadline or a dead worker is a *learner loss*. A twin whose rule is ``hold`` then fails
+(``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers from a local copy: the
+worker's last pickled snapshot (taken at start and every ``SNAPSHOT_EVERY`` twin steps) with the
+twins' commits since replayed, learning nothing more. The worker is replaced and caught up by
+replaying the ordered log of what changes its state (the source's steps, each twin's committed
+trial), and the learner is live again once the new worker has answered past the end of that log.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import logging
 import math
 import multiprocessing
 import multiprocessing.queues
+import pickle
 import queue
 import threading
 from collections import deque
@@ -27,7 +30,7 @@ from multiprocessing.process import BaseProcess
 from typing import Any
 
 from ..site_output import CommittedStep
-from .worker import LearnerSpec, Message, Reply, worker_main
+from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
 log = logging.getLogger("fresco_bridge.twins")
 
@@ -37,6 +40,8 @@ QUEUE_SIZE = 4096
 """Messages in flight to the worker before the local backlog takes them."""
 FLUSH_PAUSE = 0.002
 """Seconds the flush task waits for room in the queue between two attempts."""
+SNAPSHOT_EVERY = 50
+"""Twin steps between two snapshots of the worker (kept for ``on_learner_loss = "freeze"``)."""
 STOP_DEADLINE = 5.0
 """Seconds a worker is given to end after the stop message, then it is killed."""
 
@@ -79,6 +84,20 @@ class Learner:
         self._ready: asyncio.Future[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._closing = False
+        self._freezes = {t.name for t in spec.twins if t.on_loss == "freeze"}
+        self._commits = 0
+        self._snapshot: tuple[int, int, bytes] | None = None
+        """(log length, twin steps, pickled worker state) of the last snapshot."""
+        self._snapshot_asked: dict[int, tuple[int, int]] = {}
+        self._answered_locally: set[str] = set()
+        """Twins whose last trial the local copy answered (a new worker has not seen it)."""
+        self._local: LearnerState | None = None
+        """The frozen copy answering ``freeze`` twins while the worker is lost."""
+
+    @property
+    def snapshot_step(self) -> int:
+        """Twin steps committed when the last snapshot was taken (-1: none yet)."""
+        return -1 if self._snapshot is None else self._snapshot[1]
 
     def add_event_sink(self, sink: EventSink) -> None:
         self._sinks.append(sink)
@@ -98,6 +117,7 @@ class Learner:
         self.state = "starting"
         await self._spawn()
         self.state = "live"
+        self._ask_snapshot()
         log.info("learner of %s: worker %s live (twins %s)", self.source, self.pid,
                  ", ".join(f"{t.name}: {t.updater}" for t in self.spec.twins))
 
@@ -167,6 +187,14 @@ class Learner:
             else:
                 self._lose(reply[1])
             return
+        asked = self._snapshot_asked.pop(reply[1], None)
+        if asked is not None:
+            if kind == "snapshot":
+                self._snapshot = (*asked, reply[2])
+            else:
+                log.error("learner of %s: %s; freeze answers from an older snapshot or HOLDs",
+                          self.source, reply[2])
+            return
         fut = self._pending.pop(reply[1], None)
         if fut is None or fut.done():
             if kind == "error":
@@ -191,6 +219,8 @@ class Learner:
         self._pending.clear()
         self._event("learner-lost", f"learner of {self.source} lost: {reason}",
                     losses=self.losses)
+        if self._freezes:
+            self._freeze()
         assert self._loop is not None
         self._restart = self._loop.create_task(self._replace(), name=f"learner.{self.source}")
 
@@ -211,11 +241,42 @@ class Learner:
         except LearnerError as exc:
             self._lose(f"catching up failed: {exc}")
             return
-        self.state, self.reason = "live", ""
+        self.state, self.reason, self._local = "live", "", None
         log.warning("learner of %s: a new worker (%s) caught up over %d message(s); live",
                     self.source, self.pid, len(self.log))
         self._event("learner-restored", f"learner of {self.source} live again (worker "
-                    f"restarted, {len(self.log)} message(s) replayed)", losses=self.losses)
+                    f"restarted, {len(self.log)} message(s) replayed)", losses=self.losses,
+                    live_from_twin_step=self._commits // len(self.spec.twins) + 1)
+        self._ask_snapshot()
+
+    def _ask_snapshot(self) -> None:
+        """Ask the worker for a snapshot of its state (only when a twin may freeze)."""
+        if self._freezes:
+            rid = next(self._ids)
+            self._snapshot_asked[rid] = (len(self.log), self._commits // len(self.spec.twins))
+            self._put(("snapshot", rid))
+
+    def _freeze(self) -> None:
+        """The local copy for ``freeze`` twins: the last snapshot, the twins' commits since
+        replayed (trials and commits only: it learns nothing more)."""
+        if self._snapshot is None:
+            self._event("learner-frozen", f"learner of {self.source}: no snapshot to freeze "
+                        "from; its freeze twins fail (HOLD) until a new worker catches up",
+                        frozen=False)
+            return
+        position, steps, data = self._snapshot
+        local: LearnerState = pickle.loads(data)
+        for msg in self.log[position:]:
+            if msg[0] != "observe":
+                local.handle(msg)
+        self._local = local
+        through = min((t.trained_through for t in local.twins.values()), default=0)
+        log.warning("learner of %s: freeze twins answer from the snapshot of twin step %d "
+                    "(source trained through step %d), frozen", self.source, steps, through)
+        self._event("learner-frozen", f"learner of {self.source}: freeze twins answer from "
+                    f"the snapshot of twin step {steps}, parameters frozen (source trained "
+                    f"through step {through})", frozen=True, snapshot_step=steps,
+                    trained_through=through)
 
     async def _stop_worker(self, *, kill: bool) -> None:
         proc, inbox, reader = self._proc, self._inbox, self._reader
@@ -301,11 +362,6 @@ class Learner:
             self._lose(reason)
             raise LearnerError(f"learner lost: {reason}") from None
 
-    def _check_live(self) -> None:
-        if self.state != "live":
-            raise LearnerError(f"learner of {self.source} is {self.state}"
-                               + (f" ({self.reason})" if self.reason else ""))
-
     def step_committed(self, step: CommittedStep) -> None:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
@@ -322,27 +378,64 @@ class Learner:
 
     async def trial(self, twin: str, d: float) -> tuple[float, float, int]:
         """The twin's (force, tangent) at ``d`` and the source step it learned through."""
-        self._check_live()
+        if self.state != "live":
+            return self._frozen_trial(twin, d)
         self._last_trial[twin] = d
-        force, tangent, through = await self._request(("trial", twin, d), self.deadline)
+        self._answered_locally.discard(twin)
+        try:
+            force, tangent, through = await self._request(("trial", twin, d), self.deadline)
+        except LearnerError:
+            if self.state == "live":  # the twin refused this trial: no loss
+                raise
+            return self._frozen_trial(twin, d)
         self.trained_through = int(through)
         return float(force), float(tangent), self.trained_through
 
+    def _frozen(self, twin: str) -> LearnerState:
+        """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
+        if twin not in self._freezes or self._local is None:
+            raise LearnerError(f"learner of {self.source} is {self.state}"
+                               + (f" ({self.reason})" if self.reason else ""))
+        return self._local
+
+    def _frozen_trial(self, twin: str, d: float) -> tuple[float, float, int]:
+        local = self._frozen(twin)
+        self._last_trial[twin] = d
+        self._answered_locally.add(twin)
+        reply = local.handle(("trial", 0, twin, d))
+        assert reply is not None
+        if reply[0] == "error":
+            raise LearnerError(reply[2])
+        return float(reply[2]), float(reply[3]), int(reply[4])
+
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        self._check_live()
-        # the live worker has this trial already; a replay needs it before the commit
-        self.log.append(("trial", 0, twin, self._last_trial.get(twin, 0.0)))
+        trial = ("trial", 0, twin, self._last_trial.get(twin, 0.0))
+        if self.state == "live" and twin not in self._answered_locally:
+            self.log.append(trial)  # the live worker has it; a replay needs it before the commit
+        else:
+            if self.state != "live":
+                self._frozen(twin).handle(("commit", twin))
+            self._send(trial)  # answered locally: the worker has not seen this trial
         self._send(("commit", twin))
+        self._commits += 1
+        if self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0 and self.state == "live":
+            self._ask_snapshot()
 
     async def initial(self, twin: str) -> float:
-        self._check_live()
+        if self.state != "live":
+            reply = self._frozen(twin).handle(("initial", 0, twin))
+            assert reply is not None
+            return float(reply[2])
         (tangent,) = await self._request(("initial", twin), self.deadline)
         return float(tangent)
 
-    def status(self) -> dict[str, object]:
+    def status(self, twin: str) -> dict[str, object]:
+        """Twin ``twin``'s view of its learner (``ctl status``)."""
         behind = self.source_step - self.trained_through - 1
         shown = self.state if self.state != "live" or behind <= 0 else f"behind {behind}"
+        if self.state != "live" and twin in self._freezes and self._local is not None:
+            shown = "frozen"
         return {"learner": shown, "learner_reason": self.reason or None,
                 "steps_trained": self.trained_through, "source_step": self.source_step,
                 "not_trained": self.not_trained, "learner_losses": self.losses,

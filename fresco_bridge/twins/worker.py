@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 import multiprocessing.queues
+import pickle
 import queue
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,11 +29,11 @@ log = logging.getLogger("fresco_bridge.twins")
 
 Message = tuple[Any, ...]
 """``("observe", step, d, f)``, ``("trial", id, twin, d)``, ``("commit", twin)``,
-``("initial", id, twin)``, ``("sync", id)``; ``None`` ends the worker."""
+``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through)``, ``("initial", id, tangent)``,
-``("sync", id, trained_through)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal",
-reason)``."""
+``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
+reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,8 @@ class TwinSpec:
     name: str
     updater: str
     options: dict[str, Any]
+    on_loss: str = "hold"
+    """``hold`` or ``freeze``: what the twin does when its learner is lost."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +103,11 @@ class LearnerState:
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
+        if kind == "snapshot":
+            try:
+                return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
+            except (pickle.PicklingError, AttributeError, TypeError) as exc:
+                return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
         if kind == "sync":
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
@@ -142,7 +150,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[Message |
         try:
             reply = state.handle(msg)
         except Exception as exc:  # an updater bug must not kill the twin silently
-            rid = msg[1] if msg[0] in ("trial", "initial", "sync") else None
+            rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
             reply = ("error", rid, f"{type(exc).__name__}: {exc}")
         if reply is not None:
             outbox.put(reply)

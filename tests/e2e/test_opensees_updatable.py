@@ -160,3 +160,67 @@ def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Pa
     # integrator's, its actuator keeps the last finite command).
     assert source["step"] == 40 and all(np.isfinite(source["ctrl"]))
     assert "story1" not in holds or "non-finite trial" in holds["story1"]
+
+
+def test_worker_killed_mid_run_freezes_the_twin_and_the_run_goes_on(tmp_path: Path) -> None:
+    """``freeze``: from the snapshot of twin step 50 (learned through source step 50) the twin
+    answers with frozen parameters until a new worker has caught up, then live again; the
+    frame runs to the end, no site HOLDs. The worker is killed while the source is paused
+    after step 60, and the source pauses again after step 80 until the new worker is live:
+    twin steps 61-80 are frozen, 81 on live."""
+    pytest.importorskip("filterpy")
+    toml = frame_toml('updater = "online_ukf"\non_learner_loss = "freeze"\n')
+    with RunningBridge(toml, tmp_path) as bridge:
+        sites = bridge.bridge.sites
+        learner = bridge.bridge.learners["story1"]
+        bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 60)))
+        bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 80)))
+        ports = [bridge.ports["story1"], bridge.ports["story2"]]
+        result: list[dict[str, Any]] = []
+        client = threading.Thread(target=lambda: result.append(run_opensees(
+            "frame2", **frame_params(ports=ports, nsteps=NSTEPS))), daemon=True)
+        client.start()
+        _wait("source paused at step 60", lambda: bridge.call(
+            lambda: str(sites["story1"].state)) == "PAUSED")
+        _wait("snapshot of twin step 50", lambda: bridge.call(lambda: learner.snapshot_step) == 50)
+        old_pid = learner.pid
+        assert old_pid is not None
+        os.kill(old_pid, signal.SIGKILL)
+        _wait("twin frozen", lambda: bridge.call(
+            lambda: learner.status("story2")["learner"]) in ("frozen", "live")
+            and learner.losses == 1)
+        bridge.call(lambda: sites["story1"].operator_resume("test"))
+        _wait("source paused at step 80", lambda: bridge.call(
+            lambda: (sites["story1"].step, str(sites["story1"].state))) == (80, "PAUSED"))
+        _wait("learner live again", lambda: bridge.call(lambda: learner.state) == "live")
+        bridge.call(lambda: sites["story1"].operator_resume("test"))
+        client.join(120)
+        assert result, "OpenSees did not finish with a frozen twin"
+        holds = bridge.call(lambda: [sites["story1"].holds, sites["story2"].holds])
+        run_dir = bridge.run_dir
+    assert holds == [0, 0]
+    events = [(e["site"], e["event"]) for e in load_run(run_dir).events]
+    assert {("story2", "learner-lost"), ("story2", "learner-frozen"),
+            ("story2", "learner-restored")} <= set(events)
+    source = read_history(run_dir, site="story1")
+    twin = read_history(run_dir, site="story2")
+    assert twin.force is not None and twin.disp.size == NSTEPS
+    live = replay(make_updater("online_ukf"), source.disp, source.force, twin.disp,
+                  lag=True).force_pred
+    frozen_updater = make_updater("online_ukf")
+    replay(frozen_updater, source.disp[:50], source.force[:50], twin.disp[:50], lag=True)
+    frozen = live.copy()  # steps 51 on with the parameters learned through step 50
+    for i in range(50, NSTEPS):
+        frozen[i] = frozen_updater.twin.set_trial(float(twin.disp[i]))[0]
+        frozen_updater.twin.commit()
+    scale = float(np.max(np.abs(live)))
+
+    def close(a: np.ndarray, b: np.ndarray) -> bool:
+        return a.size == 0 or float(np.max(np.abs(a - b))) / scale < 1e-9
+
+    assert close(twin.force[:60], live[:60])  # live until the kill
+    assert not close(frozen[60:], live[60:])  # frozen and live differ: the check can fail
+    # frozen from step 61 until the new worker answered, live from then on
+    switch = [k for k in range(61, NSTEPS + 1)
+              if close(twin.force[60:k], frozen[60:k]) and close(twin.force[k:], live[k:])]
+    assert switch == [80]

@@ -39,7 +39,6 @@ def error_of(tmp_path: Path, text: str) -> str:
     (SOURCE + twin(updater='"online_ann"'), "sites[1].updater", "needs offline"),
     (SOURCE + twin(offline='"missing.csv"'), "sites[1].offline", "missing.csv"),
     (SOURCE + twin(causality='"same-step"'), "sites[1].causality", "not yet served"),
-    (SOURCE + twin(on_learner_loss='"freeze"'), "sites[1].on_learner_loss", "not yet served"),
     (SOURCE + twin() + "[sites.updater_options]\nwobble = 1\n", "sites[1].updater_options",
      "unknown option(s) wobble"),
     (SOURCE + twin(learner_deadline="9.0"), "sites[1].learner_deadline",

@@ -35,7 +35,7 @@ class FakeLearner:
     async def initial(self, twin: str) -> float:
         return 12.0
 
-    def status(self) -> dict[str, object]:
+    def status(self, twin: str) -> dict[str, object]:
         return {"learner": "live", "steps_trained": 7}
 
 
@@ -83,7 +83,7 @@ def test_non_finite_source_data_is_never_sent_for_training() -> None:
     assert learner.not_trained == 2 and learner.source_step == 4
     assert [(k, x["source_step"]) for k, _, x in events] == [("not-trained", 2),
                                                              ("not-trained", 3)]
-    assert learner.status()["not_trained"] == 2
+    assert learner.status("t")["not_trained"] == 2
 
 
 def test_ctl_status_says_what_the_twin_is() -> None:
