@@ -108,7 +108,8 @@ class SiteConfig(_Strict):
     through the source's step i-1."""
     on_learner_loss: Literal["hold", "freeze"] = "hold"
     """Updatable site: when the learner dies or misses its deadline, ``hold`` (the site's HOLD:
-    NaN answers, the integrator stops) or ``freeze`` (answer from the last snapshot)."""
+    NaN answers, the integrator stops) or ``freeze`` (answer from the learner's last snapshot,
+    parameters frozen, until a new worker has caught up)."""
     updater_options: dict[str, Any] = Field(default_factory=dict)
     """Updatable site: the updater's options (as ``updater replay --option KEY=VALUE``)."""
     learner_deadline: float = Field(default=2.0, gt=0, le=600)
