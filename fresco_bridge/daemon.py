@@ -252,6 +252,8 @@ class Bridge:
             raise OSError(exc.errno, f"metrics endpoint {host}:{port}: {exc.strerror}") from exc
         for site in self.sites.values():
             site.metrics = self.metrics.for_site(site.name)
+        for learner in self.learners.values():
+            learner.update_observer = self.metrics.observe_updater_step
         log.info("metrics: http://%s:%d/metrics", host, self.metrics_server.port)
 
     def _attach_taps(self) -> None:
@@ -272,7 +274,8 @@ class Bridge:
                 site.add_listener(batch)
                 continue
             taps = SiteTaps(self.telemetry, site.metrics,
-                            site.recorder if tcfg.monitors else None, monitor, site.monitor_warning)
+                            site.recorder if tcfg.monitors else None, monitor, site.monitor_warning,
+                            predicted=site.cfg.kind == "updatable")
             site.add_listener(taps)
             taps.publish_status(site.status_now())
 

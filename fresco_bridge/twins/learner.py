@@ -84,6 +84,8 @@ class Learner:
         self._ready: asyncio.Future[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._closing = False
+        self.update_observer: Callable[[float], None] | None = None
+        """Takes the worker's update time of each newly learned step (the metrics)."""
         self._freezes = {t.name for t in spec.twins if t.on_loss == "freeze"}
         self._commits = 0
         self._snapshot: tuple[int, int, bytes] | None = None
@@ -383,11 +385,14 @@ class Learner:
         self._last_trial[twin] = d
         self._answered_locally.discard(twin)
         try:
-            force, tangent, through = await self._request(("trial", twin, d), self.deadline)
+            force, tangent, through, seconds = await self._request(("trial", twin, d),
+                                                                    self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
             return self._frozen_trial(twin, d)
+        if int(through) > self.trained_through and self.update_observer is not None:
+            self.update_observer(float(seconds))
         self.trained_through = int(through)
         return float(force), float(tangent), self.trained_through
 

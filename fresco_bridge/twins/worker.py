@@ -31,7 +31,7 @@ Message = tuple[Any, ...]
 """``("observe", step, d, f)``, ``("trial", id, twin, d)``, ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
-"""``("trial", id, force, tangent, trained_through)``, ``("initial", id, tangent)``,
+"""``("trial", id, force, tangent, trained_through, update_seconds)``, ``("initial", id, tangent)``,
 ``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
 reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
@@ -63,6 +63,8 @@ class _Twin:
     """How many of the source's observations this twin's updater has learned."""
     trained_through: int = 0
     """The source step of the last observation learned (0: none)."""
+    update_seconds: float = 0.0
+    """Wall time the updater spent learning the step(s) learned before the last trial."""
 
 
 @dataclass
@@ -99,7 +101,7 @@ class LearnerState:
             if not (math.isfinite(force) and math.isfinite(tangent)):
                 return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
                         f"{tangent!r} at d = {d!r}")
-            return ("trial", rid, force, tangent, twin.trained_through)
+            return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds)
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
@@ -117,6 +119,8 @@ class LearnerState:
         """Twin ``name`` with every source step before its current one learned."""
         twin = self.twins[name]
         obs = self.observations
+        if twin.applied < len(obs) and obs[twin.applied][0] <= twin.commits:
+            twin.update_seconds = 0.0
         while twin.applied < len(obs) and obs[twin.applied][0] <= twin.commits:
             step, d, f = obs[twin.applied]
             twin.applied += 1
@@ -127,6 +131,7 @@ class LearnerState:
                 log.warning("learner: source step %d not learned: %s", step, exc)
                 continue
             twin.trained_through = step
+            twin.update_seconds += twin.updater.last_update_seconds
         return twin
 
 

@@ -43,6 +43,7 @@ def test_previous_step_equals_the_in_process_replay(source_first: bool) -> None:
         for k, d in enumerate((td[i] * 0.5, td[i])):  # Newton: the last trial is committed
             reply = worker.handle(("trial", 10 * i + k, "twin", float(d)))
             assert reply is not None and reply[0] == "trial" and reply[4] == i  # through i-1
+            assert reply[5] >= 0.0  # the update time of the step(s) just learned
         answers.append(reply[2])
         if source_first:  # the client commits the source's element before the twin's
             worker.handle(observe)
@@ -62,7 +63,7 @@ def test_each_twin_follows_the_learned_parameters() -> None:
     for i in range(sd.size):
         fa = worker.handle(("trial", 1, "a", float(td[i])))
         fb = worker.handle(("trial", 2, "b", float(td[i])))
-        assert fa is not None and fb is not None and fa[2:] == fb[2:]
+        assert fa is not None and fb is not None and fa[2:5] == fb[2:5]
         worker.handle(("commit", "a"))
         worker.handle(("commit", "b"))
         worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))

@@ -1,0 +1,79 @@
+"""An updatable site in a real bridge driven over the element protocol (no OpenSees): its
+status, its metrics (the updater's step time) and its telemetry (``predicted_force``)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.site_output import CommittedStep
+from fresco_bridge.telemetry.taps import SiteTaps
+from protocol import Action
+from tests.bridge.telemetry.test_metrics_bridge import scrape
+from tests.support.bridge import RunningBridge
+
+TOML = '''
+[telemetry]
+metrics_port = 0
+[[sites]]
+name = "damper"
+port = 0
+[sites.controller]
+model = "bilinear"
+params = { k0 = 20.0, fy = 5.0, alpha = 0.05 }
+[[sites]]
+name = "twin1"
+port = 0
+kind = "updatable"
+learns_from = "damper"
+updater = "online_ukf"
+'''
+
+
+def test_a_served_twin_learns_reports_and_times_its_updates(tmp_path: Path) -> None:
+    pytest.importorskip("filterpy")
+    steps = 40
+    with RunningBridge(TOML, tmp_path) as bridge, \
+            GenericClientLink("127.0.0.1", bridge.ports["damper"], 1) as source, \
+            GenericClientLink("127.0.0.1", bridge.ports["twin1"], 1) as twin:
+        forces = []
+        for i in range(1, steps + 1):
+            d = 1.5 * math.sin(i / 4.0)
+            source.set_trial((d,), time=0.01 * i)
+            source.force()
+            twin.set_trial((0.8 * d,), time=0.01 * i)
+            forces.append(twin.force()[0])
+            source.commit()
+            twin.commit()
+        twin.request(Action.GET_DISP)  # answered after the last commit: the site has it
+        status = bridge.call(lambda: bridge.bridge.sites["twin1"].status())
+        assert bridge.bridge.metrics_server is not None
+        values = scrape(bridge.bridge.metrics_server.port)
+    assert all(math.isfinite(f) for f in forces)
+    assert status["kind"] == "updatable" and status["source"] == "damper"
+    assert status["updater"] == "online_ukf" and status["causality"] == "previous-step"
+    assert status["learner"] == "live" and status["steps_trained"] == steps - 1
+    assert status["source_step"] == steps and status["step"] == steps
+    # one update time per source step learned (the twin's steps 2..40 learn steps 1..39)
+    assert values[("fresco_updater_step_seconds_count", ())] == steps - 1
+
+
+class Published:
+    def __init__(self) -> None:
+        self.steps: list[Any] = []
+
+    def publish_step(self, sample: Any) -> None:
+        self.steps.append(sample)
+
+
+@pytest.mark.parametrize("predicted", [False, True])
+def test_an_updatable_sites_step_is_published_with_its_predicted_force(predicted: bool) -> None:
+    mqtt = Published()
+    taps = SiteTaps(mqtt, None, None, predicted=predicted)  # type: ignore[arg-type]
+    taps.step_committed(CommittedStep("twin1", 1, 3, 0.03, (0.2,), (0.2,), (0.2,), (4.5,),
+                                      "RUNNING"))
+    assert mqtt.steps[0].predicted_force == (4.5 if predicted else None)
