@@ -37,7 +37,7 @@ from .sites.access import Allowlist
 from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
 from .telemetry.taps import MonitorBatch, SiteTaps
-from .twins.build import build_twins
+from .twins.build import build_twins, preload_from_record
 from .twins.learner import Learner, LearnerError
 
 log = logging.getLogger("fresco_bridge")
@@ -133,6 +133,8 @@ class Bridge:
         loop = asyncio.get_running_loop()
         learners, twins = build_twins(cfg)
         self.learners = learners
+        if self.resume is not None:
+            preload_from_record(learners, self.resume)
         try:
             await self._start_learners()
             for scfg in cfg.sites:

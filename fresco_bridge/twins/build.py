@@ -3,16 +3,19 @@ twin controller per updatable site."""
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
 from typing import Any
 
 from ..config import ConfigError, LabConfig, SiteConfig
+from ..record.export import committed_steps
 from ..updating.base import UpdaterError
 from ..updating.histories import read_history
 from .controller import TwinController
 from .learner import Learner
-from .worker import LearnerSpec, TwinSpec
+from .worker import LearnerSpec, Message, TwinSpec
 
-__all__ = ["build_twins", "twin_spec"]
+__all__ = ["build_twins", "preload_from_record", "twin_spec"]
 
 
 def twin_spec(cfg: SiteConfig) -> TwinSpec:
@@ -48,3 +51,24 @@ def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinCo
             controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
                                                  causality=t.causality)
     return learners, controllers
+
+
+def preload_from_record(learners: dict[str, Learner], run_dir: Path) -> None:
+    """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
+    committed steps and each twin's committed trials, in the record's order (the order the
+    bridge saw them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
+    steps = committed_steps(run_dir)
+    for learner in learners.values():
+        twins = {t.name for t in learner.spec.twins}
+        log: list[Message] = []
+        source_step = commits = 0
+        for step in steps:
+            if step.site == learner.source:
+                d, f = step.meas_disp[0], step.meas_force[0]
+                source_step = step.step
+                if math.isfinite(d) and math.isfinite(f):
+                    log.append(("observe", step.step, d, f))
+            elif step.site in twins:
+                log += [("trial", 0, step.site, step.cmd_disp[0]), ("commit", step.site)]
+                commits += 1
+        learner.preload(log, source_step=source_step, commits=commits)

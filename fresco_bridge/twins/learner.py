@@ -101,6 +101,13 @@ class Learner:
         """Twin steps committed when the last snapshot was taken (-1: none yet)."""
         return -1 if self._snapshot is None else self._snapshot[1]
 
+    def preload(self, log_: list[Message], *, source_step: int, commits: int) -> None:
+        """Start from a recorded history (``serve --resume``): the worker replays ``log_``
+        before it answers, as a new worker after a loss does."""
+        self.log = list(log_)
+        self.source_step = source_step
+        self._commits = commits
+
     def add_event_sink(self, sink: EventSink) -> None:
         self._sinks.append(sink)
 
@@ -118,6 +125,12 @@ class Learner:
         self._loop = asyncio.get_running_loop()
         self.state = "starting"
         await self._spawn()
+        if self.log:  # a resumed run: what the record holds, before anything new
+            self.state = "catching-up"
+            for msg in self.log:
+                self._put(msg)
+            (through,) = await self._request(("sync",), START_DEADLINE)
+            self.trained_through = int(through)
         self.state = "live"
         self._ask_snapshot()
         log.info("learner of %s: worker %s live (twins %s)", self.source, self.pid,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import multiprocessing
 import multiprocessing.queues
 import pickle
 import queue
@@ -137,7 +138,8 @@ class LearnerState:
 
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[Message | None],
                 outbox: multiprocessing.queues.Queue[Reply]) -> None:
-    """The worker process: build, say ready, then answer messages in order until ``None``."""
+    """The worker process: build, say ready, then answer messages in order until ``None`` (or
+    until the bridge process is gone)."""
     try:
         state = LearnerState(spec)
     except (UpdaterError, OSError, ValueError) as exc:
@@ -145,10 +147,13 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[Message |
                     f"{exc}"))
         return
     outbox.put(("ready",))
+    parent = multiprocessing.parent_process()
     while True:
         try:
             msg = inbox.get(timeout=1.0)
         except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                break  # the bridge was killed: no orphan worker
             continue
         if msg is None:
             break
