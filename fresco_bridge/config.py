@@ -105,7 +105,8 @@ class SiteConfig(_Strict):
     folder."""
     causality: Literal["previous-step", "same-step"] = "previous-step"
     """Updatable site: ``previous-step``: the twin's step i answers from what was learned
-    through the source's step i-1."""
+    through the source's step i-1; ``same-step``: also from the source's measurement of step
+    i (the paper's order; one trial per step: explicit schemes; in-process sources)."""
     on_learner_loss: Literal["hold", "freeze"] = "hold"
     """Updatable site: when the learner dies or misses its deadline, ``hold`` (the site's HOLD:
     NaN answers, the integrator stops) or ``freeze`` (answer from the learner's last snapshot,
@@ -115,15 +116,6 @@ class SiteConfig(_Strict):
     learner_deadline: float = Field(default=2.0, gt=0, le=600)
     """Updatable site: seconds the twin waits for its learner's answer; past it the learner
     counts as lost (``on_learner_loss``). Shorter than ``bridge.controller_timeout``."""
-
-    @field_validator("causality")
-    @classmethod
-    def _served_causality(cls, v: str) -> str:
-        if v == "same-step":
-            raise ValueError("same-step is not yet served by updatable sites (the twin answers "
-                             "from what was learned through the source's previous step); use "
-                             "previous-step")
-        return v
 
     @field_validator("limits", mode="before")
     @classmethod
@@ -435,6 +427,16 @@ def _updatable_sites(cfg: LabConfig, base: Path) -> tuple[LabConfig, list[str]]:
             problems.append(f"{key}.learner_deadline: {site.learner_deadline:g} s must be "
                             f"shorter than bridge.controller_timeout "
                             f"({cfg.bridge.controller_timeout:g} s)")
+        if site.causality == "same-step":
+            if source is not None and source.controller.kind != "sim":
+                problems.append(f"{key}.causality: same-step is served for in-process (sim) "
+                                f"sources so far; site {source.name!r} has a "
+                                f"{source.controller.kind} controller (use previous-step)")
+            if 2 * site.learner_deadline >= cfg.bridge.controller_timeout:
+                problems.append(f"{key}.learner_deadline: same-step waits up to it for the "
+                                "source's trial, then for the learner: twice it must be "
+                                "shorter than bridge.controller_timeout "
+                                f"({cfg.bridge.controller_timeout:g} s)")
         name = site.updater or ""
         if name not in UPDATERS:
             problems.append(f"{key}.updater: unknown updater {name!r}; known: "

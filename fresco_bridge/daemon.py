@@ -38,6 +38,7 @@ from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
 from .telemetry.taps import MonitorBatch, SiteTaps
 from .twins.build import build_twins, preload_from_record
+from .twins.controller import TwinController
 from .twins.learner import Learner, LearnerError
 
 log = logging.getLogger("fresco_bridge")
@@ -134,7 +135,7 @@ class Bridge:
         learners, twins = build_twins(cfg)
         self.learners = learners
         if self.resume is not None:
-            preload_from_record(learners, self.resume)
+            preload_from_record(learners, self.resume, cfg)
         try:
             await self._start_learners()
             for scfg in cfg.sites:
@@ -220,7 +221,10 @@ class Bridge:
         for source, learner in self.learners.items():
             self.sites[source].add_listener(learner)
             for twin in learner.spec.twins:
-                learner.add_event_sink(_event_sink(self.sites[twin.name]))
+                site = self.sites[twin.name]
+                learner.add_event_sink(_event_sink(site))
+                assert isinstance(site.controller, TwinController)
+                site.controller.bind(site, self.sites[source])
 
     def _listener(self, site: ExperimentalSite) -> SiteListener:
         """What the site's connections share; an open allowlist is said loudly."""

@@ -53,11 +53,12 @@ def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinCo
     return learners, controllers
 
 
-def preload_from_record(learners: dict[str, Learner], run_dir: Path) -> None:
+def preload_from_record(learners: dict[str, Learner], run_dir: Path, config: LabConfig) -> None:
     """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
     committed steps and each twin's committed trials, in the record's order (the order the
     bridge saw them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
     steps = committed_steps(run_dir)
+    same_step = {s.name for s in config.sites if s.causality == "same-step"}
     for learner in learners.values():
         twins = {t.name for t in learner.spec.twins}
         log: list[Message] = []
@@ -69,6 +70,7 @@ def preload_from_record(learners: dict[str, Learner], run_dir: Path) -> None:
                 if math.isfinite(d) and math.isfinite(f):
                     log.append(("observe", step.step, d, f))
             elif step.site in twins:
-                log += [("trial", 0, step.site, step.cmd_disp[0]), ("commit", step.site)]
+                log += [("trial", 0, step.site, step.cmd_disp[0], step.site in same_step),
+                        ("commit", step.site)]
                 commits += 1
         learner.preload(log, source_step=source_step, commits=commits)

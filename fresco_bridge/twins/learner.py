@@ -70,7 +70,10 @@ class Learner:
         self.losses = 0
         self.log: list[Message] = []
         """What changed the worker's state, in order: replayed to a new worker."""
-        self._last_trial: dict[str, float] = {}
+        self._last_trial: dict[str, tuple[float, bool]] = {}
+        """Each twin's last trial: its displacement and whether it was answered same-step."""
+        self._same_step_sent: dict[int, tuple[float, float]] = {}
+        """Source steps already sent at their trial (same-step), until their commit."""
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
@@ -381,6 +384,16 @@ class Learner:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
         self.source_step = step.step
+        sent = self._same_step_sent.pop(step.step, None)
+        if sent is not None:  # learned at its trial already (same-step)
+            if sent != (d, f):
+                log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
+                            "measurement its same-step twin learned (%r, %r): more than one "
+                            "trial in the step", self.source, step.step, d, f, *sent)
+                self._event("same-step-mismatch", f"source {self.source} step {step.step}: "
+                            "the committed measurement differs from the one learned at the "
+                            "trial (same-step needs one trial per step)", source_step=step.step)
+            return
         if not (math.isfinite(d) and math.isfinite(f)):
             self.not_trained += 1
             log.warning("learner of %s: step %d has a non-finite measurement (d %r, F %r); not "
@@ -391,23 +404,33 @@ class Learner:
             return
         self._send(("observe", step.step, d, f))
 
-    async def trial(self, twin: str, d: float) -> tuple[float, float, int]:
-        """The twin's (force, tangent) at ``d`` and the source step it learned through."""
+    async def trial(self, twin: str, d: float, *, same_step: bool = False
+                    ) -> tuple[float, float, int]:
+        """The twin's (force, tangent) at ``d`` and the source step it learned through; with
+        ``same_step`` including the source step sent by ``observe_same_step`` just before."""
         if self.state != "live":
-            return self._frozen_trial(twin, d)
-        self._last_trial[twin] = d
+            return self._frozen_trial(twin, d, same_step)
+        self._last_trial[twin] = (d, same_step)
         self._answered_locally.discard(twin)
         try:
-            force, tangent, through, seconds = await self._request(("trial", twin, d),
-                                                                    self.deadline)
+            force, tangent, through, seconds = await self._request(
+                ("trial", twin, d, same_step), self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
-            return self._frozen_trial(twin, d)
+            return self._frozen_trial(twin, d, same_step)
         if int(through) > self.trained_through and self.update_observer is not None:
             self.update_observer(float(seconds))
         self.trained_through = int(through)
         return float(force), float(tangent), self.trained_through
+
+    def observe_same_step(self, step: int, d: float, f: float) -> None:
+        """The source's measurement of the trial of ``step``, for a same-step twin (sent once
+        per step; its commit then sends nothing more)."""
+        if step in self._same_step_sent:
+            return
+        self._same_step_sent[step] = (d, f)
+        self._send(("observe", step, d, f))
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -416,11 +439,11 @@ class Learner:
                                + (f" ({self.reason})" if self.reason else ""))
         return self._local
 
-    def _frozen_trial(self, twin: str, d: float) -> tuple[float, float, int]:
+    def _frozen_trial(self, twin: str, d: float, same_step: bool) -> tuple[float, float, int]:
         local = self._frozen(twin)
-        self._last_trial[twin] = d
+        self._last_trial[twin] = (d, same_step)
         self._answered_locally.add(twin)
-        reply = local.handle(("trial", 0, twin, d))
+        reply = local.handle(("trial", 0, twin, d, same_step))
         assert reply is not None
         if reply[0] == "error":
             raise LearnerError(reply[2])
@@ -428,7 +451,7 @@ class Learner:
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        trial = ("trial", 0, twin, self._last_trial.get(twin, 0.0))
+        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, False)))
         if self.state == "live" and twin not in self._answered_locally:
             self.log.append(trial)  # the live worker has it; a replay needs it before the commit
         else:

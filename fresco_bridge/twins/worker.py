@@ -5,7 +5,8 @@ for the twins' forces, strictly in the order the bridge saw the messages.
 messages between the queues. Causality ``previous-step`` is made exact here, whatever order the
 client commits its elements in: a source step is queued when it arrives and learned only by
 the first trial of a later twin step (the twin's step k answers from the source's steps
-through k − 1), so a twin commit is never preceded by the learning of its own step.
+through k − 1), so a twin commit is never preceded by the learning of its own step. A trial
+marked ``same_step`` also learns the source's step k, which the bridge sent just before it.
 
 Each twin has its own updater, fed the same observations: a twin cloned from another's updater
 would not follow every updater's parameter changes (a UKF's retargeted Bilinear, an ANN's new
@@ -29,7 +30,7 @@ from ..updating.registry import make_updater
 log = logging.getLogger("fresco_bridge.twins")
 
 Message = tuple[Any, ...]
-"""``("observe", step, d, f)``, ``("trial", id, twin, d)``, ``("commit", twin)``,
+"""``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through, update_seconds)``, ``("initial", id, tangent)``,
@@ -93,8 +94,8 @@ class LearnerState:
             twin.commits += 1
             return None
         if kind == "trial":
-            _, rid, name, d = msg
-            twin = self._learned(name)
+            _, rid, name, d, same_step = msg
+            twin = self._learned(name, same_step)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -116,13 +117,15 @@ class LearnerState:
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str) -> _Twin:
-        """Twin ``name`` with every source step before its current one learned."""
+    def _learned(self, name: str, same_step: bool) -> _Twin:
+        """Twin ``name`` with every source step before its current one learned, and with
+        ``same_step`` its current one too."""
         twin = self.twins[name]
         obs = self.observations
-        if twin.applied < len(obs) and obs[twin.applied][0] <= twin.commits:
+        last = twin.commits + (1 if same_step else 0)
+        if twin.applied < len(obs) and obs[twin.applied][0] <= last:
             twin.update_seconds = 0.0
-        while twin.applied < len(obs) and obs[twin.applied][0] <= twin.commits:
+        while twin.applied < len(obs) and obs[twin.applied][0] <= last:
             step, d, f = obs[twin.applied]
             twin.applied += 1
             try:

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from fresco_bridge.integrator.link import GenericClientLink
@@ -77,3 +78,42 @@ def test_an_updatable_sites_step_is_published_with_its_predicted_force(predicted
     taps.step_committed(CommittedStep("twin1", 1, 3, 0.03, (0.2,), (0.2,), (0.2,), (4.5,),
                                       "RUNNING"))
     assert mqtt.steps[0].predicted_force == (4.5 if predicted else None)
+
+
+def test_a_client_asking_the_twin_before_the_sources_trial_falls_back_not_deadlocks(
+        tmp_path: Path) -> None:
+    """Same-step with a client that asks each element's force right after its own trial, twin
+    first: the twin's first trial waits out its deadline for the source's, then the session
+    goes on previous-step (said in an event), equal to the in-process previous-step replay."""
+    pytest.importorskip("filterpy")
+    from fresco_bridge.runs import load_run
+    from fresco_bridge.updating.histories import read_history
+    from fresco_bridge.updating.registry import make_updater
+    from fresco_bridge.updating.replay import replay
+
+    toml = TOML.replace("[telemetry]\nmetrics_port = 0\n", "") + (
+        'causality = "same-step"\nlearner_deadline = 0.2\n')
+    steps = 20
+    with RunningBridge(toml, tmp_path) as bridge, \
+            GenericClientLink("127.0.0.1", bridge.ports["damper"], 1) as source, \
+            GenericClientLink("127.0.0.1", bridge.ports["twin1"], 1) as twin:
+        for i in range(1, steps + 1):
+            d = 1.5 * math.sin(i / 4.0)
+            twin.set_trial((0.8 * d,), time=0.01 * i)
+            twin.force()
+            source.set_trial((d,), time=0.01 * i)
+            source.force()
+            twin.commit()
+            source.commit()
+        twin.request(Action.GET_DISP)
+        source.request(Action.GET_DISP)
+        status = bridge.call(lambda: bridge.bridge.sites["twin1"].status())
+        run_dir = bridge.run_dir
+    assert status["causality"] == "same-step (fell back to previous-step)"
+    fallbacks = [e for e in load_run(run_dir).events if e["event"] == "same-step-fallback"]
+    assert len(fallbacks) == 1 and fallbacks[0]["step"] == 1
+    src, tw = read_history(run_dir, site="damper"), read_history(run_dir, site="twin1")
+    assert tw.force is not None and tw.disp.size == steps
+    expected = replay(make_updater("online_ukf"), src.disp, src.force, tw.disp,
+                      lag=True).force_pred
+    assert float(np.max(np.abs(tw.force - expected))) / float(np.max(np.abs(expected))) < 1e-9

@@ -22,7 +22,8 @@ class FakeLearner:
         self.lost = False
         self.commits: list[str] = []
 
-    async def trial(self, twin: str, d: float) -> tuple[float, float, int]:
+    async def trial(self, twin: str, d: float, *, same_step: bool = False
+                    ) -> tuple[float, float, int]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
         return 10.0 * d, 10.0, 7

@@ -41,7 +41,7 @@ def test_previous_step_equals_the_in_process_replay(source_first: bool) -> None:
     for i in range(sd.size):
         observe = ("observe", i + 1, float(sd[i]), float(sf[i]))
         for k, d in enumerate((td[i] * 0.5, td[i])):  # Newton: the last trial is committed
-            reply = worker.handle(("trial", 10 * i + k, "twin", float(d)))
+            reply = worker.handle(("trial", 10 * i + k, "twin", float(d), False))
             assert reply is not None and reply[0] == "trial" and reply[4] == i  # through i-1
             assert reply[5] >= 0.0  # the update time of the step(s) just learned
         answers.append(reply[2])
@@ -61,8 +61,8 @@ def test_each_twin_follows_the_learned_parameters() -> None:
     sd, sf, td = histories(30)
     worker = state("a", "b")
     for i in range(sd.size):
-        fa = worker.handle(("trial", 1, "a", float(td[i])))
-        fb = worker.handle(("trial", 2, "b", float(td[i])))
+        fa = worker.handle(("trial", 1, "a", float(td[i]), False))
+        fb = worker.handle(("trial", 2, "b", float(td[i]), False))
         assert fa is not None and fb is not None and fa[2:5] == fb[2:5]
         worker.handle(("commit", "a"))
         worker.handle(("commit", "b"))
@@ -75,10 +75,24 @@ def test_a_non_finite_observation_is_not_learned_and_a_bad_trial_is_an_error() -
     worker = state("twin")
     worker.handle(("observe", 1, math.nan, 3.0))
     worker.handle(("commit", "twin"))
-    reply = worker.handle(("trial", 1, "twin", 0.5))
+    reply = worker.handle(("trial", 1, "twin", 0.5, False))
     assert reply is not None and reply[0] == "trial" and reply[4] == 0
     assert worker.rejected == 1
-    bad = worker.handle(("trial", 2, "twin", math.inf))
+    bad = worker.handle(("trial", 2, "twin", math.inf, False))
     assert bad is not None and bad[0] == "error" and bad[1] == 2
     initial = worker.handle(("initial", 3, "twin"))
     assert initial == ("initial", 3, UKF["k0"])
+
+
+def test_same_step_equals_the_in_process_replay_in_the_papers_order() -> None:
+    sd, sf, td = histories()
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))  # the source's trial
+        reply = worker.handle(("trial", i, "twin", float(td[i]), True))
+        assert reply is not None and reply[4] == i + 1  # learned through this very step
+        answers.append(reply[2])
+        worker.handle(("commit", "twin"))
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=False).force_pred
+    assert np.array_equal(np.array(answers), expected)
