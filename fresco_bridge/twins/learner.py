@@ -1,15 +1,18 @@
 """The learner of one source site, on the bridge's side: its worker process, the messages to
 it and its answers, never blocking the event loop.
 
-Messages go out through a bounded queue with ``put_nowait``; when it is full they wait in a
-local backlog that a flush task drains, in order (training data is never dropped). Answers come
-back through a reader thread and ``call_soon_threadsafe``. Every wait has a deadline; a missed
-deadline or a dead worker is a *learner loss*. A twin whose rule is ``hold`` then fails
-(``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers from a local copy: the
-worker's last pickled snapshot (taken at start and every ``SNAPSHOT_EVERY`` twin steps) with the
-twins' commits since replayed, learning nothing more. The worker is replaced and caught up by
-replaying the ordered log of what changes its state (the source's steps, each twin's committed
-trial), and the learner is live again once the new worker has answered past the end of that log.
+Messages go out in batches, one per request (a twin's trial): what changes the worker's state
+(the source's steps, the twins' commits) waits in a list until then, so the source's step
+costs no IPC. Batches go through a bounded queue with ``put_nowait``; when it is full they
+wait in a local backlog that a flush task drains, in order (training data is never dropped).
+Answers come back through a reader thread and ``call_soon_threadsafe``. Every wait has a
+deadline; a missed deadline or a dead worker is a *learner loss*. A twin whose rule is
+``hold`` then fails (``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers
+from a local copy: the worker's last pickled snapshot (taken at start and every
+``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning nothing more.
+The worker is replaced and caught up by replaying the ordered log of what changes its state
+(the source's steps, each twin's committed trial), and the learner is live again once the new
+worker has answered past the end of that log.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ log = logging.getLogger("fresco_bridge.twins")
 START_DEADLINE = 120.0
 """Seconds a new worker may take to import, read its data and build its updaters."""
 QUEUE_SIZE = 4096
-"""Messages in flight to the worker before the local backlog takes them."""
+"""Batches in flight to the worker before the local backlog takes them."""
 FLUSH_PAUSE = 0.002
 """Seconds the flush task waits for room in the queue between two attempts."""
 SNAPSHOT_EVERY = 50
@@ -77,11 +80,13 @@ class Learner:
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
-        self._backlog: deque[Message | None] = deque()
+        self._backlog: deque[list[Message]] = deque()
+        self._held: list[Message] = []
+        """Messages for the worker that wait for its next request (``_send``)."""
         self._flush: asyncio.Task[None] | None = None
         self._restart: asyncio.Task[None] | None = None
         self._proc: BaseProcess | None = None
-        self._inbox: multiprocessing.queues.Queue[Message | None] | None = None
+        self._inbox: multiprocessing.queues.Queue[list[Message] | None] | None = None
         self._reader: threading.Thread | None = None
         self._generation = 0
         self._ready: asyncio.Future[None] | None = None
@@ -130,8 +135,7 @@ class Learner:
         await self._spawn()
         if self.log:  # a resumed run: what the record holds, before anything new
             self.state = "catching-up"
-            for msg in self.log:
-                self._put(msg)
+            self._held = list(self.log)
             (through,) = await self._request(("sync",), START_DEADLINE)
             self.trained_through = int(through)
         self.state = "live"
@@ -142,13 +146,14 @@ class Learner:
     async def _spawn(self) -> None:
         assert self._loop is not None
         ctx = multiprocessing.get_context("spawn")
-        inbox: multiprocessing.queues.Queue[Message | None] = ctx.Queue(QUEUE_SIZE)
+        inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
                            name=f"fresco-learner-{self.source}", daemon=True)
         self._generation += 1
         self._ready = self._loop.create_future()
         self._backlog.clear()
+        self._held.clear()  # in the log: a new worker gets them with the replay
         await self._loop.run_in_executor(None, proc.start)
         self._proc, self._inbox = proc, inbox
         self._reader = threading.Thread(target=self._read, args=(proc, outbox, self._generation),
@@ -252,8 +257,7 @@ class Learner:
             log.error("learner of %s: no new worker: %s", self.source, exc)
             return
         self.state = "catching-up"
-        for msg in self.log:
-            self._put(msg)
+        self._held = list(self.log)
         try:
             await self._request(("sync",), START_DEADLINE)
         except LearnerError as exc:
@@ -332,17 +336,21 @@ class Learner:
 
     # -- messages -----------------------------------------------------------------------------
     def _put(self, msg: Message) -> None:
-        """``msg`` to the worker, after everything before it; never blocks."""
+        """``msg`` (a request) to the worker, after everything held before it; never blocks."""
+        batch, self._held = [*self._held, msg], []
+        self._post(batch)
+
+    def _post(self, batch: list[Message]) -> None:
         inbox = self._inbox
         if inbox is None:
             return
         if not self._backlog:
             try:
-                inbox.put_nowait(msg)
+                inbox.put_nowait(batch)
                 return
             except queue.Full:
                 pass
-        self._backlog.append(msg)
+        self._backlog.append(batch)
         if self._flush is None or self._flush.done():
             assert self._loop is not None
             self._flush = self._loop.create_task(self._drain(), name=f"learner.{self.source}")
@@ -360,11 +368,13 @@ class Learner:
             self._backlog.popleft()
 
     def _send(self, msg: Message) -> None:
-        """A message that changes the worker's state: logged, and sent unless a new worker
-        is being started (the replay of the log will carry it)."""
+        """A message that changes the worker's state: logged, and held for the worker's next
+        request unless a new worker is being started (the replay of the log will carry it).
+        The worker needs the source's steps and the twins' commits only before its next
+        answer, so the source's committed step costs the step loop an append, no IPC."""
         self.log.append(msg)
         if self.state in ("live", "catching-up"):
-            self._put(msg)
+            self._held.append(msg)
 
     async def _request(self, msg: Message, deadline: float) -> tuple[Any, ...]:
         assert self._loop is not None

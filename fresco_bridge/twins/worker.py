@@ -15,10 +15,12 @@ weights), and two seeded updaters fed the same steps hold the same parameters.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import multiprocessing
 import multiprocessing.queues
+import os
 import pickle
 import queue
 from dataclasses import dataclass, field
@@ -28,6 +30,9 @@ from ..updating.base import Updater, UpdaterError, UpdaterInputError
 from ..updating.registry import make_updater
 
 log = logging.getLogger("fresco_bridge.twins")
+
+NICE = 10
+"""How much lower than the bridge the worker runs (``os.nice``)."""
 
 Message = tuple[Any, ...]
 """``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
@@ -139,10 +144,14 @@ class LearnerState:
         return twin
 
 
-def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[Message | None],
+def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
                 outbox: multiprocessing.queues.Queue[Reply]) -> None:
-    """The worker process: build, say ready, then answer messages in order until ``None`` (or
-    until the bridge process is gone)."""
+    """The worker process: build, say ready, then answer batches of messages in order until
+    ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
+    BLAS thread, so training takes the CPU the bridge's step loop leaves."""
+    with contextlib.suppress(OSError):
+        os.nice(NICE)
+    limits = _one_blas_thread()
     try:
         state = LearnerState(spec)
     except (UpdaterError, OSError, ValueError) as exc:
@@ -153,17 +162,32 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[Message |
     parent = multiprocessing.parent_process()
     while True:
         try:
-            msg = inbox.get(timeout=1.0)
+            batch = inbox.get(timeout=1.0)
         except queue.Empty:
             if parent is not None and not parent.is_alive():
                 break  # the bridge was killed: no orphan worker
             continue
-        if msg is None:
+        if batch is None:
             break
-        try:
-            reply = state.handle(msg)
-        except Exception as exc:  # an updater bug must not kill the twin silently
-            rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
-            reply = ("error", rid, f"{type(exc).__name__}: {exc}")
-        if reply is not None:
-            outbox.put(reply)
+        for msg in batch:
+            reply = _handled(state, msg)
+            if reply is not None:
+                outbox.put(reply)
+    del limits
+
+
+def _handled(state: LearnerState, msg: Message) -> Reply | None:
+    try:
+        return state.handle(msg)
+    except Exception as exc:  # an updater bug must not kill the twin silently
+        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
+        return ("error", rid, f"{type(exc).__name__}: {exc}")
+
+
+def _one_blas_thread() -> Any:
+    """Limit numpy's BLAS to one thread in this process (threadpoolctl, when installed)."""
+    try:
+        from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+    except ImportError:
+        return None
+    return threadpool_limits(1)
