@@ -117,3 +117,42 @@ def test_a_client_asking_the_twin_before_the_sources_trial_falls_back_not_deadlo
     expected = replay(make_updater("online_ukf"), src.disp, src.force, tw.disp,
                       lag=True).force_pred
     assert float(np.max(np.abs(tw.force - expected))) / float(np.max(np.abs(expected))) < 1e-9
+
+
+def test_two_twins_of_one_source_share_a_learner_each_with_its_own_state(
+        tmp_path: Path) -> None:
+    """One learner (one worker) for both; each twin its own updater and history: twin1 the
+    UKF at 0.8 d, twin2 a fixed law at 0.5 d, each equal to its own in-process replay."""
+    pytest.importorskip("filterpy")
+    from fresco_bridge.updating.histories import read_history
+    from fresco_bridge.updating.registry import make_updater
+    from fresco_bridge.updating.replay import replay
+
+    toml = TOML.replace("[telemetry]\nmetrics_port = 0\n", "") + (
+        '[[sites]]\nname = "twin2"\nport = 0\nkind = "updatable"\nlearns_from = "damper"\n'
+        'updater = "none"\n[sites.updater_options]\nmodel = "elastic"\nparams = { k = 7.0 }\n')
+    steps = 25
+    with RunningBridge(toml, tmp_path) as bridge:
+        assert list(bridge.bridge.learners) == ["damper"]
+        links = [GenericClientLink("127.0.0.1", bridge.ports[s], 1).connect()
+                 for s in ("damper", "twin1", "twin2")]
+        for i in range(1, steps + 1):
+            d = 1.5 * math.sin(i / 4.0)
+            for link, scale in zip(links, (1.0, 0.8, 0.5), strict=True):
+                link.set_trial((scale * d,), time=0.01 * i)
+                link.force()
+            for link in links:
+                link.commit()
+        for link in links:
+            link.request(Action.GET_DISP)
+            link.close()
+        run_dir = bridge.run_dir
+    src = read_history(run_dir, site="damper")
+    for site, name, options in (("twin1", "online_ukf", {}),
+                                ("twin2", "none", {"model": "elastic", "params": {"k": 7.0}})):
+        tw = read_history(run_dir, site=site)
+        assert tw.force is not None and tw.disp.size == steps
+        expected = replay(make_updater(name, **options), src.disp, src.force, tw.disp,
+                          lag=True).force_pred
+        assert float(np.max(np.abs(tw.force - expected))) < 1e-9 * float(
+            np.max(np.abs(expected))), site
