@@ -31,6 +31,9 @@ from ..updating.registry import make_updater
 
 log = logging.getLogger("fresco_bridge.twins")
 
+TRIM = 1024
+"""Observations every twin has learned are dropped in chunks of at least this many (the
+snapshots stay small)."""
 NICE = 10
 """How much lower than the bridge the worker runs (``os.nice``)."""
 
@@ -141,6 +144,11 @@ class LearnerState:
                 continue
             twin.trained_through = step
             twin.update_seconds += twin.updater.last_update_seconds
+        learned = min(t.applied for t in self.twins.values())
+        if learned >= TRIM:  # what every twin has learned is not needed any more
+            del obs[:learned]
+            for t in self.twins.values():
+                t.applied -= learned
         return twin
 
 

@@ -96,3 +96,22 @@ def test_same_step_equals_the_in_process_replay_in_the_papers_order() -> None:
         worker.handle(("commit", "twin"))
     expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=False).force_pred
     assert np.array_equal(np.array(answers), expected)
+
+
+def test_learned_observations_are_dropped_and_learning_goes_on(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from fresco_bridge.twins import worker as worker_module
+
+    monkeypatch.setattr(worker_module, "TRIM", 16)
+    sd, sf, td = histories(60)
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        reply = worker.handle(("trial", i, "twin", float(td[i]), False))
+        assert reply is not None
+        answers.append(reply[2])
+        worker.handle(("commit", "twin"))
+        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))
+    assert len(worker.observations) < 20
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=True).force_pred
+    assert np.array_equal(np.array(answers), expected)
