@@ -137,7 +137,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "check":
         cfg, _ = load_config(args.config)
         print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
-              + ", ".join(f"{s.name} {s.transport}:{s.port}" for s in cfg.sites) + ")")
+              + ", ".join(f"{s.name} {s.transport}:{s.port}" + (
+                  f" (updatable: {s.updater} learning from {s.learns_from}, {s.causality})"
+                  if s.kind == "updatable" else "") for s in cfg.sites) + ")")
         return 0
     if args.command == "demo":
         from .demo import run_demo

@@ -52,9 +52,12 @@ else:  # the discriminated union of every registered kind's config model
 
 
 class SiteConfig(_Strict):
-    """One experimental site: a listener the integrator connects to, and its controller."""
+    """One site: a listener the integrator connects to, and its controller (``experimental``)
+    or the twin of an experimental site's element (``updatable``, ``twins/``)."""
 
     name: Name
+    kind: Literal["experimental", "updatable"] = "experimental"
+    """``updatable``: the force comes from an updater learning online from ``learns_from``."""
     port: int = Field(ge=0, le=65535)
     """0 picks a free port (tests, demo); the chosen port is logged and printed."""
     transport: Literal["tcp", "udp"] = "tcp"
@@ -88,6 +91,31 @@ class SiteConfig(_Strict):
     client_ca_file: ConfigPath | None = None
     """PEM CA certificate(s) that issue the clients' certificates (OpenFresco's
     ``server_ca.crt``)."""
+    learns_from: Name | None = None
+    """Updatable site: the experimental site (one actuator) whose committed steps it learns
+    from."""
+    updater: str | None = None
+    """Updatable site: a name of ``updating/registry.py`` (``none``, ``offline_ann``,
+    ``online_ann``, ``online_ukf``, ``online_improved``)."""
+    offline: ConfigPath | None = None
+    """Updatable site: the offline database (CSV ``time,disp,force``, the bridge's export CSV
+    or a run directory), relative to the config file's folder."""
+    model: ConfigPath | None = None
+    """Updatable site: an ANN model file (``updater pretrain``), relative to the config file's
+    folder."""
+    causality: Literal["previous-step", "same-step"] = "previous-step"
+    """Updatable site: ``previous-step``: the twin's step i answers from what was learned
+    through the source's step i-1; ``same-step``: also from the source's measurement of step
+    i (the paper's order; one trial per step: explicit schemes; in-process sources)."""
+    on_learner_loss: Literal["hold", "freeze"] = "hold"
+    """Updatable site: when the learner dies or misses its deadline, ``hold`` (the site's HOLD:
+    NaN answers, the integrator stops) or ``freeze`` (answer from the learner's last snapshot,
+    parameters frozen, until a new worker has caught up)."""
+    updater_options: dict[str, Any] = Field(default_factory=dict)
+    """Updatable site: the updater's options (as ``updater replay --option KEY=VALUE``)."""
+    learner_deadline: float = Field(default=2.0, gt=0, le=600)
+    """Updatable site: seconds the twin waits for its learner's answer; past it the learner
+    counts as lost (``on_learner_loss``). Shorter than ``bridge.controller_timeout``."""
 
     @field_validator("limits", mode="before")
     @classmethod
@@ -114,6 +142,7 @@ class SiteConfig(_Strict):
                 f"controller {self.controller.kind} drives {most} actuator(s); this site needs "
                 f"{n_act} (use setup OneActuator or dofs = 1)"
             )
+        self._kind_keys_fit(n_act)
         actuators = [lim.actuator for lim in self.limits]
         if any(a > n_act for a in actuators):
             raise ValueError(f"limits: actuator {max(actuators)} does not exist (setup "
@@ -123,6 +152,25 @@ class SiteConfig(_Strict):
                              f"{sorted({a for a in actuators if actuators.count(a) > 1})}")
         self._tls_fits()
         return self
+
+    def _kind_keys_fit(self, n_act: int) -> None:
+        twin_keys = [k for k in _TWIN_KEYS if k in self.model_fields_set]
+        if self.kind == "experimental":
+            if twin_keys:
+                raise ValueError(f"{', '.join(twin_keys)}: keys of kind = \"updatable\" sites "
+                                 "(this site is experimental)")
+            return
+        if "controller" in self.model_fields_set:
+            raise ValueError("an updatable site has no [sites.controller] table (its force is "
+                             "the twin's, learned from learns_from)")
+        missing = [k for k in ("learns_from", "updater") if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"kind = \"updatable\" needs {' and '.join(missing)}")
+        if n_act != 1:
+            raise ValueError(f"an updatable site drives one actuator (its twin is uniaxial); "
+                             f"setup {self.setup} with {self.dofs} DOF(s) drives {n_act}")
+        if self.offline is not None and self.model is not None:
+            raise ValueError("give offline or model, not both")
 
     def _tls_fits(self) -> None:
         files = {"cert_file": self.cert_file, "key_file": self.key_file,
@@ -143,6 +191,11 @@ class SiteConfig(_Strict):
             assert path is not None
             if not path.is_file():
                 raise ValueError(f"{key}: no such file {str(path)!r}")
+
+
+_TWIN_KEYS = ("learns_from", "updater", "offline", "model", "causality", "on_learner_loss",
+              "updater_options", "learner_deadline")
+"""The keys only an updatable site takes."""
 
 
 class BridgeConfig(_Strict):
@@ -322,16 +375,104 @@ def _format_errors(source: str, exc: ValidationError) -> str:
     return "\n".join(lines)
 
 
-def parse_config(text: str, source: str = "<config>") -> LabConfig:
-    """Parse TOML text; raise ConfigError with file, key and reason."""
+def parse_config(text: str, source: str = "<config>", *, base: Path | None = None) -> LabConfig:
+    """Parse TOML text; raise ConfigError with file, key and reason. Relative data paths of
+    updatable sites resolve against ``base`` (the config file's folder; default: the current
+    directory)."""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: not valid TOML: {exc}") from None
     try:
-        return LabConfig.model_validate(raw)
+        cfg = LabConfig.model_validate(raw)
     except ValidationError as exc:
         raise ConfigError(_format_errors(source, exc)) from None
+    if not any(s.kind == "updatable" for s in cfg.sites):
+        return cfg
+    cfg, problems = _updatable_sites(cfg, Path.cwd() if base is None else base)
+    if problems:
+        raise ConfigError("\n".join([f"{source}: invalid configuration ({len(problems)} "
+                                     "problem(s))", *(f"  {p}" for p in problems)]))
+    return cfg
+
+
+def _updatable_sites(cfg: LabConfig, base: Path) -> tuple[LabConfig, list[str]]:
+    """``cfg`` with the updatable sites' data paths resolved against ``base``, and what is
+    wrong with those sites (``sites[i].key: reason``): their source, updater and data. The
+    updater registry and the data readers load only for a config with updatable sites."""
+    from .updating.base import UpdaterError
+    from .updating.histories import read_history
+    from .updating.modelfile import load_model
+    from .updating.registry import UPDATERS, updater_options
+
+    problems: list[str] = []
+    by_name = {s.name: s for s in cfg.sites}
+    sites = list(cfg.sites)
+    for i, site in enumerate(sites):
+        if site.kind != "updatable":
+            continue
+        key = f"sites[{i}]"
+        source = by_name.get(site.learns_from or "")
+        if source is None:
+            problems.append(f"{key}.learns_from: no site named {site.learns_from!r} (sites: "
+                            f"{', '.join(by_name)})")
+        elif source.kind != "experimental":
+            problems.append(f"{key}.learns_from: site {source.name!r} is {source.kind}; a twin "
+                            "learns from an experimental site")
+        elif (n := make_setup(source.setup, source.dofs).n_actuators) != 1:
+            problems.append(f"{key}.learns_from: site {source.name!r} drives {n} actuators "
+                            f"(setup {source.setup}, dofs {source.dofs}); a twin learns from a "
+                            "one-actuator site")
+        if site.learner_deadline >= cfg.bridge.controller_timeout:
+            problems.append(f"{key}.learner_deadline: {site.learner_deadline:g} s must be "
+                            f"shorter than bridge.controller_timeout "
+                            f"({cfg.bridge.controller_timeout:g} s)")
+        if site.causality == "same-step":
+            if source is not None and source.controller.kind != "sim":
+                problems.append(f"{key}.causality: same-step is served for in-process (sim) "
+                                f"sources so far; site {source.name!r} has a "
+                                f"{source.controller.kind} controller (use previous-step)")
+            if 2 * site.learner_deadline >= cfg.bridge.controller_timeout:
+                problems.append(f"{key}.learner_deadline: same-step waits up to it for the "
+                                "source's trial, then for the learner: twice it must be "
+                                "shorter than bridge.controller_timeout "
+                                f"({cfg.bridge.controller_timeout:g} s)")
+        name = site.updater or ""
+        if name not in UPDATERS:
+            problems.append(f"{key}.updater: unknown updater {name!r}; known: "
+                            f"{', '.join(UPDATERS)}")
+            continue
+        paths = {k: p if p is None or p.is_absolute() else base / p
+                 for k, p in (("offline", site.offline), ("model", site.model))}
+        site = sites[i] = site.model_copy(update=paths)
+        accepted = updater_options(name)
+        for k, option in (("offline", "offline"), ("model", "model_file")):
+            if paths[k] is not None and option not in accepted:
+                problems.append(f"{key}.{k}: updater {name!r} takes no {k}")
+        needs = UPDATERS[name].needs
+        if needs and site.offline is None and (site.model is None or "model_file" not in needs):
+            wanted = " or ".join(f"{k} = \"...\"" for k, o in (("offline", "offline"),
+                                                                ("model", "model_file"))
+                                 if o in needs)
+            problems.append(f"{key}.updater: updater {name!r} needs {wanted} (the offline "
+                            "database or a pre-trained model)")
+        given = set(site.updater_options)
+        unknown = sorted(given - set(accepted))
+        if unknown:
+            problems.append(f"{key}.updater_options: unknown option(s) {', '.join(unknown)} of "
+                            f"updater {name!r}; allowed: {', '.join(accepted) or '(none)'}")
+        for option, instead in (("offline", "offline"), ("model_file", "model")):
+            if option in given:
+                problems.append(f"{key}.updater_options.{option}: give it as the site's "
+                                f"{instead} = \"...\" (a path)")
+        try:
+            if site.model is not None:
+                load_model(site.model)
+            if site.offline is not None:
+                read_history(site.offline)
+        except UpdaterError as exc:
+            problems.append(f"{key}.{'model' if site.model is not None else 'offline'}: {exc}")
+    return cfg.model_copy(update={"sites": sites}), problems
 
 
 def load_config(path: Path) -> tuple[LabConfig, str]:
@@ -346,4 +487,4 @@ def load_config(path: Path) -> tuple[LabConfig, str]:
         line = data.count(b"\n", 0, exc.start) + 1
         raise ConfigError(f"{path}: not UTF-8 text (TOML must be UTF-8): byte "
                           f"0x{data[exc.start]:02x} at line {line}, offset {exc.start}") from None
-    return parse_config(text, str(path)), text
+    return parse_config(text, str(path), base=path.parent), text

@@ -286,6 +286,13 @@ def format_answer(answer: dict[str, Any]) -> str:
             + f"  step {st['step']}  time {st['time']:g}")
         lines.append(f"    ctrl {_vec(st['ctrl'])} mm (target {_vec(st['target'])})  daq disp "
                      f"{_vec(st['daq_disp'])} mm force {_vec(st['daq_force'])} kN")
+        if st.get("kind") == "updatable":
+            lines.append(f"    updatable: learns from {st['source']}  updater {st['updater']}  "
+                         f"causality {st['causality']}  learner {st['learner']}"
+                         + (f" ({st['learner_reason']})" if st["learner_reason"] else "")
+                         + f"  trained through source step {st['steps_trained']} "
+                         f"(source at {st['source_step']})  not trained {st['not_trained']}  "
+                         f"losses {st['learner_losses']}")
         counts = ", ".join(f"{k} {v}" for k, v in sorted(st["limit_events"].items())) or "none"
         lines.append(f"    holds {st['holds']}  limit events: {counts}")
         for lim in st["limits"]:

@@ -37,6 +37,9 @@ from .sites.access import Allowlist
 from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
 from .telemetry.taps import MonitorBatch, SiteTaps
+from .twins.build import build_twins, preload_from_record
+from .twins.controller import TwinController
+from .twins.learner import Learner, LearnerError
 
 log = logging.getLogger("fresco_bridge")
 T = TypeVar("T")
@@ -73,6 +76,16 @@ def _secret(value: SecretStr | None) -> str | None:
     return None if value is None else value.get_secret_value()
 
 
+def _event_sink(site: ExperimentalSite) -> Callable[[str, str, dict[str, object]], None]:
+    """A learner's events as events of one of its twin sites; a lost learner HOLDs a ``hold``
+    twin at once, not only at its next request (a ``freeze`` twin answers from its snapshot)."""
+    def sink(kind: str, reason: str, extra: dict[str, object]) -> None:
+        site.event(kind, reason, **extra)
+        if kind == "learner-lost" and site.in_session and site.cfg.on_learner_loss == "hold":
+            site.enter_hold(reason)
+    return sink
+
+
 class Bridge:
     def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
                  resume: Path | None = None) -> None:
@@ -92,6 +105,8 @@ class Bridge:
         self.desk = OperatorDesk(self.sites)
         self.control: ControlServer | None = None
         self._monitor_batches: list[MonitorBatch] = []
+        self.learners: dict[str, Learner] = {}
+        """The learner of each source site of updatable sites, by source name."""
 
     async def start(self) -> None:
         cfg = self.config
@@ -117,10 +132,16 @@ class Bridge:
         flag_interrupted(run_root, exclude=None if self.record is None
                          else self.record.directory)
         loop = asyncio.get_running_loop()
+        learners, twins = build_twins(cfg)
+        self.learners = learners
+        if self.resume is not None:
+            preload_from_record(learners, self.resume, cfg)
         try:
+            await self._start_learners()
             for scfg in cfg.sites:
+                controller = twins[scfg.name] if scfg.name in twins else make_controller(scfg)
                 site = ExperimentalSite(
-                    scfg, make_controller(scfg), self.record,
+                    scfg, controller, self.record,
                     controller_timeout=cfg.bridge.controller_timeout,
                     controller_recovery=cfg.bridge.controller_recovery,
                 )
@@ -159,7 +180,8 @@ class Bridge:
                 log.info("site %s: listening on %s %s:%d (%s protocol, %d DOF, setup %s)",
                          scfg.name, scfg.transport.upper(), cfg.bridge.host, port,
                          scfg.protocol, scfg.dofs, scfg.setup)
-        except (OSError, TlsConfigError):
+            self._wire_learners()
+        except (OSError, TlsConfigError, ConfigError):
             await self._abandon_start()
             raise
         await self._start_control()
@@ -183,6 +205,26 @@ class Bridge:
                 await self._abandon_start()
                 raise
         self._attach_taps()
+
+    async def _start_learners(self) -> None:
+        """Every learner's worker, built and ready before any site listens."""
+        results = await asyncio.gather(*(learner.start() for learner in self.learners.values()),
+                                       return_exceptions=True)
+        for source, result in zip(self.learners, results, strict=True):
+            if isinstance(result, LearnerError):
+                raise ConfigError(f"the learner of site {source} did not start: {result}")
+            if isinstance(result, BaseException):
+                raise result
+
+    def _wire_learners(self) -> None:
+        """Each learner listens to its source's committed steps; its events go to its twins."""
+        for source, learner in self.learners.items():
+            self.sites[source].add_listener(learner)
+            for twin in learner.spec.twins:
+                site = self.sites[twin.name]
+                learner.add_event_sink(_event_sink(site))
+                assert isinstance(site.controller, TwinController)
+                site.controller.bind(site, self.sites[source])
 
     def _listener(self, site: ExperimentalSite) -> SiteListener:
         """What the site's connections share; an open allowlist is said loudly."""
@@ -216,6 +258,8 @@ class Bridge:
             raise OSError(exc.errno, f"metrics endpoint {host}:{port}: {exc.strerror}") from exc
         for site in self.sites.values():
             site.metrics = self.metrics.for_site(site.name)
+        for learner in self.learners.values():
+            learner.update_observer = self.metrics.observe_updater_step
         log.info("metrics: http://%s:%d/metrics", host, self.metrics_server.port)
 
     def _attach_taps(self) -> None:
@@ -236,7 +280,8 @@ class Bridge:
                 site.add_listener(batch)
                 continue
             taps = SiteTaps(self.telemetry, site.metrics,
-                            site.recorder if tcfg.monitors else None, monitor, site.monitor_warning)
+                            site.recorder if tcfg.monitors else None, monitor, site.monitor_warning,
+                            predicted=site.cfg.kind == "updatable")
             site.add_listener(taps)
             taps.publish_status(site.status_now())
 
@@ -274,6 +319,8 @@ class Bridge:
                 await asyncio.wait_for(site.controller.close(), site.guard.timeout)
             except Exception as exc:  # closing must go on for the other sites
                 log.warning("site %s: controller close failed: %s", site.name, exc)
+        for learner in self.learners.values():
+            await learner.close()
         if self.metrics_server is not None:
             self.metrics_server.close()
             self.metrics_server = None

@@ -74,6 +74,10 @@ class Controller(abc.ABC):
     async def close(self) -> None:  # noqa: B027 - optional hook
         """Release the link; the actuator keeps holding its last command."""
 
+    def status_fields(self) -> dict[str, object]:
+        """What the controller adds to its site's ``ctl status`` (a twin: source, learner)."""
+        return {}
+
 
 class InlineController(Controller):
     """An in-process controller: every call completes at once, so its synchronous ``*_now``

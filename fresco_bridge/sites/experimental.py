@@ -313,7 +313,8 @@ class ExperimentalSite(CommandGate):
         """A JSON-able snapshot for ``fresco-bridge ctl status``."""
         since = self.paused_since
         return {
-            "site": self.name, "state": str(self.state), "reason": self.reason,
+            "site": self.name, "kind": self.cfg.kind, "state": str(self.state),
+            "reason": self.reason,
             "session": self.session, "peer": self.peer or None, "step": self.step,
             "time": self.time, "target": list(self.target), "ctrl": list(self.ctrl),
             "daq_disp": list(self.daq.disp), "daq_force": list(self.daq.force),
@@ -324,6 +325,7 @@ class ExperimentalSite(CommandGate):
             "holds": self.holds, "limit_events": dict(self.limit_counts),
             "refused": {} if self.rejections is None else dict(self.rejections.counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
+            **self.controller.status_fields(),
         }
 
     def tell_integrator_to_stop(self, why: str) -> None:

@@ -44,8 +44,13 @@ class SiteTaps:
         recorder: SiteRecorder | None,
         monitor: OnlineMonitor | None = None,
         warn: Callable[[str, int], None] | None = None,
+        *,
+        predicted: bool = False,
     ) -> None:
+        """``predicted``: the site is updatable, its measured force is the twin's prediction
+        (published as ``predicted_force``)."""
         self._mqtt = mqtt
+        self._predicted = predicted
         self._metrics = metrics
         self._recorder = recorder
         self._monitor = monitor
@@ -66,7 +71,8 @@ class SiteTaps:
         if self._mqtt is not None:
             self._mqtt.publish_step(StepSample(
                 step.site, step.session, step.step, step.time, step.trial, step.ctrl,
-                step.daq_disp, step.daq_force, step.state, None, sample,
+                step.daq_disp, step.daq_force, step.state,
+                step.daq_force[0] if self._predicted else None, sample,
             ))
 
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:

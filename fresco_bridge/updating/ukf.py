@@ -79,6 +79,12 @@ def _triple(name: str, value: float | Sequence[float]) -> FloatArray:
     return arr
 
 
+def _random_walk(z: FloatArray, dt: float) -> FloatArray:
+    """The UKF's process model: the parameters stay (a module function, so the updater
+    pickles: a served twin's learner snapshots it)."""
+    return z
+
+
 class BilinearTwin:
     """A Bilinear twin whose parameters can be replaced between steps, keeping its state.
 
@@ -160,7 +166,7 @@ class OnlineUkfUpdater(OwnsTwin):
         self._f_c = 0.0
         self._d_i = 0.0
         self._ukf = UnscentedKalmanFilter(
-            dim_x=3, dim_z=1, dt=1.0, hx=self._hx, fx=lambda z, dt: z, points=points
+            dim_x=3, dim_z=1, dt=1.0, hx=self._hx, fx=_random_walk, points=points
         )
         self._ukf.x = start.copy()
         self._ukf.P = np.diag(_triple("p0", p0))

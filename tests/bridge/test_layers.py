@@ -20,7 +20,7 @@ from tests.support.paths import REPO
 
 ROOT = "fresco_bridge"
 PROTOCOL = "protocol"
-DAEMON = ("server", "sites", "telemetry", "daemon")
+DAEMON = ("server", "sites", "telemetry", "twins", "daemon")
 ABOVE: dict[str, tuple[str, ...]] = {
     # the numerics are testable alone
     "updating": DAEMON,
@@ -30,8 +30,10 @@ ABOVE: dict[str, tuple[str, ...]] = {
     # writes the monitors into the record), the sites, the transports serving them
     "site_output": ("record", "telemetry", *DAEMON),
     "record": ("telemetry", *DAEMON),
-    "telemetry": ("sites", "server", "daemon"),
-    "sites": ("server", "daemon"),
+    "telemetry": ("sites", "twins", "server", "daemon"),
+    "sites": ("twins", "server", "daemon"),
+    # updatable sites: above the sites (their controller) and the updaters, below the daemon
+    "twins": ("server", "daemon"),
 }
 """``{layer: the layers above it}``, which it must not import (``fresco_bridge``'s)."""
 IO_MODULES = ("asyncio", "socket", "selectors", "ssl")

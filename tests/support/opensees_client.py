@@ -71,7 +71,8 @@ def _build_frame(p: dict[str, Any]) -> None:
     ops.mass(3, p["masses"][1])
     ports = p.get("ports")
     if ports is not None:
-        for ele, (ni, nj), port in ((1, (1, 2), ports[0]), (2, (2, 3), ports[1])):
+        tags = (2, 1) if p.get("story2_first") else (1, 2)  # OpenSees visits elements by tag
+        for ele, (ni, nj), port in ((tags[0], (1, 2), ports[0]), (tags[1], (2, 3), ports[1])):
             ops.element("genericClient", ele, "-node", ni, nj, "-dof", 1, "-dof", 1,
                         *_gc_args(port, p))
     else:
@@ -89,7 +90,7 @@ def _build_frame(p: dict[str, Any]) -> None:
     ops.constraints("Plain")
     ops.test("NormDispIncr", 1e-12, 50)
     ops.algorithm(*p.get("algorithm", ["Newton"]))
-    ops.integrator("Newmark", 0.5, 0.25)
+    ops.integrator(*p.get("integrator", ["Newmark", 0.5, 0.25]))
     ops.analysis("Transient")
 
 

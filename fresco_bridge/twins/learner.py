@@ -1,0 +1,493 @@
+"""The learner of one source site, on the bridge's side: its worker process, the messages to
+it and its answers, never blocking the event loop.
+
+Messages go out in batches, one per request (a twin's trial): what changes the worker's state
+(the source's steps, the twins' commits) waits in a list until then, so the source's step
+costs no IPC. Batches go through a bounded queue with ``put_nowait``; when it is full they
+wait in a local backlog that a flush task drains, in order (training data is never dropped).
+Answers come back through a reader thread and ``call_soon_threadsafe``. Every wait has a
+deadline; a missed deadline or a dead worker is a *learner loss*. A twin whose rule is
+``hold`` then fails (``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers
+from a local copy: the worker's last pickled snapshot (taken at start and every
+``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning nothing more.
+The worker is replaced and caught up by replaying the ordered log of what changes its state
+(the source's steps, each twin's committed trial), and the learner is live again once the new
+worker has answered past the end of that log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import math
+import multiprocessing
+import multiprocessing.queues
+import pickle
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable
+from multiprocessing.process import BaseProcess
+from typing import Any
+
+from ..site_output import CommittedStep
+from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
+
+log = logging.getLogger("fresco_bridge.twins")
+
+START_DEADLINE = 120.0
+"""Seconds a new worker may take to import, read its data and build its updaters."""
+QUEUE_SIZE = 4096
+"""Batches in flight to the worker before the local backlog takes them."""
+FLUSH_PAUSE = 0.002
+"""Seconds the flush task waits for room in the queue between two attempts."""
+SNAPSHOT_EVERY = 50
+"""Twin steps between two snapshots of the worker (kept for ``on_learner_loss = "freeze"``)."""
+STOP_DEADLINE = 5.0
+"""Seconds a worker is given to end after the stop message, then it is killed."""
+
+EventSink = Callable[[str, str, dict[str, object]], None]
+"""``(kind, reason, extra)``: an event for the twin sites of this learner."""
+
+
+class LearnerError(Exception):
+    """The learner cannot answer (lost, catching up, or the twin refused the trial)."""
+
+
+class Learner:
+    """One source site's learner: a worker process with one updater per twin."""
+
+    def __init__(self, source: str, spec: LearnerSpec, *, deadline: float) -> None:
+        self.source = source
+        self.spec = spec
+        self.deadline = deadline
+        self.state = "stopped"
+        """``starting``, ``live``, ``lost``, ``catching-up`` or ``stopped``."""
+        self.reason = ""
+        self.source_step = 0
+        self.trained_through = 0
+        self.not_trained = 0
+        """Source steps with a non-finite measurement, never sent for training."""
+        self.losses = 0
+        self.log: list[Message] = []
+        """What changed the worker's state, in order: replayed to a new worker."""
+        self._last_trial: dict[str, tuple[float, bool]] = {}
+        """Each twin's last trial: its displacement and whether it was answered same-step."""
+        self._same_step_sent: dict[int, tuple[float, float]] = {}
+        """Source steps already sent at their trial (same-step), until their commit."""
+        self._sinks: list[EventSink] = []
+        self._ids = itertools.count(1)
+        self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._backlog: deque[list[Message]] = deque()
+        self._held: list[Message] = []
+        """Messages for the worker that wait for its next request (``_send``)."""
+        self._flush: asyncio.Task[None] | None = None
+        self._restart: asyncio.Task[None] | None = None
+        self._proc: BaseProcess | None = None
+        self._inbox: multiprocessing.queues.Queue[list[Message] | None] | None = None
+        self._reader: threading.Thread | None = None
+        self._generation = 0
+        self._ready: asyncio.Future[None] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._closing = False
+        self.update_observer: Callable[[float], None] | None = None
+        """Takes the worker's update time of each newly learned step (the metrics)."""
+        self._freezes = {t.name for t in spec.twins if t.on_loss == "freeze"}
+        self._commits = 0
+        self._snapshot: tuple[int, int, bytes] | None = None
+        """(log length, twin steps, pickled worker state) of the last snapshot."""
+        self._snapshot_asked: dict[int, tuple[int, int]] = {}
+        self._answered_locally: set[str] = set()
+        """Twins whose last trial the local copy answered (a new worker has not seen it)."""
+        self._local: LearnerState | None = None
+        """The frozen copy answering ``freeze`` twins while the worker is lost."""
+
+    @property
+    def snapshot_step(self) -> int:
+        """Twin steps committed when the last snapshot was taken (-1: none yet)."""
+        return -1 if self._snapshot is None else self._snapshot[1]
+
+    def preload(self, log_: list[Message], *, source_step: int, commits: int) -> None:
+        """Start from a recorded history (``serve --resume``): the worker replays ``log_``
+        before it answers, as a new worker after a loss does."""
+        self.log = list(log_)
+        self.source_step = source_step
+        self._commits = commits
+
+    def add_event_sink(self, sink: EventSink) -> None:
+        self._sinks.append(sink)
+
+    def _event(self, kind: str, reason: str, **extra: object) -> None:
+        for sink in self._sinks:
+            sink(kind, reason, extra)
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._proc is None else self._proc.pid
+
+    # -- the worker's life ------------------------------------------------------------------
+    async def start(self) -> None:
+        """Start the worker and wait (``START_DEADLINE``) until its updaters are built."""
+        self._loop = asyncio.get_running_loop()
+        self.state = "starting"
+        await self._spawn()
+        if self.log:  # a resumed run: what the record holds, before anything new
+            self.state = "catching-up"
+            self._held = list(self.log)
+            (through,) = await self._request(("sync",), START_DEADLINE)
+            self.trained_through = int(through)
+        self.state = "live"
+        self._ask_snapshot()
+        log.info("learner of %s: worker %s live (twins %s)", self.source, self.pid,
+                 ", ".join(f"{t.name}: {t.updater}" for t in self.spec.twins))
+
+    async def _spawn(self) -> None:
+        assert self._loop is not None
+        ctx = multiprocessing.get_context("spawn")
+        inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
+        outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
+        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
+                           name=f"fresco-learner-{self.source}", daemon=True)
+        self._generation += 1
+        self._ready = self._loop.create_future()
+        self._backlog.clear()
+        self._held.clear()  # in the log: a new worker gets them with the replay
+        await self._loop.run_in_executor(None, proc.start)
+        self._proc, self._inbox = proc, inbox
+        self._reader = threading.Thread(target=self._read, args=(proc, outbox, self._generation),
+                                        name=f"learner-reader-{self.source}", daemon=True)
+        self._reader.start()
+        try:
+            await asyncio.wait_for(asyncio.shield(self._ready), START_DEADLINE)
+        except TimeoutError:
+            raise LearnerError(f"learner of {self.source}: the worker was not ready within "
+                               f"{START_DEADLINE:g} s") from None
+
+    def _read(self, proc: BaseProcess, outbox: multiprocessing.queues.Queue[Reply],
+              generation: int) -> None:
+        """The reader thread of one worker: its answers to the loop, then its end."""
+        while not self._closing and generation == self._generation:
+            try:
+                reply = outbox.get(timeout=0.2)
+            except queue.Empty:
+                if not proc.is_alive():
+                    self._call(self._died, generation, proc.exitcode)
+                    return
+                continue
+            except (EOFError, OSError):
+                self._call(self._died, generation, proc.exitcode)
+                return
+            self._call(self._answer, generation, reply)
+
+    def _call(self, fn: Callable[..., None], *args: Any) -> None:
+        loop = self._loop
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop closed: the bridge has stopped
+                loop.call_soon_threadsafe(fn, *args)
+
+    def _died(self, generation: int, code: int | None) -> None:
+        if generation != self._generation or self._closing:
+            return
+        reason = f"the worker process exited (code {code})"
+        if self._ready is not None and not self._ready.done():
+            self._ready.set_exception(LearnerError(reason))
+        else:
+            self._lose(reason)
+
+    def _answer(self, generation: int, reply: Reply) -> None:
+        if generation != self._generation:
+            return
+        kind = reply[0]
+        if kind == "ready":
+            if self._ready is not None and not self._ready.done():
+                self._ready.set_result(None)
+            return
+        if kind == "fatal":
+            if self._ready is not None and not self._ready.done():
+                self._ready.set_exception(LearnerError(reply[1]))
+            else:
+                self._lose(reply[1])
+            return
+        asked = self._snapshot_asked.pop(reply[1], None)
+        if asked is not None:
+            if kind == "snapshot":
+                self._snapshot = (*asked, reply[2])
+            else:
+                log.error("learner of %s: %s; freeze answers from an older snapshot or HOLDs",
+                          self.source, reply[2])
+            return
+        fut = self._pending.pop(reply[1], None)
+        if fut is None or fut.done():
+            if kind == "error":
+                log.error("learner of %s: %s", self.source, reply[2])
+            return  # an answer to a replayed message, or one whose wait ended
+        if kind == "error":
+            fut.set_exception(LearnerError(reply[2]))
+        else:
+            fut.set_result(reply[2:])
+
+    def _lose(self, reason: str) -> None:
+        """The worker is gone or silent: fail what waits, tell the twins, replace it."""
+        if self.state in ("lost", "stopped") or self._closing:
+            return
+        self.state, self.reason = "lost", reason
+        self.losses += 1
+        log.error("learner of %s LOST: %s; its twins HOLD, a new worker catches up",
+                  self.source, reason)
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(LearnerError(f"learner lost: {reason}"))
+        self._pending.clear()
+        self._event("learner-lost", f"learner of {self.source} lost: {reason}",
+                    losses=self.losses)
+        if self._freezes:
+            self._freeze()
+        assert self._loop is not None
+        self._restart = self._loop.create_task(self._replace(), name=f"learner.{self.source}")
+
+    async def _replace(self) -> None:
+        """A new worker, caught up by replaying the log, then live again."""
+        await self._stop_worker(kill=True)
+        try:
+            await self._spawn()
+        except LearnerError as exc:
+            self.reason = str(exc)
+            log.error("learner of %s: no new worker: %s", self.source, exc)
+            return
+        self.state = "catching-up"
+        self._held = list(self.log)
+        try:
+            await self._request(("sync",), START_DEADLINE)
+        except LearnerError as exc:
+            self._lose(f"catching up failed: {exc}")
+            return
+        self.state, self.reason, self._local = "live", "", None
+        log.warning("learner of %s: a new worker (%s) caught up over %d message(s); live",
+                    self.source, self.pid, len(self.log))
+        self._event("learner-restored", f"learner of {self.source} live again (worker "
+                    f"restarted, {len(self.log)} message(s) replayed)", losses=self.losses,
+                    live_from_twin_step=self._commits // len(self.spec.twins) + 1)
+        self._ask_snapshot()
+
+    def _ask_snapshot(self) -> None:
+        """Ask the worker for a snapshot of its state (only when a twin may freeze)."""
+        if self._freezes:
+            rid = next(self._ids)
+            self._snapshot_asked[rid] = (len(self.log), self._commits // len(self.spec.twins))
+            self._put(("snapshot", rid))
+
+    def _freeze(self) -> None:
+        """The local copy for ``freeze`` twins: the last snapshot, the twins' commits since
+        replayed (trials and commits only: it learns nothing more)."""
+        if self._snapshot is None:
+            self._event("learner-frozen", f"learner of {self.source}: no snapshot to freeze "
+                        "from; its freeze twins fail (HOLD) until a new worker catches up",
+                        frozen=False)
+            return
+        position, steps, data = self._snapshot
+        local: LearnerState = pickle.loads(data)
+        for msg in self.log[position:]:
+            if msg[0] != "observe":
+                local.handle(msg)
+        self._local = local
+        through = min((t.trained_through for t in local.twins.values()), default=0)
+        log.warning("learner of %s: freeze twins answer from the snapshot of twin step %d "
+                    "(source trained through step %d), frozen", self.source, steps, through)
+        self._event("learner-frozen", f"learner of {self.source}: freeze twins answer from "
+                    f"the snapshot of twin step {steps}, parameters frozen (source trained "
+                    f"through step {through})", frozen=True, snapshot_step=steps,
+                    trained_through=through)
+
+    async def _stop_worker(self, *, kill: bool) -> None:
+        proc, inbox, reader = self._proc, self._inbox, self._reader
+        self._proc = self._inbox = self._reader = None
+        if proc is None:
+            return
+        self._generation += 1  # the old reader and its answers are ignored from now on
+        loop = asyncio.get_running_loop()
+        if not kill and inbox is not None:
+            with contextlib.suppress(queue.Full, ValueError, OSError):
+                inbox.put_nowait(None)
+            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
+        if proc.is_alive():
+            proc.kill()
+            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
+        if inbox is not None:
+            inbox.cancel_join_thread()
+            inbox.close()
+        if reader is not None:
+            await loop.run_in_executor(None, reader.join, 1.0)
+
+    async def close(self) -> None:
+        """Stop the worker (a clean end, then a kill past ``STOP_DEADLINE``)."""
+        self._closing = True
+        self.state = "stopped"
+        for task in (self._restart, self._flush):
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        await self._stop_worker(kill=False)
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(LearnerError("the bridge is stopping"))
+
+    # -- messages -----------------------------------------------------------------------------
+    def _put(self, msg: Message) -> None:
+        """``msg`` (a request) to the worker, after everything held before it; never blocks."""
+        batch, self._held = [*self._held, msg], []
+        self._post(batch)
+
+    def _post(self, batch: list[Message]) -> None:
+        inbox = self._inbox
+        if inbox is None:
+            return
+        if not self._backlog:
+            try:
+                inbox.put_nowait(batch)
+                return
+            except queue.Full:
+                pass
+        self._backlog.append(batch)
+        if self._flush is None or self._flush.done():
+            assert self._loop is not None
+            self._flush = self._loop.create_task(self._drain(), name=f"learner.{self.source}")
+
+    async def _drain(self) -> None:
+        while self._backlog:
+            inbox = self._inbox
+            if inbox is None:
+                return
+            try:
+                inbox.put_nowait(self._backlog[0])
+            except queue.Full:
+                await asyncio.sleep(FLUSH_PAUSE)
+                continue
+            self._backlog.popleft()
+
+    def _send(self, msg: Message) -> None:
+        """A message that changes the worker's state: logged, and held for the worker's next
+        request unless a new worker is being started (the replay of the log will carry it).
+        The worker needs the source's steps and the twins' commits only before its next
+        answer, so the source's committed step costs the step loop an append, no IPC."""
+        self.log.append(msg)
+        if self.state in ("live", "catching-up"):
+            self._held.append(msg)
+
+    async def _request(self, msg: Message, deadline: float) -> tuple[Any, ...]:
+        assert self._loop is not None
+        rid = next(self._ids)
+        fut: asyncio.Future[tuple[Any, ...]] = self._loop.create_future()
+        self._pending[rid] = fut
+        self._put((msg[0], rid, *msg[1:]))
+        try:
+            return await asyncio.wait_for(fut, deadline)
+        except TimeoutError:
+            self._pending.pop(rid, None)
+            reason = f"no answer to {msg[0]} within {deadline:g} s"
+            self._lose(reason)
+            raise LearnerError(f"learner lost: {reason}") from None
+
+    def step_committed(self, step: CommittedStep) -> None:
+        """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
+        d, f = step.daq_disp[0], step.daq_force[0]
+        self.source_step = step.step
+        sent = self._same_step_sent.pop(step.step, None)
+        if sent is not None:  # learned at its trial already (same-step)
+            if sent != (d, f):
+                log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
+                            "measurement its same-step twin learned (%r, %r): more than one "
+                            "trial in the step", self.source, step.step, d, f, *sent)
+                self._event("same-step-mismatch", f"source {self.source} step {step.step}: "
+                            "the committed measurement differs from the one learned at the "
+                            "trial (same-step needs one trial per step)", source_step=step.step)
+            return
+        if not (math.isfinite(d) and math.isfinite(f)):
+            self.not_trained += 1
+            log.warning("learner of %s: step %d has a non-finite measurement (d %r, F %r); not "
+                        "trained on", self.source, step.step, d, f)
+            self._event("not-trained", f"source {self.source} step {step.step}: non-finite "
+                        f"measurement (d {d!r} mm, F {f!r} kN) not trained on",
+                        source_step=step.step)
+            return
+        self._send(("observe", step.step, d, f))
+
+    async def trial(self, twin: str, d: float, *, same_step: bool = False
+                    ) -> tuple[float, float, int]:
+        """The twin's (force, tangent) at ``d`` and the source step it learned through; with
+        ``same_step`` including the source step sent by ``observe_same_step`` just before."""
+        if self.state != "live":
+            return self._frozen_trial(twin, d, same_step)
+        self._last_trial[twin] = (d, same_step)
+        self._answered_locally.discard(twin)
+        try:
+            force, tangent, through, seconds = await self._request(
+                ("trial", twin, d, same_step), self.deadline)
+        except LearnerError:
+            if self.state == "live":  # the twin refused this trial: no loss
+                raise
+            return self._frozen_trial(twin, d, same_step)
+        if int(through) > self.trained_through and self.update_observer is not None:
+            self.update_observer(float(seconds))
+        self.trained_through = int(through)
+        return float(force), float(tangent), self.trained_through
+
+    def observe_same_step(self, step: int, d: float, f: float) -> None:
+        """The source's measurement of the trial of ``step``, for a same-step twin (sent once
+        per step; its commit then sends nothing more)."""
+        if step in self._same_step_sent:
+            return
+        self._same_step_sent[step] = (d, f)
+        self._send(("observe", step, d, f))
+
+    def _frozen(self, twin: str) -> LearnerState:
+        """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
+        if twin not in self._freezes or self._local is None:
+            raise LearnerError(f"learner of {self.source} is {self.state}"
+                               + (f" ({self.reason})" if self.reason else ""))
+        return self._local
+
+    def _frozen_trial(self, twin: str, d: float, same_step: bool) -> tuple[float, float, int]:
+        local = self._frozen(twin)
+        self._last_trial[twin] = (d, same_step)
+        self._answered_locally.add(twin)
+        reply = local.handle(("trial", 0, twin, d, same_step))
+        assert reply is not None
+        if reply[0] == "error":
+            raise LearnerError(reply[2])
+        return float(reply[2]), float(reply[3]), int(reply[4])
+
+    def commit(self, twin: str) -> None:
+        """The twin's last trial becomes its committed state."""
+        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, False)))
+        if self.state == "live" and twin not in self._answered_locally:
+            self.log.append(trial)  # the live worker has it; a replay needs it before the commit
+        else:
+            if self.state != "live":
+                self._frozen(twin).handle(("commit", twin))
+            self._send(trial)  # answered locally: the worker has not seen this trial
+        self._send(("commit", twin))
+        self._commits += 1
+        if self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0 and self.state == "live":
+            self._ask_snapshot()
+
+    async def initial(self, twin: str) -> float:
+        if self.state != "live":
+            reply = self._frozen(twin).handle(("initial", 0, twin))
+            assert reply is not None
+            return float(reply[2])
+        (tangent,) = await self._request(("initial", twin), self.deadline)
+        return float(tangent)
+
+    def status(self, twin: str) -> dict[str, object]:
+        """Twin ``twin``'s view of its learner (``ctl status``)."""
+        behind = self.source_step - self.trained_through - 1
+        shown = self.state if self.state != "live" or behind <= 0 else f"behind {behind}"
+        if self.state != "live" and twin in self._freezes and self._local is not None:
+            shown = "frozen"
+        return {"learner": shown, "learner_reason": self.reason or None,
+                "steps_trained": self.trained_through, "source_step": self.source_step,
+                "not_trained": self.not_trained, "learner_losses": self.losses,
+                "worker_pid": self.pid}

@@ -1,0 +1,201 @@
+"""The learner's worker process: one updater per twin, fed the source's committed steps, asked
+for the twins' forces, strictly in the order the bridge saw the messages.
+
+``LearnerState.handle`` is the whole behaviour (tested in process); ``worker_main`` only moves
+messages between the queues. Causality ``previous-step`` is made exact here, whatever order the
+client commits its elements in: a source step is queued when it arrives and learned only by
+the first trial of a later twin step (the twin's step k answers from the source's steps
+through k − 1), so a twin commit is never preceded by the learning of its own step. A trial
+marked ``same_step`` also learns the source's step k, which the bridge sent just before it.
+
+Each twin has its own updater, fed the same observations: a twin cloned from another's updater
+would not follow every updater's parameter changes (a UKF's retargeted Bilinear, an ANN's new
+weights), and two seeded updaters fed the same steps hold the same parameters.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import multiprocessing
+import multiprocessing.queues
+import os
+import pickle
+import queue
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..updating.base import Updater, UpdaterError, UpdaterInputError
+from ..updating.registry import make_updater
+
+log = logging.getLogger("fresco_bridge.twins")
+
+TRIM = 1024
+"""Observations every twin has learned are dropped in chunks of at least this many (the
+snapshots stay small)."""
+NICE = 10
+"""How much lower than the bridge the worker runs (``os.nice``)."""
+
+Message = tuple[Any, ...]
+"""``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
+``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
+Reply = tuple[Any, ...]
+"""``("trial", id, force, tangent, trained_through, update_seconds)``, ``("initial", id, tangent)``,
+``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
+reason)``, ``("ready",)``, ``("fatal", reason)``."""
+
+
+@dataclass(frozen=True)
+class TwinSpec:
+    """One twin's updater: a registry name and its options (picklable)."""
+
+    name: str
+    updater: str
+    options: dict[str, Any]
+    on_loss: str = "hold"
+    """``hold`` or ``freeze``: what the twin does when its learner is lost."""
+
+
+@dataclass(frozen=True)
+class LearnerSpec:
+    """What the worker builds its updaters from (picklable: crosses the process boundary)."""
+
+    source: str
+    twins: tuple[TwinSpec, ...]
+
+
+@dataclass
+class _Twin:
+    updater: Updater
+    commits: int = 0
+    applied: int = 0
+    """How many of the source's observations this twin's updater has learned."""
+    trained_through: int = 0
+    """The source step of the last observation learned (0: none)."""
+    update_seconds: float = 0.0
+    """Wall time the updater spent learning the step(s) learned before the last trial."""
+
+
+@dataclass
+class LearnerState:
+    """The worker's state: the updaters, the source's observations, each twin's progress."""
+
+    spec: LearnerSpec
+    twins: dict[str, _Twin] = field(default_factory=dict)
+    observations: list[tuple[int, float, float]] = field(default_factory=list)
+    rejected: int = 0
+
+    def __post_init__(self) -> None:
+        for twin in self.spec.twins:
+            self.twins[twin.name] = _Twin(make_updater(twin.updater, **twin.options))
+
+    def handle(self, msg: Message) -> Reply | None:
+        kind = msg[0]
+        if kind == "observe":
+            _, step, d, f = msg
+            self.observations.append((int(step), float(d), float(f)))
+            return None
+        if kind == "commit":
+            twin = self.twins[msg[1]]
+            twin.updater.twin.commit()
+            twin.commits += 1
+            return None
+        if kind == "trial":
+            _, rid, name, d, same_step = msg
+            twin = self._learned(name, same_step)
+            try:
+                force, tangent = twin.updater.twin.set_trial(float(d))
+            except (ValueError, ArithmeticError) as exc:
+                return ("error", rid, f"the twin cannot answer trial d = {d!r}: {exc}")
+            if not (math.isfinite(force) and math.isfinite(tangent)):
+                return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
+                        f"{tangent!r} at d = {d!r}")
+            return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds)
+        if kind == "initial":
+            _, rid, name = msg
+            return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
+        if kind == "snapshot":
+            try:
+                return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
+            except (pickle.PicklingError, AttributeError, TypeError) as exc:
+                return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
+        if kind == "sync":
+            through = min((t.trained_through for t in self.twins.values()), default=0)
+            return ("sync", msg[1], through)
+        raise ValueError(f"unknown learner message {kind!r}")
+
+    def _learned(self, name: str, same_step: bool) -> _Twin:
+        """Twin ``name`` with every source step before its current one learned, and with
+        ``same_step`` its current one too."""
+        twin = self.twins[name]
+        obs = self.observations
+        last = twin.commits + (1 if same_step else 0)
+        if twin.applied < len(obs) and obs[twin.applied][0] <= last:
+            twin.update_seconds = 0.0
+        while twin.applied < len(obs) and obs[twin.applied][0] <= last:
+            step, d, f = obs[twin.applied]
+            twin.applied += 1
+            try:
+                twin.updater.observe(d, f)
+            except UpdaterInputError as exc:
+                self.rejected += 1
+                log.warning("learner: source step %d not learned: %s", step, exc)
+                continue
+            twin.trained_through = step
+            twin.update_seconds += twin.updater.last_update_seconds
+        learned = min(t.applied for t in self.twins.values())
+        if learned >= TRIM:  # what every twin has learned is not needed any more
+            del obs[:learned]
+            for t in self.twins.values():
+                t.applied -= learned
+        return twin
+
+
+def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
+                outbox: multiprocessing.queues.Queue[Reply]) -> None:
+    """The worker process: build, say ready, then answer batches of messages in order until
+    ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
+    BLAS thread, so training takes the CPU the bridge's step loop leaves."""
+    with contextlib.suppress(OSError):
+        os.nice(NICE)
+    limits = _one_blas_thread()
+    try:
+        state = LearnerState(spec)
+    except (UpdaterError, OSError, ValueError) as exc:
+        outbox.put(("fatal", f"the learner of {spec.source} could not build its updaters: "
+                    f"{exc}"))
+        return
+    outbox.put(("ready",))
+    parent = multiprocessing.parent_process()
+    while True:
+        try:
+            batch = inbox.get(timeout=1.0)
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                break  # the bridge was killed: no orphan worker
+            continue
+        if batch is None:
+            break
+        for msg in batch:
+            reply = _handled(state, msg)
+            if reply is not None:
+                outbox.put(reply)
+    del limits
+
+
+def _handled(state: LearnerState, msg: Message) -> Reply | None:
+    try:
+        return state.handle(msg)
+    except Exception as exc:  # an updater bug must not kill the twin silently
+        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
+        return ("error", rid, f"{type(exc).__name__}: {exc}")
+
+
+def _one_blas_thread() -> Any:
+    """Limit numpy's BLAS to one thread in this process (threadpoolctl, when installed)."""
+    try:
+        from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+    except ImportError:
+        return None
+    return threadpool_limits(1)

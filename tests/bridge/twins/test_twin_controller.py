@@ -1,0 +1,101 @@
+"""The twin controller over a fake learner, and the learner's source listener: a non-finite
+source measurement is never sent for training."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import pytest
+
+from fresco_bridge.controls.base import ControllerError, Daq
+from fresco_bridge.site_output import CommittedStep
+from fresco_bridge.twins.controller import TwinController
+from fresco_bridge.twins.learner import Learner, LearnerError
+from fresco_bridge.twins.worker import LearnerSpec, TwinSpec
+
+
+class FakeLearner:
+    source = "damper"
+
+    def __init__(self) -> None:
+        self.lost = False
+        self.commits: list[str] = []
+
+    async def trial(self, twin: str, d: float, *, same_step: bool = False
+                    ) -> tuple[float, float, int]:
+        if self.lost:
+            raise LearnerError("learner of damper is lost")
+        return 10.0 * d, 10.0, 7
+
+    def commit(self, twin: str) -> None:
+        if self.lost:
+            raise LearnerError("learner of damper is lost")
+        self.commits.append(twin)
+
+    async def initial(self, twin: str) -> float:
+        return 12.0
+
+    def status(self, twin: str) -> dict[str, object]:
+        return {"learner": "live", "steps_trained": 7}
+
+
+def controller(learner: FakeLearner) -> TwinController:
+    return TwinController(learner, "twin1", updater="online_ukf",  # type: ignore[arg-type]
+                          causality="previous-step")
+
+
+def test_the_twin_answers_its_learner_and_a_lost_learner_is_a_controller_error() -> None:
+    async def run() -> None:
+        learner = FakeLearner()
+        ctrl = controller(learner)
+        assert await ctrl.initial_stiffness() == (12.0,)
+        assert await ctrl.tangent_stiffness() == (12.0,)  # no trial yet: the initial one
+        await ctrl.set_ctrl((0.5,))
+        assert await ctrl.get_daq() == Daq((0.5,), (5.0,))
+        assert await ctrl.tangent_stiffness() == (10.0,)
+        await ctrl.commit()
+        assert learner.commits == ["twin1"] and ctrl.trained_through == 7
+        assert ctrl.status_fields() == {"kind": "updatable", "source": "damper",
+                                        "updater": "online_ukf", "causality": "previous-step",
+                                        "learner": "live", "steps_trained": 7}
+        learner.lost = True
+        with pytest.raises(ControllerError, match="twin twin1: learner of damper is lost"):
+            await ctrl.set_ctrl((0.6,))
+        with pytest.raises(ControllerError):
+            await ctrl.commit()
+
+    asyncio.run(run())
+
+
+def step(n: int, d: float, f: float) -> CommittedStep:
+    return CommittedStep("damper", 1, n, 0.01 * n, (d,), (d,), (d,), (f,), "RUNNING")
+
+
+def test_non_finite_source_data_is_never_sent_for_training() -> None:
+    learner = Learner("damper", LearnerSpec("damper", (TwinSpec("t", "none", {}),)), deadline=1.0)
+    events: list[tuple[str, str, dict[str, object]]] = []
+    learner.add_event_sink(lambda kind, reason, extra: events.append((kind, reason, extra)))
+    learner.step_committed(step(1, 0.5, 2.0))
+    learner.step_committed(step(2, 0.6, math.nan))
+    learner.step_committed(step(3, math.inf, 1.0))
+    learner.step_committed(step(4, 0.7, 2.5))
+    assert learner.log == [("observe", 1, 0.5, 2.0), ("observe", 4, 0.7, 2.5)]
+    assert learner.not_trained == 2 and learner.source_step == 4
+    assert [(k, x["source_step"]) for k, _, x in events] == [("not-trained", 2),
+                                                             ("not-trained", 3)]
+    assert learner.status("t")["not_trained"] == 2
+
+
+def test_ctl_status_says_what_the_twin_is() -> None:
+    from fresco_bridge.ctl import format_answer
+
+    site = {"site": "twin1", "kind": "updatable", "state": "RUNNING", "reason": "",
+            "session": 1, "peer": None, "step": 12, "time": 0.12, "ctrl": [0.1],
+            "target": [0.1], "daq_disp": [0.1], "daq_force": [1.0], "holds": 0,
+            "limit_events": {}, "limits": [], "pending": None,
+            **controller(FakeLearner()).status_fields(), "learner_reason": None,
+            "source_step": 12, "not_trained": 0, "learner_losses": 0}
+    text = format_answer({"sites": [site]})
+    assert ("updatable: learns from damper  updater online_ukf  causality previous-step  "
+            "learner live  trained through source step 7 (source at 12)") in text

@@ -1,0 +1,117 @@
+"""The learner's worker, in process: message handling, previous-step exactness whatever the
+order of the source's commit and the twin's, one updater per twin."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fresco_bridge.twins.worker import LearnerSpec, LearnerState, TwinSpec
+from fresco_bridge.updating.registry import make_updater
+from fresco_bridge.updating.replay import replay
+
+UKF = {"k0": 20.0, "fy": 12.0, "alpha": 0.05}
+
+
+def histories(n: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    from sim_actuator.models import make_model
+
+    law = make_model("bilinear", k0=25.0, fy=15.0, alpha=0.02)
+    d = 2.0 * np.sin(np.arange(1, n + 1) / 5.0) * np.linspace(0.5, 1.5, n)
+    f = np.empty(n)
+    for i, x in enumerate(d):
+        f[i] = law.set_trial(float(x))[0]
+        law.commit()
+    return d, f, 0.8 * d
+
+
+def state(*twins: str) -> LearnerState:
+    pytest.importorskip("filterpy")
+    return LearnerState(LearnerSpec("src", tuple(TwinSpec(t, "online_ukf", dict(UKF))
+                                                 for t in twins)))
+
+
+@pytest.mark.parametrize("source_first", [True, False])
+def test_previous_step_equals_the_in_process_replay(source_first: bool) -> None:
+    sd, sf, td = histories()
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        observe = ("observe", i + 1, float(sd[i]), float(sf[i]))
+        for k, d in enumerate((td[i] * 0.5, td[i])):  # Newton: the last trial is committed
+            reply = worker.handle(("trial", 10 * i + k, "twin", float(d), False))
+            assert reply is not None and reply[0] == "trial" and reply[4] == i  # through i-1
+            assert reply[5] >= 0.0  # the update time of the step(s) just learned
+        answers.append(reply[2])
+        if source_first:  # the client commits the source's element before the twin's
+            worker.handle(observe)
+            worker.handle(("commit", "twin"))
+        else:
+            worker.handle(("commit", "twin"))
+            worker.handle(observe)
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=True).force_pred
+    assert np.array_equal(np.array(answers), expected)
+    assert worker.handle(("sync", 7)) == ("sync", 7, sd.size - 1)
+
+
+def test_each_twin_follows_the_learned_parameters() -> None:
+    """A second twin of the same source learns too (its own updater, the same steps)."""
+    sd, sf, td = histories(30)
+    worker = state("a", "b")
+    for i in range(sd.size):
+        fa = worker.handle(("trial", 1, "a", float(td[i]), False))
+        fb = worker.handle(("trial", 2, "b", float(td[i]), False))
+        assert fa is not None and fb is not None and fa[2:5] == fb[2:5]
+        worker.handle(("commit", "a"))
+        worker.handle(("commit", "b"))
+        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))
+    fixed = make_updater("online_ukf", **UKF).twin.set_trial(float(td[-1]))[0]
+    assert fa[2] != fixed  # the parameters moved: the twins answer from what they learned
+
+
+def test_a_non_finite_observation_is_not_learned_and_a_bad_trial_is_an_error() -> None:
+    worker = state("twin")
+    worker.handle(("observe", 1, math.nan, 3.0))
+    worker.handle(("commit", "twin"))
+    reply = worker.handle(("trial", 1, "twin", 0.5, False))
+    assert reply is not None and reply[0] == "trial" and reply[4] == 0
+    assert worker.rejected == 1
+    bad = worker.handle(("trial", 2, "twin", math.inf, False))
+    assert bad is not None and bad[0] == "error" and bad[1] == 2
+    initial = worker.handle(("initial", 3, "twin"))
+    assert initial == ("initial", 3, UKF["k0"])
+
+
+def test_same_step_equals_the_in_process_replay_in_the_papers_order() -> None:
+    sd, sf, td = histories()
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))  # the source's trial
+        reply = worker.handle(("trial", i, "twin", float(td[i]), True))
+        assert reply is not None and reply[4] == i + 1  # learned through this very step
+        answers.append(reply[2])
+        worker.handle(("commit", "twin"))
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=False).force_pred
+    assert np.array_equal(np.array(answers), expected)
+
+
+def test_learned_observations_are_dropped_and_learning_goes_on(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from fresco_bridge.twins import worker as worker_module
+
+    monkeypatch.setattr(worker_module, "TRIM", 16)
+    sd, sf, td = histories(60)
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        reply = worker.handle(("trial", i, "twin", float(td[i]), False))
+        assert reply is not None
+        answers.append(reply[2])
+        worker.handle(("commit", "twin"))
+        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))
+    assert len(worker.observations) < 20
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=True).force_pred
+    assert np.array_equal(np.array(answers), expected)
