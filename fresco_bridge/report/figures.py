@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from ..record.export import MonitorLine
 from ..runs import SessionSignals
@@ -201,5 +202,53 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     _legend(ax)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
+             twin_time: np.ndarray, source_time: np.ndarray, source_f: np.ndarray,
+             steps: np.ndarray, behind: np.ndarray, update_ms: np.ndarray) -> bytes:
+    """An updatable site in four panels: the twin's hysteresis (its trial displacement
+    against its predicted force), its predicted force beside the source's measured force in
+    time, and per twin step how many source steps its answer lagged and the update time."""
+    fig = Figure(figsize=(10.0, 7.2))
+    axes = fig.subplots(2, 2)
+    k = _stride(twin_d.size)
+    ax = axes[0, 0]
+    ax.plot(twin_d[::k], twin_f[::k], lw=0.8, color="C3")
+    ax.set_xlabel("twin displacement (mm)")
+    ax.set_ylabel("predicted force (kN)")
+    ax.set_title("twin hysteresis (predicted)", fontsize=10)
+    ax = axes[0, 1]
+    ks = _stride(source_f.size)
+    ax.plot(source_time[::ks], source_f[::ks], lw=0.8, color="0.4",
+            label=f"source {source} (measured)")
+    ax.plot(twin_time[::k], twin_f[::k], lw=0.8, color="C3", label=f"twin {twin} (predicted)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("force (kN)")
+    ax.set_title("predicted vs source force", fontsize=10)
+    _legend(ax)
+    ku = _stride(steps.size)
+    ax = axes[1, 0]
+    ax.step(steps[::ku], behind[::ku], where="post", lw=0.8, color="C0")
+    ax.set_xlabel("twin step")
+    ax.set_ylabel("source steps not yet learned")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    finite = behind[np.isfinite(behind)]
+    ax.set_ylim(-0.5, max(float(finite.max()) if finite.size else 0.0, 1.0) + 0.5)
+    ax.set_title("learning lag (twin step − source step learned through)", fontsize=10)
+    ax = axes[1, 1]
+    ax.plot(steps[::ku], update_ms[::ku], ".", ms=4, color="C2")
+    ax.set_xlabel("twin step")
+    ax.set_ylabel("update time (ms)")
+    ax.set_title("worker's update time per twin step", fontsize=10)
+    for n, ax in enumerate(axes.flat):
+        ax.grid(alpha=0.3)
+        if not twin_d.size:
+            _no_data(ax, "no committed twin steps")
+        elif n >= 2 and not steps.size:
+            _no_data(ax, "no update lines (a record before format 5)")
+    fig.suptitle(f"Updatable site {twin}: its twin learned online from {source}", fontsize=11)
     fig.tight_layout()
     return _png(fig)

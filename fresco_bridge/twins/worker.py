@@ -74,7 +74,10 @@ class _Twin:
     trained_through: int = 0
     """The source step of the last observation learned (0: none)."""
     update_seconds: float = 0.0
-    """Wall time the updater spent learning the step(s) learned before the last trial."""
+    """Wall time the updater spent learning the source step(s) learned for the twin's current
+    step (0.0: none learned for it)."""
+    timed_step: int = -1
+    """The twin step (its commits so far) ``update_seconds`` belongs to."""
 
 
 @dataclass
@@ -131,8 +134,8 @@ class LearnerState:
         twin = self.twins[name]
         obs = self.observations
         last = twin.commits + (1 if same_step else 0)
-        if twin.applied < len(obs) and obs[twin.applied][0] <= last:
-            twin.update_seconds = 0.0
+        if twin.timed_step != twin.commits:  # a new twin step: its own update time
+            twin.timed_step, twin.update_seconds = twin.commits, 0.0
         while twin.applied < len(obs) and obs[twin.applied][0] <= last:
             step, d, f = obs[twin.applied]
             twin.applied += 1
