@@ -59,7 +59,8 @@ of an updatable site (``twins/``), written right after each of its committed ste
 - ``step``: the twin's committed step; ``through``: the source step its answer was learned
   through (the snapshot it came from; 0: none learned); ``secs``: the wall time the worker
   spent learning source steps for this twin step (0 when it learned none);
-- complete (never inherited); ``site``/``session``/``t`` as on every line.
+- complete (never inherited); ``site``/``session``/``t`` as on every line; a step whose last
+  trial the learner did not answer (the site HOLDs) has none.
 The source's one-step prediction error is not recorded: the updaters predict the twin on the
 twin's path only, and a prediction on the source's path would need a second model state per
 updater.

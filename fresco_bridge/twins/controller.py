@@ -54,6 +54,8 @@ class TwinController(Controller):
         """The source step the last answer was learned through."""
         self.update_seconds = 0.0
         """The worker's update time of the twin's current step (the last answer's)."""
+        self._answered = False
+        """Whether the last trial was answered by the learner (else no update line)."""
         self._site: ExperimentalSite | None = None
         self._source: ExperimentalSite | None = None
         self._fallback_session = -1
@@ -67,6 +69,7 @@ class TwinController(Controller):
 
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
         same = self.causality == "same-step" and await self._source_measured()
+        self._answered = False
         try:
             force, tangent, through, seconds = await self.learner.trial(
                 self.twin, disp[0], same_step=same)
@@ -74,6 +77,7 @@ class TwinController(Controller):
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
         self.trained_through, self.update_seconds = through, seconds
+        self._answered = True
         self.same_step_steps += same
 
     async def _source_measured(self) -> bool:
@@ -121,13 +125,14 @@ class TwinController(Controller):
             raise ControllerError(f"twin {self.twin}: {exc}") from None
 
     def step_committed(self, step: CommittedStep) -> None:
-        """The site's listener: the committed step's update line in the record."""
+        """The site's listener: the committed step's update line in the record (none for a
+        step whose last trial the learner did not answer: the site HOLDs then)."""
         self.step_values(step.session, step.step, step.time, step.ctrl, step.daq_disp)
 
     def step_values(self, session: int, step: int, time: float, ctrl: tuple[float, ...],
                     daq_disp: tuple[float, ...]) -> None:
         site = self._site
-        if site is not None and site.recorder is not None:
+        if self._answered and site is not None and site.recorder is not None:
             site.recorder.update(session, step, self.trained_through, self.update_seconds)
 
     async def tangent_stiffness(self) -> tuple[float, ...]:

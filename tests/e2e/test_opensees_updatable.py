@@ -168,6 +168,10 @@ def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Pa
     # for every element, and the source's NaN stop refuses to forward them (its HOLD is the
     # integrator's, its actuator keeps the last finite command).
     assert source["step"] == 40 and all(np.isfinite(source["ctrl"]))
+    # an update line for each twin step the learner answered, none for the held one
+    run = load_run(run_dir)
+    answered = [s for s in run.steps if s.site == "story2" and np.isfinite(s.meas_force[0])]
+    assert [u["step"] for u in run.updates] == [s.step for s in answered]
     assert "story1" not in holds or "non-finite trial" in holds["story1"]
 
 
