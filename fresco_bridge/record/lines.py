@@ -54,16 +54,16 @@ monitors run for the record alone (no MQTT, no metrics: the telemetry taps then 
 Format 5 (``FORMAT_VERSION``, what this version writes) is format 4 plus the **update line**
 of an updatable site (``twins/``), written right after each of its committed steps::
 
-    {"t":…,"kind":"update","step":S,"through":K,"secs":U}
+    {"t":…,"kind":"update","step":S,"through":K,"secs":U,"err":E}
 
 - ``step``: the twin's committed step; ``through``: the source step its answer was learned
   through (the snapshot it came from; 0: none learned); ``secs``: the wall time the worker
-  spent learning source steps for this twin step (0 when it learned none);
+  spent learning source steps for this twin step (0 when it learned none); ``err`` (only when
+  the updater predicts the source, ``Updater.last_one_step_error``): |F − F̂| of the last
+  source step learned for this twin step, F̂ predicted from the source's measured past before
+  learning it (kN);
 - complete (never inherited); ``site``/``session``/``t`` as on every line; a step whose last
   trial the learner did not answer (the site HOLDs) has none.
-The source's one-step prediction error is not recorded: the updaters predict the twin on the
-twin's path only, and a prediction on the source's path would need a second model state per
-updater.
 
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
 version) back into complete format-1 dicts, in file order (each site's lines in the order it
@@ -205,9 +205,10 @@ class LineEncoder:
         return body
 
     @staticmethod
-    def update(step: int, through: int, seconds: float) -> str:
+    def update(step: int, through: int, seconds: float, error: float | None) -> str:
         """The body of an update line (format 5)."""
-        return f',"step":{step},"through":{through},"secs":{num(seconds)}'
+        body = f',"step":{step},"through":{through},"secs":{num(seconds)}'
+        return body if error is None else f'{body},"err":{num(error)}'
 
     @staticmethod
     def event(kind: str, reason: str, extra: dict[str, object]) -> str:

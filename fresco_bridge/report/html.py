@@ -3,10 +3,10 @@
 Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
 and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
 synchronization subspace), ``updating-<name>`` for an updatable site (its twin hysteresis,
-predicted vs source force, learning lag and update time, from its update lines), ``events``
-and ``config`` (the snapshot). The same summary numbers are embedded as JSON in
-``<script id="summary-data" type="application/json">`` so that a curation pipeline can read
-them without scraping the tables.
+predicted vs source force, the source's one-step error, learning lag and update time, from
+its update lines), ``events`` and ``config`` (the snapshot). The same summary numbers are
+embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
+pipeline can read them without scraping the tables.
 """
 
 from __future__ import annotations
@@ -162,18 +162,23 @@ def _updating_section(run: Run, twin: str, source: str) -> str:
     steps = np.array([int(u["step"]) for u in ups], dtype=float)
     through = np.array([int(u["through"]) for u in ups], dtype=float)
     seconds = np.array([float(u["secs"]) for u in ups])
+    error = np.array([float(u.get("err", math.nan)) for u in ups])
     png = figures.updating(
         twin, source, np.array([s.cmd_disp[0] for s in mine]),
         np.array([s.meas_force[0] for s in mine]), np.array([s.time for s in mine]),
         np.array([s.time for s in theirs]), np.array([s.meas_force[0] for s in theirs]),
-        steps, steps - through, 1e3 * seconds)
+        steps, steps - through, 1e3 * seconds, error)
     learned = seconds[seconds > 0]
     rows = [("source", source), ("committed twin steps", str(len(mine))),
             ("update lines", str(len(ups))),
             ("source step learned through (last)", str(int(through[-1])) if ups else "none"),
             ("median / max update time (ms)",
              f"{fmt(1e3 * float(np.median(learned)), digits=4)} / "
-             f"{fmt(1e3 * float(learned.max()), digits=4)}" if learned.size else "none")]
+             f"{fmt(1e3 * float(learned.max()), digits=4)}" if learned.size else "none"),
+            ("median / max source one-step error (kN)",
+             f"{fmt(float(np.nanmedian(error)), digits=4)} / "
+             f"{fmt(float(np.nanmax(error)), digits=4)}" if np.isfinite(error).any()
+             else "not predicted by this updater")]
     table = "".join(f'<tr><th>{_e(k)}</th><td class="n">{_e(v)}</td></tr>' for k, v in rows)
     note = "" if ups else ('<p class="note">The record has no update lines for this site (a '
                            "record written before format 5).</p>")
@@ -182,12 +187,14 @@ def _updating_section(run: Run, twin: str, source: str) -> str:
         f"{_e(source)}</h2><table>{table}</table>{note}",
         _img(png, f"{twin} updating",
              "Top left: the twin's trial displacement against the force it answered. Top "
-             "right: that force and the source's measured force in time. Bottom left: how "
-             "many source steps each twin step's answer had not learned yet (1 with "
-             "previous-step causality, 0 with same-step). Bottom right: the worker's update "
-             "time for each twin step (0: nothing new learned). The source's one-step "
-             "prediction error is not recorded (the updaters predict on the twin's path "
-             "only)."),
+             "right: that force and the source's measured force in time. Middle left: the "
+             "source's one-step error, the measured force of the last source step learned for "
+             "each twin step against the updater's prediction of it from the source's "
+             "measured past before learning it (only updaters that predict it: "
+             "online_improved). Middle right: how many source steps each twin step's answer "
+             "had not learned yet (1 with previous-step causality, 0 with same-step). Bottom: "
+             "the worker's update time for each twin step (0: nothing new learned) and its "
+             "distribution over the steps that learned."),
         "</section>",
     ])
 

@@ -16,7 +16,8 @@ said in a ``same-step-fallback`` event.
 
 The controller is also a step listener of its own site, after the site's record writer: each
 committed twin step gets an update line (the source step its answer was learned through, the
-step's update time) from the one writer of the site's lines (``record/site.py``).
+step's update time, the source's one-step error) from the one writer of the site's lines
+(``record/site.py``).
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ class TwinController(Controller):
         """The source step the last answer was learned through."""
         self.update_seconds = 0.0
         """The worker's update time of the twin's current step (the last answer's)."""
+        self.one_step_error: float | None = None
+        """The source's one-step error of the twin's current step (the last answer's)."""
         self._answered = False
         """Whether the last trial was answered by the learner (else no update line)."""
         self._site: ExperimentalSite | None = None
@@ -71,12 +74,12 @@ class TwinController(Controller):
         same = self.causality == "same-step" and await self._source_measured()
         self._answered = False
         try:
-            force, tangent, through, seconds = await self.learner.trial(
+            force, tangent, through, seconds, error = await self.learner.trial(
                 self.twin, disp[0], same_step=same)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
-        self.trained_through, self.update_seconds = through, seconds
+        self.trained_through, self.update_seconds, self.one_step_error = through, seconds, error
         self._answered = True
         self.same_step_steps += same
 
@@ -133,7 +136,8 @@ class TwinController(Controller):
                     daq_disp: tuple[float, ...]) -> None:
         site = self._site
         if self._answered and site is not None and site.recorder is not None:
-            site.recorder.update(session, step, self.trained_through, self.update_seconds)
+            site.recorder.update(session, step, self.trained_through, self.update_seconds,
+                                 self.one_step_error)
 
     async def tangent_stiffness(self) -> tuple[float, ...]:
         if self._tangent is None:

@@ -100,6 +100,10 @@ def test_twin_online_improved_equals_the_in_process_previous_step_coupling(
     assert [(u["site"], u["step"], u["through"]) for u in updates] == [
         ("story2", k, k - 1) for k in range(1, NSTEPS + 1)]
     assert all(math.isfinite(u["secs"]) and u["secs"] >= 0.0 for u in updates)
+    # online_improved's one-step error on the source step learned, from twin step 2 on
+    assert "err" not in updates[0]
+    errors = [u["err"] for u in updates[1:]]
+    assert all(math.isfinite(e) and e >= 0.0 for e in errors) and max(errors) > 0.0
     assert '<section id="updating-story2">' in write_report(run_dir).read_text()
 
 

@@ -66,6 +66,7 @@ def test_a_served_twin_records_what_each_step_was_learned_through(tmp_path: Path
     seconds = [u["secs"] for u in updates]
     assert all(math.isfinite(s) and s >= 0.0 for s in seconds)
     assert seconds[0] == 0.0 and all(s > 0.0 for s in seconds[1:])  # the UKF learned each
+    assert not any("err" in u for u in updates)  # the UKF makes no one-step prediction
     # each follows its step line; the independent decoder of the README's rules agrees
     assert [r for r in raw_lines(run_dir) if r["kind"] == "update"] == updates
     kinds = [(r["kind"], r["site"]) for r in read_record(run_dir)]
@@ -80,7 +81,7 @@ def test_a_served_twin_records_what_each_step_was_learned_through(tmp_path: Path
     section = report.split('<section id="updating-twin1">')[1].split("</section>")[0]
     assert "twin1 learns from damper" in section and "data:image/png;base64," in section
     assert f"<th>update lines</th><td class=\"n\">{steps}</td>" in section
-    assert "no update lines" not in section
+    assert "no update lines" not in section and "not predicted by this updater" in section
 
 
 def test_a_format4_record_of_an_updatable_site_still_reads(tmp_path: Path,
