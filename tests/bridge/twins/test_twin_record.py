@@ -10,6 +10,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import h5py  # type: ignore[import-untyped]
 import pytest
 
 from fresco_bridge.cli import main as cli_main
@@ -81,6 +82,11 @@ def test_a_served_twin_records_what_each_step_was_learned_through(tmp_path: Path
     section = report.split('<section id="updating-twin1">')[1].split("</section>")[0]
     assert "twin1 learns from damper" in section and "data:image/png;base64," in section
     assert f"<th>update lines</th><td class=\"n\">{steps}</td>" in section
+    assert cli_main(["export", str(run_dir), "-o", str(tmp_path / "run.h5")]) == 0
+    with h5py.File(tmp_path / "run.h5", "r") as f:
+        assert list(f["sites/twin1/update/through"][:]) == list(range(steps))
+        assert list(f["sites/twin1/update/secs"][:]) == seconds
+        assert "update" not in f["sites/damper"]
     assert "no update lines" not in section and "not predicted by this updater" in section
 
 
