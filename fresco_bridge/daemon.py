@@ -225,6 +225,7 @@ class Bridge:
                 learner.add_event_sink(_event_sink(site))
                 assert isinstance(site.controller, TwinController)
                 site.controller.bind(site, self.sites[source])
+                site.add_listener(site.controller)  # its update lines, after its step lines
 
     def _listener(self, site: ExperimentalSite) -> SiteListener:
         """What the site's connections share; an open allowlist is said loudly."""

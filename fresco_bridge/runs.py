@@ -54,6 +54,9 @@ class Run:
     torn: bool
     size_bytes: int
     notes: list[str] = field(default_factory=list)
+    updates: list[dict[str, Any]] = field(default_factory=list)
+    """The update lines of updatable sites (format 5: ``site``, ``session``, ``step``,
+    ``through``, ``secs``), in record order."""
 
     @property
     def name(self) -> str:
@@ -67,6 +70,19 @@ class Run:
             if s.site not in names:
                 names.append(s.site)
         return names
+
+    def sources(self) -> dict[str, str]:
+        """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
+        snapshot, or no updatable site)."""
+        if self.config_text is None:
+            return {}
+        try:
+            sites = tomllib.loads(self.config_text).get("sites", [])
+        except tomllib.TOMLDecodeError:
+            return {}
+        return {str(s["name"]): str(s["learns_from"]) for s in sites
+                if isinstance(s, dict) and s.get("kind") == "updatable" and "name" in s
+                and "learns_from" in s}
 
     def config_value(self, section: str, key: str, default: Any) -> Any:
         """A value from the config snapshot (``default`` when absent or unreadable)."""
@@ -125,6 +141,7 @@ def load_run(path: Path) -> Run:
         notes.append(f"{CONFIG_FILE} could not be read ({exc.strerror}); no config snapshot")
     events: list[dict[str, Any]] = []
     monitors: list[dict[str, Any]] = []
+    updates: list[dict[str, Any]] = []
     last_seq: list[object] = [None]
 
     def tap(records: Iterator[dict[str, Any]]) -> Iterator[dict[str, Any]]:
@@ -135,6 +152,8 @@ def load_run(path: Path) -> Run:
                 events.append(rec)
             elif kind == "monitor":
                 monitors.append(rec)
+            elif kind == "update":
+                updates.append(rec)
             yield rec
 
     record = directory / RECORD_FILE
@@ -160,7 +179,7 @@ def load_run(path: Path) -> Run:
         if state != "running":
             notes.append(f"site {site} session {session} was opened and never closed")
     return Run(directory, meta, config_text, steps, events, monitor_data, torn,
-               _dir_size(directory), notes)
+               _dir_size(directory), notes, updates)
 
 
 def check_resumable(path: Path) -> Path:

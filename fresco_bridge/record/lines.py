@@ -1,4 +1,4 @@
-"""The record's line format: a lean encoder (format 4) and one decoder for every format.
+"""The record's line format: a lean encoder (format 5) and one decoder for every format.
 
 Format 1 (the oldest; still read) wrote every field on every line: ``seq``, ``t``, ``kind``,
 ``site``, ``session`` and the values, 8 lines per committed 1-DOF step, most of it repeated
@@ -38,7 +38,7 @@ lines was the largest cost left on the step path)::
 - ``site``/``session`` as on every line; ``t`` is when the line was written (the commit), and
   the lines it stands for read back with that ``t``.
 
-Format 4 (``FORMAT_VERSION``, what this version writes) is format 3 plus the **monitors line**,
+Format 4 is format 3 plus the **monitors line**,
 the monitor lines of consecutive committed steps of a site in one line, written when the online
 monitors run for the record alone (no MQTT, no metrics: the telemetry taps then batch them,
 ``telemetry/taps.py``)::
@@ -50,6 +50,20 @@ monitors run for the record alone (no MQTT, no metrics: the telemetry taps then 
   that of the previous monitor line, or ``0`` for all its values (the first of a session carries
   all five);
 - step lines then carry no ``mon``; ``site``/``session``/``t`` as on every line.
+
+Format 5 (``FORMAT_VERSION``, what this version writes) is format 4 plus the **update line**
+of an updatable site (``twins/``), written right after each of its committed steps::
+
+    {"t":…,"kind":"update","step":S,"through":K,"secs":U,"err":E}
+
+- ``step``: the twin's committed step; ``through``: the source step its answer was learned
+  through (the snapshot it came from; 0: none learned); ``secs``: the wall time the worker
+  spent learning source steps for this twin step (0 when it learned none); ``err`` (only when
+  the updater predicts the source, ``Updater.last_one_step_error``): |F − F̂| of the last
+  source step learned for this twin step, F̂ predicted from the source's measured past before
+  learning it (kN);
+- complete (never inherited); ``site``/``session``/``t`` as on every line; a step whose last
+  trial the learner did not answer (the site HOLDs) has none.
 
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
 version) back into complete format-1 dicts, in file order (each site's lines in the order it
@@ -64,7 +78,7 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 INHERITED_KINDS = frozenset(("trial", "daq", "commit", "monitor"))
 """Line kinds whose absent value fields repeat the previous line's (same site, session)."""
 TRIAL, DAQ, MONITOR = 0, 1, 2
@@ -96,7 +110,7 @@ def opt(v: float | None) -> str:
 
 
 class LineEncoder:
-    """Format-4 lines; remembers what the file already says (not thread-safe).
+    """Format-5 lines; remembers what the file already says (not thread-safe).
 
     Every line it returns must reach the file in order: the next lines are written relative
     to it.
@@ -189,6 +203,12 @@ class LineEncoder:
             if v != was:
                 body += f',"{name}":{opt(v)}'
         return body
+
+    @staticmethod
+    def update(step: int, through: int, seconds: float, error: float | None) -> str:
+        """The body of an update line (format 5)."""
+        body = f',"step":{step},"through":{through},"secs":{num(seconds)}'
+        return body if error is None else f'{body},"err":{num(error)}'
 
     @staticmethod
     def event(kind: str, reason: str, extra: dict[str, object]) -> str:
@@ -343,7 +363,8 @@ _MONITOR_FLOATS = ("err", "ti", "nrms", "fei_amp", "fei_delay")
 
 def expand(objs: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
     """Complete format-1 dicts (with ``seq``, ``site``, ``session`` and every value) from the
-    decoded lines of a record of format 1, 2, 3 or a mix, in order. RecordFormatError: a step
+    decoded lines of a record of any format or a mix, in order (a kind it does not know, as
+``update``, passes through complete). RecordFormatError: a step
     line without the lines it is relative to (not a record this writer wrote)."""
     seq, site, session = 0, "", 0
     last: dict[tuple[str, str], dict[str, Any]] = {}

@@ -67,6 +67,13 @@ class SiteRecorder:
     def event(self, session: int, kind: str, reason: str, **extra: object) -> None:
         self._record.event(self.site, session, kind, reason, **extra)
 
+    def update(self, session: int, step: int, through: int, seconds: float,
+               error: float | None) -> None:
+        """An updatable site's committed ``step``: the source step its answer was learned
+        through, the update time of the step and the source's one-step error
+        (``RunRecord.update``)."""
+        self._record.update(self.site, session, step, through, seconds, error)
+
     def monitors(self, session: int, step: int,
                  samples: list[tuple[float, float, float | None, float | None, float | None]]
                  ) -> None:

@@ -242,6 +242,20 @@ class RunRecord:
         self._seq += 1
         self.flush(sync=True, urgent=True)
 
+    def update(self, site: str, session: int, step: int, through: int, seconds: float,
+               error: float | None) -> None:
+        """An updatable site's committed ``step`` learned through source step ``through`` in
+        ``seconds`` of updating, with the source's one-step ``error`` (derived data, after its
+        step line: the next commit or event asks for its sync; the site's pending items wait
+        for their commit: the line does not refer to them)."""
+        if self.closed:
+            return
+        t = _monotonic() - self._t0
+        self._buf.append(self._enc.line(t, "update", site, session,
+                                        self._enc.update(step, through, seconds, error)))
+        self._seq += 1
+        self.flush()
+
     def monitor(
         self, site: str, session: int, step: int, tracking_error: float, ti: float,
         nrms: float | None, fei_amplitude: float | None, fei_delay: float | None,

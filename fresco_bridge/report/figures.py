@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from ..record.export import MonitorLine
 from ..runs import SessionSignals
@@ -201,5 +202,75 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     _legend(ax)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
+             twin_time: np.ndarray, source_time: np.ndarray, source_f: np.ndarray,
+             steps: np.ndarray, behind: np.ndarray, update_ms: np.ndarray,
+             error: np.ndarray) -> bytes:
+    """An updatable site in six panels: the twin's hysteresis (its trial displacement against
+    its predicted force), its predicted force beside the source's measured force in time, and
+    per twin step the source's one-step error, how many source steps its answer lagged and the
+    update time (in time and as a distribution)."""
+    fig = Figure(figsize=(10.0, 10.0))
+    axes = fig.subplots(3, 2)
+    k = _stride(twin_d.size)
+    ax = axes[0, 0]
+    ax.plot(twin_d[::k], twin_f[::k], lw=0.8, color="C3")
+    ax.set_xlabel("twin displacement (mm)")
+    ax.set_ylabel("predicted force (kN)")
+    ax.set_title("twin hysteresis (predicted)", fontsize=10)
+    ax = axes[0, 1]
+    ks = _stride(source_f.size)
+    ax.plot(source_time[::ks], source_f[::ks], lw=0.8, color="0.4",
+            label=f"source {source} (measured)")
+    ax.plot(twin_time[::k], twin_f[::k], lw=0.8, color="C3", label=f"twin {twin} (predicted)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("force (kN)")
+    ax.set_title("predicted vs source force", fontsize=10)
+    _legend(ax)
+    ku = _stride(steps.size)
+    ax = axes[1, 0]
+    if np.isfinite(error).any():
+        ax.plot(steps[::ku], error[::ku], lw=0.8, color="C1")
+    elif steps.size:
+        _no_data(ax, "the updater makes no one-step prediction")
+    ax.set_xlabel("twin step")
+    ax.set_ylabel("|F − F̂| (kN)")
+    ax.set_title("source's one-step error (before learning it)", fontsize=10)
+    ax = axes[1, 1]
+    ax.step(steps[::ku], behind[::ku], where="post", lw=0.8, color="C0")
+    ax.set_xlabel("twin step")
+    ax.set_ylabel("source steps not yet learned")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    finite = behind[np.isfinite(behind)]
+    ax.set_ylim(-0.5, max(float(finite.max()) if finite.size else 0.0, 1.0) + 0.5)
+    ax.set_title("learning lag (twin step − source step learned through)", fontsize=10)
+    ax = axes[2, 0]
+    learns = update_ms > 0  # log scales: a refit costs orders of magnitude more than a step
+    learned = update_ms[learns]
+    if learned.size:
+        ax.semilogy(steps[learns][::ku], learned[::ku], ".", ms=4, color="C2")
+    ax.set_xlabel("twin step")
+    ax.set_ylabel("update time (ms, log)")
+    ax.set_title("worker's update time per twin step (steps that learned)", fontsize=10)
+    ax = axes[2, 1]
+    if learned.size:
+        low, high = float(learned.min()), float(learned.max())
+        bins = np.geomspace(low, high * 1.0001, 30) if high > low else 10
+        ax.hist(learned, bins=bins, color="C2")
+        ax.set_xscale("log")
+    ax.set_xlabel("update time (ms, log)")
+    ax.set_ylabel("twin steps")
+    ax.set_title("update time distribution (steps that learned)", fontsize=10)
+    for n, ax in enumerate(axes.flat):
+        ax.grid(alpha=0.3)
+        if not twin_d.size:
+            _no_data(ax, "no committed twin steps")
+        elif n >= 2 and not steps.size:
+            _no_data(ax, "no update lines (a record before format 5)")
+    fig.suptitle(f"Updatable site {twin}: its twin learned online from {source}", fontsize=11)
     fig.tight_layout()
     return _png(fig)

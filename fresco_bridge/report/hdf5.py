@@ -10,6 +10,9 @@ Layout (every dataset has a ``units`` attribute; ``1`` means dimensionless)::
         monitor/           online monitors per committed step, when recorded:
                            step session tracking_error (mm) ti (mm²) nrms fei_amplitude (1)
                            fei_delay (s); NaN where a monitor had no value yet
+        update/            an updatable site's update lines (format 5): step session
+                           through (the source step learned through) secs (s) err (kN;
+                           NaN where the updater made no one-step prediction)
     /events/               seq t (s since the bridge started) site session kind reason
                            extra (JSON text of the other fields)
 """
@@ -80,6 +83,15 @@ def export_hdf5(run: Run, out_path: Path, *, site: str | None = None) -> int:
                                    ("fei_amplitude", "1"), ("fei_delay", "s")):
                     _put(mg, key, np.array([_opt(getattr(m, key)) for m in mons],
                                            dtype=np.float64), units)
+            ups = [u for u in run.updates if u.get("site") == name]
+            if ups:
+                ug = g.create_group("update")
+                for key, units, dtype in (("step", "1", np.int64), ("session", "1", np.int64),
+                                          ("through", "1", np.int64)):
+                    _put(ug, key, np.array([int(u[key]) for u in ups], dtype=dtype), units)
+                _put(ug, "secs", np.array([float(u["secs"]) for u in ups], dtype=np.float64), "s")
+                _put(ug, "err", np.array([float(u.get("err", math.nan)) for u in ups],
+                                         dtype=np.float64), "kN")
         events = [e for e in run.events if site is None or e.get("site") == site]
         eg = f.create_group("events")
         _put(eg, "seq", np.array([int(e.get("seq", 0)) for e in events], dtype=np.int64), "1")

@@ -2,9 +2,11 @@
 
 Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
 and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
-synchronization subspace), ``events`` and ``config`` (the snapshot). The same summary numbers
-are embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a
-curation pipeline can read them without scraping the tables.
+synchronization subspace), ``updating-<name>`` for an updatable site (its twin hysteresis,
+predicted vs source force, the source's one-step error, learning lag and update time, from
+its update lines), ``events`` and ``config`` (the snapshot). The same summary numbers are
+embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
+pipeline can read them without scraping the tables.
 """
 
 from __future__ import annotations
@@ -151,6 +153,52 @@ def _site_section(run: Run, site: str, warn: float | None) -> str:
     ])
 
 
+def _updating_section(run: Run, twin: str, source: str) -> str:
+    """An updatable site's learning: its committed steps (trial d, predicted F), its source's,
+    and its update lines (format 5; a record without them still shows the forces)."""
+    mine = [s for s in run.steps if s.site == twin]
+    theirs = [s for s in run.steps if s.site == source]
+    ups = [u for u in run.updates if u.get("site") == twin]
+    steps = np.array([int(u["step"]) for u in ups], dtype=float)
+    through = np.array([int(u["through"]) for u in ups], dtype=float)
+    seconds = np.array([float(u["secs"]) for u in ups])
+    error = np.array([float(u.get("err", math.nan)) for u in ups])
+    png = figures.updating(
+        twin, source, np.array([s.cmd_disp[0] for s in mine]),
+        np.array([s.meas_force[0] for s in mine]), np.array([s.time for s in mine]),
+        np.array([s.time for s in theirs]), np.array([s.meas_force[0] for s in theirs]),
+        steps, steps - through, 1e3 * seconds, error)
+    learned = seconds[seconds > 0]
+    rows = [("source", source), ("committed twin steps", str(len(mine))),
+            ("update lines", str(len(ups))),
+            ("source step learned through (last)", str(int(through[-1])) if ups else "none"),
+            ("median / max update time (ms)",
+             f"{fmt(1e3 * float(np.median(learned)), digits=4)} / "
+             f"{fmt(1e3 * float(learned.max()), digits=4)}" if learned.size else "none"),
+            ("median / max source one-step error (kN)",
+             f"{fmt(float(np.nanmedian(error)), digits=4)} / "
+             f"{fmt(float(np.nanmax(error)), digits=4)}" if np.isfinite(error).any()
+             else "not predicted by this updater")]
+    table = "".join(f'<tr><th>{_e(k)}</th><td class="n">{_e(v)}</td></tr>' for k, v in rows)
+    note = "" if ups else ('<p class="note">The record has no update lines for this site (a '
+                           "record written before format 5).</p>")
+    return "".join([
+        f'<section id="updating-{_e(twin)}"><h2>Updating: {_e(twin)} learns from '
+        f"{_e(source)}</h2><table>{table}</table>{note}",
+        _img(png, f"{twin} updating",
+             "Top left: the twin's trial displacement against the force it answered. Top "
+             "right: that force and the source's measured force in time. Middle left: the "
+             "source's one-step error, the measured force of the last source step learned for "
+             "each twin step against the updater's prediction of it from the source's "
+             "measured past before learning it (only updaters that predict it: "
+             "online_improved). Middle right: how many source steps each twin step's answer "
+             "had not learned yet (1 with previous-step causality, 0 with same-step). Bottom: "
+             "the worker's update time for each twin step (0: nothing new learned) and its "
+             "distribution over the steps that learned."),
+        "</section>",
+    ])
+
+
 def _event_times(run: Run, site: str, signals: list[SessionSignals]) -> list[tuple[float, str]]:
     """(time, kind) of the site's holds, limit hits and monitor warnings: the time of the
     last step committed before the event (its ``step``) in the same session."""
@@ -223,6 +271,7 @@ def render_report(run: Run) -> str:
         _summary_section(summaries),
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
+        *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
         _events_section(run),
         _config_section(run),
         '<script type="application/json" id="summary-data">',

@@ -13,6 +13,11 @@ element's trial before any force request, so the source's trial arrives whatever
 order; a client that asks the twin's force before sending the source's trial would wait
 forever: past the deadline the twin answers ``previous-step`` for the rest of the session,
 said in a ``same-step-fallback`` event.
+
+The controller is also a step listener of its own site, after the site's record writer: each
+committed twin step gets an update line (the source step its answer was learned through, the
+step's update time, the source's one-step error) from the one writer of the site's lines
+(``record/site.py``).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import math
 
 from ..controls.base import Controller, ControllerError, Daq
 from ..safety import SiteState
+from ..site_output import CommittedStep
 from ..sites import ExperimentalSite
 from .learner import Learner, LearnerError
 
@@ -47,6 +53,12 @@ class TwinController(Controller):
         self._tangent: float | None = None
         self.trained_through = 0
         """The source step the last answer was learned through."""
+        self.update_seconds = 0.0
+        """The worker's update time of the twin's current step (the last answer's)."""
+        self.one_step_error: float | None = None
+        """The source's one-step error of the twin's current step (the last answer's)."""
+        self._answered = False
+        """Whether the last trial was answered by the learner (else no update line)."""
         self._site: ExperimentalSite | None = None
         self._source: ExperimentalSite | None = None
         self._fallback_session = -1
@@ -60,13 +72,15 @@ class TwinController(Controller):
 
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
         same = self.causality == "same-step" and await self._source_measured()
+        self._answered = False
         try:
-            force, tangent, through = await self.learner.trial(self.twin, disp[0],
-                                                               same_step=same)
+            force, tangent, through, seconds, error = await self.learner.trial(
+                self.twin, disp[0], same_step=same)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
-        self.trained_through = through
+        self.trained_through, self.update_seconds, self.one_step_error = through, seconds, error
+        self._answered = True
         self.same_step_steps += same
 
     async def _source_measured(self) -> bool:
@@ -112,6 +126,18 @@ class TwinController(Controller):
             self.learner.commit(self.twin)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
+
+    def step_committed(self, step: CommittedStep) -> None:
+        """The site's listener: the committed step's update line in the record (none for a
+        step whose last trial the learner did not answer: the site HOLDs then)."""
+        self.step_values(step.session, step.step, step.time, step.ctrl, step.daq_disp)
+
+    def step_values(self, session: int, step: int, time: float, ctrl: tuple[float, ...],
+                    daq_disp: tuple[float, ...]) -> None:
+        site = self._site
+        if self._answered and site is not None and site.recorder is not None:
+            site.recorder.update(session, step, self.trained_through, self.update_seconds,
+                                 self.one_step_error)
 
     async def tangent_stiffness(self) -> tuple[float, ...]:
         if self._tangent is None:

@@ -75,6 +75,8 @@ class Learner:
         """What changed the worker's state, in order: replayed to a new worker."""
         self._last_trial: dict[str, tuple[float, bool]] = {}
         """Each twin's last trial: its displacement and whether it was answered same-step."""
+        self._through: dict[str, int] = {}
+        """The source step each twin's last live answer was learned through."""
         self._same_step_sent: dict[int, tuple[float, float]] = {}
         """Source steps already sent at their trial (same-step), until their commit."""
         self._sinks: list[EventSink] = []
@@ -415,24 +417,26 @@ class Learner:
         self._send(("observe", step.step, d, f))
 
     async def trial(self, twin: str, d: float, *, same_step: bool = False
-                    ) -> tuple[float, float, int]:
-        """The twin's (force, tangent) at ``d`` and the source step it learned through; with
-        ``same_step`` including the source step sent by ``observe_same_step`` just before."""
+                    ) -> tuple[float, float, int, float, float | None]:
+        """The twin's (force, tangent) at ``d``, the source step it learned through, the
+        update time and the source's one-step error of the twin's current step
+        (``LearnerState``); with ``same_step`` including the source step sent by
+        ``observe_same_step`` just before."""
         if self.state != "live":
             return self._frozen_trial(twin, d, same_step)
         self._last_trial[twin] = (d, same_step)
         self._answered_locally.discard(twin)
         try:
-            force, tangent, through, seconds = await self._request(
+            force, tangent, through, seconds, error = await self._request(
                 ("trial", twin, d, same_step), self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
             return self._frozen_trial(twin, d, same_step)
-        if int(through) > self.trained_through and self.update_observer is not None:
-            self.update_observer(float(seconds))
-        self.trained_through = int(through)
-        return float(force), float(tangent), self.trained_through
+        if int(through) > self._through.get(twin, 0) and self.update_observer is not None:
+            self.update_observer(float(seconds))  # each twin's newly learned step(s), once
+        self._through[twin] = self.trained_through = int(through)
+        return float(force), float(tangent), self.trained_through, float(seconds), error
 
     def observe_same_step(self, step: int, d: float, f: float) -> None:
         """The source's measurement of the trial of ``step``, for a same-step twin (sent once
@@ -449,7 +453,8 @@ class Learner:
                                + (f" ({self.reason})" if self.reason else ""))
         return self._local
 
-    def _frozen_trial(self, twin: str, d: float, same_step: bool) -> tuple[float, float, int]:
+    def _frozen_trial(self, twin: str, d: float, same_step: bool
+                      ) -> tuple[float, float, int, float, float | None]:
         local = self._frozen(twin)
         self._last_trial[twin] = (d, same_step)
         self._answered_locally.add(twin)
@@ -457,7 +462,7 @@ class Learner:
         assert reply is not None
         if reply[0] == "error":
             raise LearnerError(reply[2])
-        return float(reply[2]), float(reply[3]), int(reply[4])
+        return float(reply[2]), float(reply[3]), int(reply[4]), float(reply[5]), reply[6]
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""

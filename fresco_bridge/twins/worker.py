@@ -41,7 +41,8 @@ Message = tuple[Any, ...]
 """``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
-"""``("trial", id, force, tangent, trained_through, update_seconds)``, ``("initial", id, tangent)``,
+"""``("trial", id, force, tangent, trained_through, update_seconds,
+one_step_error)``, ``("initial", id, tangent)``,
 ``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
 reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
@@ -74,7 +75,14 @@ class _Twin:
     trained_through: int = 0
     """The source step of the last observation learned (0: none)."""
     update_seconds: float = 0.0
-    """Wall time the updater spent learning the step(s) learned before the last trial."""
+    """Wall time the updater spent learning the source step(s) learned for the twin's current
+    step (0.0: none learned for it)."""
+    one_step_error: float | None = None
+    """The updater's one-step error on the last source step learned for the twin's current
+    step (``Updater.last_one_step_error``; None: none learned, or not predicted)."""
+    timed_step: int = -1
+    """The twin step (its commits so far) ``update_seconds`` and ``one_step_error`` belong
+    to."""
 
 
 @dataclass
@@ -111,7 +119,8 @@ class LearnerState:
             if not (math.isfinite(force) and math.isfinite(tangent)):
                 return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
                         f"{tangent!r} at d = {d!r}")
-            return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds)
+            return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds,
+                    twin.one_step_error)
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
@@ -131,8 +140,8 @@ class LearnerState:
         twin = self.twins[name]
         obs = self.observations
         last = twin.commits + (1 if same_step else 0)
-        if twin.applied < len(obs) and obs[twin.applied][0] <= last:
-            twin.update_seconds = 0.0
+        if twin.timed_step != twin.commits:  # a new twin step: its own update time
+            twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
         while twin.applied < len(obs) and obs[twin.applied][0] <= last:
             step, d, f = obs[twin.applied]
             twin.applied += 1
@@ -144,6 +153,7 @@ class LearnerState:
                 continue
             twin.trained_through = step
             twin.update_seconds += twin.updater.last_update_seconds
+            twin.one_step_error = twin.updater.last_one_step_error
         learned = min(t.applied for t in self.twins.values())
         if learned >= TRIM:  # what every twin has learned is not needed any more
             del obs[:learned]

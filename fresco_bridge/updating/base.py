@@ -57,6 +57,13 @@ class Updater(Protocol):
         """Wall time the last ``observe`` spent updating (0.0 for a fixed model)."""
         ...
 
+    @property
+    def last_one_step_error(self) -> float | None:
+        """|F − F̂| of the last ``observe``: the measured force against the updater's
+        prediction of it from the tested element's measured past, made before learning the
+        step (the source's one-step error). None: the updater makes no such prediction."""
+        ...
+
 
 def check_measurement(name: str, d: float, force: float) -> tuple[float, float]:
     """(d, force) as floats, or UpdaterInputError naming the updater and the bad value."""
@@ -76,6 +83,7 @@ class OwnsTwin:
 
     _twin: HysteresisModel
     _last_update: float = 0.0
+    _last_one_step: float | None = None
 
     @property
     def twin(self) -> HysteresisModel:
@@ -84,3 +92,7 @@ class OwnsTwin:
     @property
     def last_update_seconds(self) -> float:
         return self._last_update
+
+    @property
+    def last_one_step_error(self) -> float | None:
+        return self._last_one_step

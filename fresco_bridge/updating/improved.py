@@ -242,6 +242,8 @@ class OnlineImproved(OwnsTwin):
         d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
+        weights = self.mixture_weights() if self.score != "free-run" else None
+        predicted = 0.0
         if self.shadow is not None:
             self.shadow.before_step([expert.source_twin() for expert in self.experts])
         for k, expert in enumerate(self.experts):
@@ -249,8 +251,10 @@ class OnlineImproved(OwnsTwin):
             if self.score != "one-step":
                 free = force - self._shadows[k](d)
                 squared += free * free
-            if self.score != "free-run":
-                one = force - expert.predict(d)
+            if weights is not None:
+                one_step = expert.predict(d)
+                predicted += float(weights[k]) * one_step
+                one = force - one_step
                 squared += one * one
             score = float(self.scores[k])
             self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
@@ -259,4 +263,5 @@ class OnlineImproved(OwnsTwin):
             self._update_trust()
         if self.shadow is not None:
             self.shadow.after_step(d, force)
+        self._last_one_step = None if weights is None else abs(force - predicted)
         self._last_update = time.perf_counter() - start

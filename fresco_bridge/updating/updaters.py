@@ -100,6 +100,10 @@ class FixedModelUpdater:
     def last_update_seconds(self) -> float:
         return 0.0
 
+    @property
+    def last_one_step_error(self) -> None:
+        return None  # a fixed model predicts the twin only
+
 
 class OnlineAnnUpdater(OwnsTwin):
     """The paper's online ANN updater (see the module docstring for the exact algorithm)."""

@@ -4,6 +4,7 @@ updatable site learning from it in a worker process, causality ``previous-step``
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import threading
@@ -14,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fresco_bridge.report.html import write_report
 from fresco_bridge.runs import load_run
 from fresco_bridge.updating.histories import read_history
 from fresco_bridge.updating.registry import make_updater
@@ -92,6 +94,17 @@ def test_twin_online_improved_equals_the_in_process_previous_step_coupling(
     scale = float(np.max(np.abs(expected)))
     assert scale > 1.0
     assert float(np.max(np.abs(twin.force - expected))) / scale < 1e-9
+    # the record's update lines: each twin step learned through the source's step before it,
+    # and the report draws them (from the run directory alone)
+    updates = load_run(run_dir).updates
+    assert [(u["site"], u["step"], u["through"]) for u in updates] == [
+        ("story2", k, k - 1) for k in range(1, NSTEPS + 1)]
+    assert all(math.isfinite(u["secs"]) and u["secs"] >= 0.0 for u in updates)
+    # online_improved's one-step error on the source step learned, from twin step 2 on
+    assert "err" not in updates[0]
+    errors = [u["err"] for u in updates[1:]]
+    assert all(math.isfinite(e) and e >= 0.0 for e in errors) and max(errors) > 0.0
+    assert '<section id="updating-story2">' in write_report(run_dir).read_text()
 
 
 def _wait(what: str, check: Any, deadline: float = 60.0) -> None:
@@ -159,6 +172,10 @@ def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Pa
     # for every element, and the source's NaN stop refuses to forward them (its HOLD is the
     # integrator's, its actuator keeps the last finite command).
     assert source["step"] == 40 and all(np.isfinite(source["ctrl"]))
+    # an update line for each twin step the learner answered, none for the held one
+    run = load_run(run_dir)
+    answered = [s for s in run.steps if s.site == "story2" and np.isfinite(s.meas_force[0])]
+    assert [u["step"] for u in run.updates] == [s.step for s in answered]
     assert "story1" not in holds or "non-finite trial" in holds["story1"]
 
 

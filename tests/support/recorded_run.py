@@ -150,7 +150,7 @@ def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
             if rec["kind"] == "monitors":
                 out += unfold_monitors(rec, seen)
                 continue
-            if rec["kind"] != "event":
+            if rec["kind"] not in ("event", "update"):  # complete lines
                 had = "ctrl" in rec
                 rec = {**seen.get((rec["site"], rec["session"], rec["kind"]), {}), **rec}
                 if rec["kind"] == "trial" and not had:

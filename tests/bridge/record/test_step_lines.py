@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.record.export import committed_steps, monitor_lines
+from fresco_bridge.record.lines import FORMAT_VERSION
 from fresco_bridge.record.writer import PENDING_LIMIT
 from tests.bridge.record.test_lean_record import replay, same, without_t
 from tests.support.recorded_run import raw_lines
@@ -102,7 +103,8 @@ def test_the_real_format2_run_replayed_in_format3_reads_back_identical(tmp_path:
     record = RunRecord.create(tmp_path, "lean", "", {})
     replay(old, record)
     record.close()
-    assert json.loads((record.directory / "run.json").read_text())["format"] == 4  # its lines: 3
+    meta = json.loads((record.directory / "run.json").read_text())
+    assert meta["format"] == FORMAT_VERSION  # its lines: format 3
     assert_same_lines(list(read_record(record.directory)), old)
     assert_same_lines(raw_lines(record.directory), old)
     kinds = [r["kind"] for r in file_lines(record.directory)]

@@ -22,7 +22,7 @@ from fresco_bridge.daemon import Bridge
 from fresco_bridge.indicators import OnlineMonitor
 from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.record.export import monitor_lines
-from fresco_bridge.record.lines import RecordFormatError, expand
+from fresco_bridge.record.lines import FORMAT_VERSION, RecordFormatError, expand
 from fresco_bridge.record.site import SiteRecorder
 from fresco_bridge.site_output import CommittedStep, SiteNotice
 from fresco_bridge.telemetry.schema import SiteStatus
@@ -104,7 +104,8 @@ def test_batched_monitors_read_back_as_the_per_step_ones(tmp_path: Path) -> None
     each, batched = Run(tmp_path / "a", False), Run(tmp_path / "b", True)
     drive(each)
     drive(batched)
-    assert json.loads((batched.record.directory / "run.json").read_text())["format"] == 4
+    meta = json.loads((batched.record.directory / "run.json").read_text())
+    assert meta["format"] == FORMAT_VERSION
     kinds = [r["kind"] for r in batched.lines()]
     assert "monitors" in kinds and "monitor" not in kinds
     assert not any("mon" in r for r in batched.lines() if r["kind"] == "step")
