@@ -116,7 +116,8 @@ class Bridge:
             if not cfg.record.enabled:
                 raise ConfigError("resuming a run needs [record] enabled = true")
             self.record = RunRecord.resume(self.resume, fsync=cfg.record.fsync,
-                                           sync_interval=cfg.record.sync_interval)
+                                           sync_interval=cfg.record.sync_interval,
+                                           min_free_mb=cfg.record.min_free_mb)
             resumed = last_commits(self.resume)
             log.warning("run record: %s RESUMED (continues after the last committed step of "
                         "each site: %s)", self.record.directory,
@@ -127,6 +128,7 @@ class Bridge:
                 redact_config_text(self.config_text, (v for _, v in secret_values(cfg))),
                 {"fresco_bridge": __version__, "sites": [s.name for s in cfg.sites]},
                 fsync=cfg.record.fsync, sync_interval=cfg.record.sync_interval,
+                min_free_mb=cfg.record.min_free_mb,
             )
             log.info("run record: %s", self.record.directory)
         flag_interrupted(run_root, exclude=None if self.record is None
