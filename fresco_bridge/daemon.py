@@ -131,6 +131,9 @@ class Bridge:
                 min_free_mb=cfg.record.min_free_mb,
             )
             log.info("run record: %s", self.record.directory)
+        if self.record is not None and self.record.failure is not None:
+            log.error("%s: every site refuses clients until the run record can be written",
+                      self.record.failure)
         flag_interrupted(run_root, exclude=None if self.record is None
                          else self.record.directory)
         loop = asyncio.get_running_loop()

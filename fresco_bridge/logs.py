@@ -33,7 +33,8 @@ class RateLimitFilter(logging.Filter):
 
     A cause is the logger, the level, the message's format string and its first argument (the
     site's name, by this project's convention): two sites' HOLDs are two causes, one site's
-    thousand failed writes are one.
+    thousand failed writes are one. A line with a traceback is caused by its exception's type
+    and the line that raised it, whatever its message says.
     """
 
     def __init__(self, interval: float = LOG_INTERVAL,
@@ -48,6 +49,15 @@ class RateLimitFilter(logging.Filter):
 
     @staticmethod
     def cause(record: logging.LogRecord) -> tuple[object, ...]:
+        exc = record.exc_info
+        if exc and exc[0] is not None and exc[2] is not None:
+            # a traceback: its exception and where it was raised (asyncio's "Exception in
+            # callback <handle>" message differs per connection, the fault does not)
+            tb = exc[2]
+            while tb.tb_next is not None:
+                tb = tb.tb_next
+            return (record.name, record.levelno, exc[0].__qualname__,
+                    tb.tb_frame.f_code.co_filename, tb.tb_lineno)
         args = record.args
         first = args[0] if isinstance(args, tuple) and args else None
         return (record.name, record.levelno, str(record.msg),

@@ -64,6 +64,17 @@ def test_information_is_not_limited_and_tracebacks_are() -> None:
     assert text.count("Traceback") == 1
 
 
+def test_tracebacks_of_one_fault_are_one_cause_whatever_their_messages() -> None:
+    log, out = logger_with(RateLimitFilter(10.0, Clock()))
+    peername: tuple[str, int] | None = None  # a vanished peer's
+    for port in range(100):
+        try:
+            peername[:2]  # type: ignore[index]
+        except TypeError:
+            log.error("Exception in callback <Handle %d>", port, exc_info=True)
+    assert out.getvalue().count("Traceback") == 1
+
+
 def test_the_causes_remembered_are_bounded() -> None:
     filt = RateLimitFilter(10.0, Clock())
     log, _ = logger_with(filt)
