@@ -96,6 +96,7 @@ class RunRecord:
         self.failure: RecordError | None = None
         """Why the record cannot take commits now (None: it can); see ``check_writable``."""
         self._space_due = 0.0  # record time of the next free-space check
+        self._cut_to: int | None = None  # the file's size before a failed write not yet cut
         self._fsync = fsync
         self._seq = seq
         self._buf: list[str] = []
@@ -319,6 +320,8 @@ class RunRecord:
         if buf:
             data = (buf[0] if len(buf) == 1 else "".join(buf)).encode()
             buf.clear()
+            if not self._cut() and self.failure is not None:  # never after a torn line
+                raise self.failure
             self._write(data)
         if sync and self._fsync != "off":
             self._sync(urgent)
@@ -337,12 +340,26 @@ class RunRecord:
             raise self._write_failed(exc, done) from exc
 
     def _write_failed(self, exc: OSError, done: int) -> RecordError:
-        """The failure of a write that got ``done`` bytes of its data into the file."""
+        """The failure of a write that got ``done`` bytes of its data into the file: they are
+        cut off (until they are, nothing more is written: a torn line stays the last one,
+        which the readers skip and a resume cuts)."""
         if done:
-            with contextlib.suppress(OSError):  # else left for ``cut_torn_tail`` at a resume
-                os.ftruncate(self._fd, os.fstat(self._fd).st_size - done)
+            with contextlib.suppress(OSError):
+                self._cut_to = os.fstat(self._fd).st_size - done
+            self._cut()
         return self._fail(RecordError(
             exc.errno, f"run record {self.path} cannot be written: {exc.strerror}"))
+
+    def _cut(self) -> bool:
+        """Cut a failed write's bytes off the file (True: nothing is left to cut)."""
+        if self._cut_to is None:
+            return True
+        try:
+            os.ftruncate(self._fd, self._cut_to)
+        except OSError:
+            return False
+        self._cut_to = None
+        return True
 
     def _fail(self, error: RecordError) -> RecordError:
         self.failure = error
@@ -374,7 +391,7 @@ class RunRecord:
             return self._fail(RecordError(
                 errno.ENOSPC, f"run record {self.path}: {free:.1f} MiB free on its filesystem, "
                               f"below record.min_free_mb = {self.min_free_mb:g}"))
-        if self.failure is not None and free < RECOVERY_FREE_MB:
+        if self.failure is not None and (free < RECOVERY_FREE_MB or not self._cut()):
             return self.failure
         self.failure = None
         return None

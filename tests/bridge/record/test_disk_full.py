@@ -251,3 +251,52 @@ def test_an_enospc_at_the_writer_holds_the_site_and_leaves_no_torn_line(
         lines = assert_readable(bridge.run_dir)
         steps = [ln["step"] for ln in lines if ln["kind"] == "commit" and ln["session"] == 1]
         assert steps == [1, 2, 3]
+
+
+def test_a_torn_write_that_cannot_be_cut_at_once_blocks_every_line_until_it_is(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import fresco_bridge.record.writer as writer
+
+    real_write, real_truncate = os.write, os.ftruncate
+
+    def half_then_full(fd: int, data: bytes | memoryview) -> int:
+        monkeypatch.setattr(writer, "_os_write", full)
+        return real_write(fd, bytes(data)[: len(data) // 2])
+
+    def full(fd: int, data: bytes | memoryview) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def truncate_fails(fd: int, size: int) -> None:
+        raise OSError(errno.EIO, os.strerror(errno.EIO))
+
+    def commit(record: writer.RunRecord, n: int) -> None:
+        record.trial("s", 1, n, 0.01 * n, (0.1 * n,), (0.1 * n,))
+        record.measurement("s", 1, n, (0.1 * n,), (K * 0.1 * n,))
+        record.commit("s", 1, n, 0.01 * n)
+
+    record = writer.RunRecord.create(tmp_path, "t", "", {}, fsync="off", min_free_mb=0)
+    path = record.directory / RECORD_FILE
+    try:
+        commit(record, 1)
+        intact = path.read_bytes()
+        monkeypatch.setattr(writer, "_os_write", half_then_full)
+        monkeypatch.setattr(os, "ftruncate", truncate_fails)
+        with pytest.raises(writer.RecordError, match=r"Errno 28.*No space left"):
+            commit(record, 2)
+        torn = path.read_bytes()
+        assert torn.startswith(intact) and len(torn) > len(intact)
+        monkeypatch.setattr(writer, "_os_write", real_write)
+        with pytest.raises(writer.RecordError):
+            record.event("s", 1, "hold", "the record failed")  # nothing after a torn line
+        assert record.check_writable() is not None and path.read_bytes() == torn
+        monkeypatch.setattr(os, "ftruncate", real_truncate)
+        assert record.check_writable() is None
+        assert path.read_bytes() == intact
+        record.event("s", 1, "hold", "the record failed")
+        commit(record, 3)
+    finally:
+        monkeypatch.undo()
+        record.close()
+    assert_readable(record.directory)
+    lines = list(read_record(record.directory))
+    assert [ln["step"] for ln in lines if ln["kind"] == "commit"] == [1, 3]
