@@ -437,7 +437,8 @@ class RunRecord:
         t = time.monotonic() - self._t0
         for site in list(self._pending):
             self._write_pending(site, t)
-        self.flush()
+        with contextlib.suppress(RecordError):  # lost with the disk; ``failure`` says why
+            self.flush()
         if self._syncer is not None:
             self._syncer.stop()
         try:

@@ -230,6 +230,7 @@ def test_an_enospc_at_the_writer_holds_the_site_and_leaves_no_torn_line(
     def fail(fd: int, data: bytes | memoryview) -> int:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
+    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 0.5)
     with RunningBridge(config(min_free_mb=0), tmp_path) as bridge:
         holds = spy_holds(bridge)
         port = bridge.ports[SITE]
@@ -245,7 +246,8 @@ def test_an_enospc_at_the_writer_holds_the_site_and_leaves_no_torn_line(
             assert st["state"] == "HOLD" and "Errno 28" in st["reason"]
             assert st["step"] == 3, "the step whose commit failed was counted"
             wait_for(lambda: holds == [1], "the controller to be held")
-        wait_for(lambda: status(bridge)["peer"] is None, "the session to end")
+            # the integrator stays, silent: the bridge ends its session
+            wait_for(lambda: status(bridge)["peer"] is None, "the session to end", timeout=10)
         monkeypatch.setattr(writer, "_os_write", real_write)
         served(port)
         lines = assert_readable(bridge.run_dir)
