@@ -18,19 +18,12 @@ from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
 from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
 from .exit_codes import exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
+from .logs import configure as configure_logging
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
 from .runs import RunDirError, check_resumable, resolve_run
 from .study import add_study_parser, study_command
 from .updating.cli import add_updater_parser, updater_command
-
-
-def _setup_logging(verbose: bool) -> None:
-    logging.basicConfig(
-        level=logging.DEBUG if verbose else logging.INFO,
-        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
 
 
 async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
@@ -118,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     add_updater_parser(sub)
     add_diagnosis_parsers(sub)  # diagnose, diagnose-bench
     args = parser.parse_args(argv)
-    _setup_logging(args.verbose)
+    configure_logging(args.verbose)
     _warn_if_stale()
     return exit_code(lambda: _run(args), (ConfigError, LabError, RunDirError, ControlError))
 

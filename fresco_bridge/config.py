@@ -242,6 +242,11 @@ class RecordConfig(_Strict):
     50 ms by default: every fdatasync costs the CPU the step loop shares wake-ups and I/O
     completions, a visible share of a fast step when it runs much more often (``BENCHMARKS.md``,
     "Record size and durability")."""
+    min_free_mb: float = Field(default=64.0, ge=0.0)
+    """Headroom: below this much free space (MiB) on the run directory's filesystem the record
+    takes no more commits: the sites HOLD and refuse clients before the disk is full, while the
+    HOLD's event and the log still fit. Checked about once a second; 0 turns the check off
+    (a full disk still HOLDs)."""
 
 
 class TelemetryConfig(_Strict):

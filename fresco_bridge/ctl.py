@@ -293,6 +293,9 @@ def format_answer(answer: dict[str, Any]) -> str:
                          + f"  trained through source step {st['steps_trained']} "
                          f"(source at {st['source_step']})  not trained {st['not_trained']}  "
                          f"losses {st['learner_losses']}")
+        if st.get("record"):
+            lines.append(f"    run record not writable: {st['record']} (new clients refused "
+                         "until it is)")
         counts = ", ".join(f"{k} {v}" for k, v in sorted(st["limit_events"].items())) or "none"
         lines.append(f"    holds {st['holds']}  limit events: {counts}")
         for lim in st["limits"]:

@@ -116,7 +116,8 @@ class Bridge:
             if not cfg.record.enabled:
                 raise ConfigError("resuming a run needs [record] enabled = true")
             self.record = RunRecord.resume(self.resume, fsync=cfg.record.fsync,
-                                           sync_interval=cfg.record.sync_interval)
+                                           sync_interval=cfg.record.sync_interval,
+                                           min_free_mb=cfg.record.min_free_mb)
             resumed = last_commits(self.resume)
             log.warning("run record: %s RESUMED (continues after the last committed step of "
                         "each site: %s)", self.record.directory,
@@ -127,8 +128,12 @@ class Bridge:
                 redact_config_text(self.config_text, (v for _, v in secret_values(cfg))),
                 {"fresco_bridge": __version__, "sites": [s.name for s in cfg.sites]},
                 fsync=cfg.record.fsync, sync_interval=cfg.record.sync_interval,
+                min_free_mb=cfg.record.min_free_mb,
             )
             log.info("run record: %s", self.record.directory)
+        if self.record is not None and self.record.failure is not None:
+            log.error("%s: every site refuses clients until the run record can be written",
+                      self.record.failure)
         flag_interrupted(run_root, exclude=None if self.record is None
                          else self.record.directory)
         loop = asyncio.get_running_loop()

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from .lines import DAQ, MONITOR, TRIAL
-from .writer import PENDING_LIMIT, RunRecord
+from .writer import PENDING_LIMIT, RecordError, RunRecord
 
 if TYPE_CHECKING:
     from ..indicators import MonitorSample
@@ -25,7 +25,7 @@ __all__ = ["SiteRecorder"]
 class SiteRecorder:
     """The record lines of site ``site`` (a step and event listener of that site)."""
 
-    __slots__ = ("_commit", "_pending", "_record", "before_event", "site")
+    __slots__ = ("_commit", "_pending", "_record", "before_event", "failed", "site")
 
     def __init__(self, record: RunRecord, site: str) -> None:
         self._record = record
@@ -33,6 +33,8 @@ class SiteRecorder:
         self.before_event: Callable[[], None] | None = None
         """Called before an event of the site is recorded (the monitor batch writes the
         samples it holds first: ``telemetry.taps.MonitorBatch``)."""
+        self.failed: Callable[[RecordError], None] | None = None
+        """Told when a line other than a commit could not be written (the site HOLDs)."""
         self._pending = record.pending(site)
         self._commit = record.commit_items
 
@@ -43,7 +45,23 @@ class SiteRecorder:
         items = self._pending
         items.append((TRIAL, session, step, time_, trial, ctrl))
         if len(items) > PENDING_LIMIT:
-            self._record.trial_overflow(self.site)
+            try:
+                self._record.trial_overflow(self.site)
+            except RecordError as exc:
+                self._failed(exc)
+
+    def _failed(self, exc: RecordError) -> None:
+        if self.failed is not None:
+            self.failed(exc)
+
+    @property
+    def failure(self) -> RecordError | None:
+        """Why the record cannot take commits now (None: it can)."""
+        return self._record.failure
+
+    def check_writable(self) -> RecordError | None:
+        """``RunRecord.check_writable``: a new session asks it first."""
+        return self._record.check_writable()
 
     def measurement(self, session: int, step: int, disp: tuple[float, ...],
                     force: tuple[float, ...]) -> None:
@@ -65,7 +83,10 @@ class SiteRecorder:
         self.event(notice.session, notice.kind, notice.reason, **notice.extra)
 
     def event(self, session: int, kind: str, reason: str, **extra: object) -> None:
-        self._record.event(self.site, session, kind, reason, **extra)
+        try:
+            self._record.event(self.site, session, kind, reason, **extra)
+        except RecordError as exc:
+            self._failed(exc)
 
     def update(self, session: int, step: int, through: int, seconds: float,
                error: float | None) -> None:
@@ -79,7 +100,10 @@ class SiteRecorder:
                  ) -> None:
         """The monitors after committed steps ``step``, ``step + 1``… (a batch: one line,
         written at once; ``RunRecord.monitors``)."""
-        self._record.monitors(self.site, session, step, samples)
+        try:
+            self._record.monitors(self.site, session, step, samples)
+        except RecordError as exc:
+            self._failed(exc)
 
     def monitor(self, session: int, step: int, sample: MonitorSample) -> None:
         """The monitors after committed ``step`` (``RunRecord.monitor`` without its frame:

@@ -22,10 +22,19 @@ lab's test; the snapshot never holds a secret, see ``config_model.redact_config_
 ``run.json`` says ``state``: ``running`` while a bridge holds the record's ``flock``, ``closed``
 after a clean close; a run left ``running`` with no lock holder was interrupted
 (``record/recovery.py``), and ``RunRecord.resume`` continues it.
+
+A failed write is a fault of the record, not of the bridge: the bytes of the failed write are
+cut off again (no torn line stays behind), ``failure`` says why (path and errno) and the commit
+raises ``RecordError``, so the site HOLDs and does not count the step. Free space is checked
+about once a second on the commit path (``os.statvfs``); below ``min_free_mb`` the record
+refuses commits the same way, before the disk is full. ``check_writable`` clears the failure
+once the filesystem has its headroom again (a new session asks it first).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -45,6 +54,17 @@ from .syncer import Syncer
 
 _monotonic = time.monotonic
 _os_write = os.write
+_statvfs = os.statvfs
+
+DEFAULT_MIN_FREE_MB = 64
+"""Commits stop (the site HOLDs) when the run directory's filesystem has less free space than
+this: the HOLD event, the session's end and the log still fit."""
+RECOVERY_FREE_MB = 1.0
+"""A record that failed takes commits again once this much space is free at least (with
+``min_free_mb = 0`` a full disk would otherwise look writable to ``check_writable``)."""
+SPACE_CHECK_INTERVAL = 1.0
+"""Seconds between two free-space checks on the commit path (one ``statvfs``)."""
+_MIB = 1 << 20
 
 DEFAULT_SYNC_INTERVAL = 0.05
 """Group commit: at most one fdatasync per this many seconds (events sync at once). Why 50 ms,
@@ -68,8 +88,15 @@ class RunRecord:
     def __init__(
         self, directory: Path, *, fsync: Literal["background", "inline", "off"] = "background",
         sync_interval: float = DEFAULT_SYNC_INTERVAL, seq: int = 0, t: float = 0.0,
+        min_free_mb: float = DEFAULT_MIN_FREE_MB,
     ) -> None:
         self.directory = directory
+        self.path = directory / RECORD_FILE
+        self.min_free_mb = min_free_mb
+        self.failure: RecordError | None = None
+        """Why the record cannot take commits now (None: it can); see ``check_writable``."""
+        self._space_due = 0.0  # record time of the next free-space check
+        self._cut_to: int | None = None  # the file's size before a failed write not yet cut
         self._fsync = fsync
         self._seq = seq
         self._buf: list[str] = []
@@ -94,6 +121,7 @@ class RunRecord:
             self._syncer = Syncer(self._fd, sync_interval)
             self._syncer.start()
         self.closed = False
+        self.check_writable()
 
     @classmethod
     def create(
@@ -104,7 +132,7 @@ class RunRecord:
         meta: dict[str, object],
         *,
         fsync: Literal["background", "inline", "off"] = "background",
-        sync_interval: float = DEFAULT_SYNC_INTERVAL,
+        sync_interval: float = DEFAULT_SYNC_INTERVAL, min_free_mb: float = DEFAULT_MIN_FREE_MB,
     ) -> RunRecord:
         """Make ``base_dir/<UTC timestamp>-<name>/`` (0700) with the config snapshot and
         metadata (0600). ``config_text`` must already be redacted."""
@@ -133,12 +161,12 @@ class RunRecord:
             raise RecordError(
                 exc.errno, f"cannot create run directory under {base_dir}: {exc}"
             ) from exc
-        return cls(directory, fsync=fsync, sync_interval=sync_interval)
+        return cls(directory, fsync=fsync, sync_interval=sync_interval, min_free_mb=min_free_mb)
 
     @classmethod
     def resume(
         cls, directory: Path, *, fsync: Literal["background", "inline", "off"] = "background",
-        sync_interval: float = DEFAULT_SYNC_INTERVAL,
+        sync_interval: float = DEFAULT_SYNC_INTERVAL, min_free_mb: float = DEFAULT_MIN_FREE_MB,
     ) -> RunRecord:
         """Continue the record of an interrupted run: a torn last line is moved aside, the
         sequence numbers and times go on from the last complete line."""
@@ -150,7 +178,8 @@ class RunRecord:
         try:
             cut_torn_tail(directory)
             seq, t = last_seq_and_time(directory)
-            record = cls(directory, fsync=fsync, sync_interval=sync_interval, seq=seq, t=t)
+            record = cls(directory, fsync=fsync, sync_interval=sync_interval, seq=seq, t=t,
+                         min_free_mb=min_free_mb)
             directory.chmod(0o700)
             meta = update_meta(directory)
             resumed = list(meta.get("resumed", []))  # type: ignore[call-overload]
@@ -198,8 +227,11 @@ class RunRecord:
         the buffer) runs as one straight path — fold, encode, one ``write``, a sync request.
         """
         t = _monotonic() - self._t0
+        if t >= self._space_due:
+            self._check_space(t)
         line = (self._enc.fold(t, site, session, step, time_, items)
-                if items and not self._buf and not self.closed else None)
+                if items and not self._buf and not self.closed and self.failure is None
+                else None)
         if line is None:
             self._commit_lines(t, site, items, session, step, time_)
             return
@@ -216,7 +248,10 @@ class RunRecord:
                       time_: float) -> None:
         """The general commit: a step line when the items fold (after whatever the buffer
         holds), else format-2 lines and a commit line (the fold changes no state when it
-        returns None, so trying it again here is safe)."""
+        returns None, so trying it again here is safe). A record that cannot take commits
+        raises ``failure`` before anything changes: the items wait for the site's event."""
+        if self.failure is not None:
+            raise self.failure
         enc = self._enc
         if items:
             line = enc.fold(t, site, session, step, time_, items)
@@ -299,22 +334,81 @@ class RunRecord:
         if buf:
             data = (buf[0] if len(buf) == 1 else "".join(buf)).encode()
             buf.clear()
+            if not self._cut() and self.failure is not None:  # never after a torn line
+                raise self.failure
             self._write(data)
         if sync and self._fsync != "off":
             self._sync(urgent)
 
     def _write(self, data: bytes) -> None:
         """``data`` to the kernel: one ``write`` (the rest after a short one: a signal, a full
-        disk)."""
+        disk). A failure cuts what this call wrote (no torn line) and raises ``RecordError``."""
+        done = 0
         try:
-            n = _os_write(self._fd, data)
-            if n != len(data):
-                view = memoryview(data)[n:]
-                while view:
-                    written = _os_write(self._fd, view)  # not in the slice (mypyc: twice)
-                    view = view[written:]
+            done = _os_write(self._fd, data)
+            if done != len(data):
+                view = memoryview(data)
+                while done < len(data):
+                    done += _os_write(self._fd, view[done:])
         except OSError as exc:
-            raise RecordError(exc.errno, f"run record write failed: {exc.strerror}") from exc
+            raise self._write_failed(exc, done) from exc
+
+    def _write_failed(self, exc: OSError, done: int) -> RecordError:
+        """The failure of a write that got ``done`` bytes of its data into the file: they are
+        cut off (until they are, nothing more is written: a torn line stays the last one,
+        which the readers skip and a resume cuts)."""
+        if done:
+            with contextlib.suppress(OSError):
+                self._cut_to = os.fstat(self._fd).st_size - done
+            self._cut()
+        return self._fail(RecordError(
+            exc.errno, f"run record {self.path} cannot be written: {exc.strerror}"))
+
+    def _cut(self) -> bool:
+        """Cut a failed write's bytes off the file (True: nothing is left to cut)."""
+        if self._cut_to is None:
+            return True
+        try:
+            os.ftruncate(self._fd, self._cut_to)
+        except OSError:
+            return False
+        self._cut_to = None
+        return True
+
+    def _fail(self, error: RecordError) -> RecordError:
+        self.failure = error
+        return error
+
+    def _check_space(self, t: float) -> None:
+        """Raise ``failure`` when the filesystem is below ``min_free_mb`` (once a second)."""
+        self._space_due = t + SPACE_CHECK_INTERVAL
+        error = self.check_writable()
+        if error is not None:
+            raise error
+
+    def free_mb(self) -> float:
+        """Free space (for an unprivileged process) on the record's filesystem, in MiB."""
+        st = _statvfs(self.directory)
+        return st.f_bavail * st.f_frsize / _MIB
+
+    def check_writable(self) -> RecordError | None:
+        """Why the record cannot take commits now (None: it can). A failure clears when the
+        filesystem has its ``min_free_mb`` again (a write that fails again sets it again)."""
+        if self.closed:
+            return RecordError(f"run record {self.path} is closed")
+        try:
+            free = self.free_mb()
+        except OSError as exc:
+            return self._fail(RecordError(
+                exc.errno, f"run record {self.path}: free space unknown: {exc.strerror}"))
+        if free < self.min_free_mb:
+            return self._fail(RecordError(
+                errno.ENOSPC, f"run record {self.path}: {free:.1f} MiB free on its filesystem, "
+                              f"below record.min_free_mb = {self.min_free_mb:g}"))
+        if self.failure is not None and (free < RECOVERY_FREE_MB or not self._cut()):
+            return self.failure
+        self.failure = None
+        return None
 
     def _sync(self, urgent: bool) -> None:
         """Everything written so far durable: asked of the syncer, or now (inline)."""
@@ -322,10 +416,15 @@ class RunRecord:
         if syncer is not None:
             if syncer.error is not None:
                 err, syncer.error = syncer.error, None
-                raise RecordError(err.errno, f"run record fdatasync failed: {err.strerror}")
+                raise self._fail(RecordError(
+                    err.errno, f"run record {self.path}: fdatasync failed: {err.strerror}"))
             syncer.request(self._seq, urgent)
         else:
-            os.fdatasync(self._fd)
+            try:
+                os.fdatasync(self._fd)
+            except OSError as exc:
+                raise self._fail(RecordError(exc.errno, f"run record {self.path}: fdatasync "
+                                             f"failed: {exc.strerror}")) from exc
 
     @property
     def lines(self) -> int:
@@ -352,7 +451,8 @@ class RunRecord:
         t = time.monotonic() - self._t0
         for site in list(self._pending):
             self._write_pending(site, t)
-        self.flush()
+        with contextlib.suppress(RecordError):  # lost with the disk; ``failure`` says why
+            self.flush()
         if self._syncer is not None:
             self._syncer.stop()
         try:

@@ -53,8 +53,9 @@ class Site(Protocol):
 
     # -- sessions (the transports, the protocol handlers) --------------------------------------
     def claim(self, peer: str) -> None:
-        """``peer`` connected: hold the site for it, or raise :class:`SiteError` (busy, or a
-        state that accepts no session). Nothing is recorded until ``open_session``."""
+        """``peer`` connected: hold the site for it, or raise :class:`SiteError` (busy, a
+        state that accepts no session, a run record that cannot be written). Nothing is
+        recorded until ``open_session``."""
         ...
 
     def open_session(self, peer: str) -> int:

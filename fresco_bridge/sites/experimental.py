@@ -10,6 +10,11 @@ request instead (``recovery``, up to ``controller_recovery`` s): the run goes on
 or the integrator is told to stop (NaN answers until its DIE), never answered from a stale
 measurement. PAUSED makes the integrator's next command wait for an operator; FAULT (operator
 abort) tells the integrator to stop the same way and refuses new sessions until resumed.
+
+A run record that cannot be written (a full disk, less than ``record.min_free_mb`` free, an
+I/O error) is a fault of the site: the step whose commit failed does not count, the site HOLDs,
+the integrator is told to stop and its session is ended after ``ABORT_GRACE`` s if it does not
+leave by itself; new clients are refused (``claim``) until the record can be written again.
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from protocol import Signals, SignalSizes
 
 from ..config import SiteConfig
 from ..controls.base import Controller, Daq, InlineController
-from ..record import RunRecord
+from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
     Limiter,
@@ -106,6 +111,7 @@ class ExperimentalSite(CommandGate):
         """The one writer of this site's lines in the run record (None: recording off)."""
         if self.recorder is not None:
             self.add_listener(self.recorder)
+            self.recorder.failed = self.record_failed
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
@@ -157,6 +163,24 @@ class ExperimentalSite(CommandGate):
         except TransitionRefused as exc:
             raise SiteError(f"site {self.name} is in {self.state} ({self.reason}); not accepting "
                             f"client {peer}: {exc}") from None
+        if self.recorder is not None:
+            failure = self.recorder.check_writable()
+            if self.metrics is not None:
+                self.metrics.record_writable(failure is None)
+            if failure is not None:
+                raise SiteError(f"site {self.name} is not accepting client {peer}: {failure}")
+
+    def record_failed(self, error: RecordError) -> None:
+        """The run record could not take a line of this site: HOLD (the controller holds, the
+        integrator is told to stop) and end the session if it does not end by itself. Outside
+        a session, or once held, only the metrics and ``ctl status`` say it."""
+        if self.metrics is not None:
+            self.metrics.record_writable(False)
+        if not self.in_session or not (self.state is RUNNING or self.state is PAUSED):
+            return
+        self.enter_hold(f"{error}; step {self.step + 1} not committed")
+        self._end_session_later(self.session, f"the run record cannot be written ({error}); the "
+                                f"client did not leave within {ABORT_GRACE:g} s")
 
     def open_session(self, peer: str) -> int:
         """Open ``peer``'s session (claiming the site first unless ``peer`` holds the claim)."""
@@ -323,6 +347,8 @@ class ExperimentalSite(CommandGate):
             "recovering_for": None if self.guard.recovering_since is None
             else round(_time.monotonic() - self.guard.recovering_since, 3),
             "holds": self.holds, "limit_events": dict(self.limit_counts),
+            "record": None if self.recorder is None or self.recorder.failure is None
+            else str(self.recorder.failure),
             "refused": {} if self.rejections is None else dict(self.rejections.counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
             **self.controller.status_fields(),
@@ -434,6 +460,8 @@ class ExperimentalSite(CommandGate):
             self.ctrl = target
             if self.recorder is not None:
                 self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
+                if self.state is HOLD:  # the record failed (``record_failed``)
+                    return None
             if target != self.guard.sent:
                 if self._now is None:
                     return self._send_later(target)
@@ -537,19 +565,24 @@ class ExperimentalSite(CommandGate):
         """The controller committed (or failed to: then the site is in HOLD): the step counts."""
         self.step += 1
         self._uncommitted = False
-        self._commit_time = self.time
+        commit_time, self._commit_time = self._commit_time, self.time
         lean = self._step_values
-        if lean is not None:  # the record and its monitor: no CommittedStep to build
-            session, step, time_, ctrl, disp = (self.session, self.step, self.time, self.ctrl,
-                                                self.daq.disp)
-            for listener_values in lean:
-                listener_values(session, step, time_, ctrl, disp)
-        elif self._step_listeners:
-            committed = CommittedStep(self.name, self.session, self.step, self.time,
-                                      self.trial.disp, self.ctrl, self.daq.disp, self.daq.force,
-                                      str(self.state))
-            for listener in self._step_listeners:
-                listener.step_committed(committed)
+        try:
+            if lean is not None:  # the record and its monitor: no CommittedStep to build
+                session, step, time_, ctrl, disp = (self.session, self.step, self.time,
+                                                    self.ctrl, self.daq.disp)
+                for listener_values in lean:
+                    listener_values(session, step, time_, ctrl, disp)
+            elif self._step_listeners:
+                committed = CommittedStep(self.name, self.session, self.step, self.time,
+                                          self.trial.disp, self.ctrl, self.daq.disp,
+                                          self.daq.force, str(self.state))
+                for listener in self._step_listeners:
+                    listener.step_committed(committed)
+        except RecordError as exc:  # the record is the first listener: nobody saw the step
+            self.step -= 1
+            self._commit_time = commit_time
+            self.record_failed(exc)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
         """Measured signals in basic DOFs (see ``out_signals_eager``)."""

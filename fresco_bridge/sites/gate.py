@@ -88,6 +88,8 @@ class CommandGate:
         ctrl = self.ctrl = commands[-1]
         if self.recorder is not None:
             self.recorder.trial(self.session, self.step, self.time, trial.disp, ctrl)
+            if self.state is HOLD:  # the record failed (``record_failed``)
+                return
         for command in commands:
             if command != self.guard.sent and not await self._send(command):
                 return

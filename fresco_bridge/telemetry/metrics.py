@@ -70,6 +70,7 @@ class SiteMetrics:
     _limits: Counter
     _events: Counter
     _monitor: tuple[Gauge, ...] = ()
+    _record_writable: Gauge | None = None
     _latency_children: dict[str, Histogram] = field(default_factory=dict)
     _limit_children: dict[str, Counter] = field(default_factory=dict)
     _event_children: dict[str, Counter] = field(default_factory=dict)
@@ -87,6 +88,13 @@ class SiteMetrics:
 
     def hold(self) -> None:
         self.holds.inc()
+
+    def record_writable(self, writable: bool) -> None:
+        """1: the run record takes this site's commits; 0: it cannot be written (a full disk,
+        below ``record.min_free_mb``): the site HOLDs and refuses clients (``ctl status``
+        says why)."""
+        if self._record_writable is not None:
+            self._record_writable.set(1.0 if writable else 0.0)
 
     def latency(self, action: str, seconds: float) -> None:
         child = self._latency_children.get(action)
@@ -173,8 +181,8 @@ class Metrics:
     ``limit_events_total{site,signal}``, ``events_total{site,kind}``, ``updater_step_seconds``
     (present, with zero counts, before any updater runs), the online monitors as gauges
     ``monitor_tracking_error_mm{site}``, ``monitor_tracking_indicator``, ``monitor_nrms``,
-    ``monitor_fei_amplitude``, ``monitor_fei_delay_seconds`` and, once ``track_telemetry``
-    is called, ``telemetry_dropped_total`` and friends.
+    ``monitor_fei_amplitude``, ``monitor_fei_delay_seconds``, ``record_writable{site}`` and,
+    once ``track_telemetry`` is called, ``telemetry_dropped_total`` and friends.
     """
 
     def __init__(self, registry: CollectorRegistry | None = None) -> None:
@@ -197,6 +205,10 @@ class Metrics:
                 ("monitor_fei_amplitude", "Online monitor: FEI amplitude ratio (window)"),
                 ("monitor_fei_delay_seconds", "Online monitor: FEI equivalent delay (window)"),
             ))
+        self.record_writable = Gauge(
+            "record_writable", "1: the run record takes the site's commits; 0: it cannot be "
+            "written (the site HOLDs and refuses clients; ctl status says why)", ["site"],
+            namespace=NAMESPACE, registry=r)
         self.events_total = Counter("events", "Site events (as in the run record) per kind",
                                     ["site", "kind"], namespace=NAMESPACE, registry=r)
         self.updater_step_seconds = Histogram(
@@ -213,7 +225,9 @@ class Metrics:
                 site=site, steps=self.steps_total.labels(site), holds=self.holds_total.labels(site),
                 _latency=self.message_latency_seconds, _limits=self.limit_events_total,
                 _events=self.events_total,
-                _monitor=tuple(g.labels(site) for g in self.monitor_gauges))
+                _monitor=tuple(g.labels(site) for g in self.monitor_gauges),
+                _record_writable=self.record_writable.labels(site))
+            bound.record_writable(True)
             self._sites[site] = bound
         return bound
 

@@ -89,7 +89,7 @@ def test_inline_syncs_before_the_commit_returns(tmp_path: Path, monkeypatch: pyt
         record.close()
 
 
-def test_a_failed_fdatasync_is_reported_once_and_retried_on_the_next_commit(
+def test_a_failed_fdatasync_is_reported_and_retried_once_the_record_is_checked(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     attempts: list[int] = []
     real = os.fdatasync
@@ -109,6 +109,8 @@ def test_a_failed_fdatasync_is_reported_once_and_retried_on_the_next_commit(
         assert len(attempts) == 1 and record.syncs == 0 and record.durable_lines == 0
         with pytest.raises(RecordError, match="fdatasync failed: Input/output error"):
             step(record, 2)  # written to the kernel first, then the error is reported
+        assert record.failure is not None  # no commit until it is checked (a new session)
+        assert record.check_writable() is None
         step(record, 3)
         wait_for(lambda: record.durable_lines == record.lines == 9, "the retry")
         assert record.syncs == 1
@@ -139,7 +141,7 @@ def test_a_short_write_is_finished_and_a_failed_one_reported(
             step(record, n)  # step 2: a step line, written in two parts
         assert calls[0] == 4
         mode[0] = "fail"
-        with pytest.raises(RecordError, match="write failed: No space left on device"):
+        with pytest.raises(RecordError, match="cannot be written: No space left on device"):
             step(record, 4)
     finally:
         mode[0] = ""
