@@ -57,6 +57,7 @@ class ElementHandler:
         self.send = send
         self.peer = peer
         self.introduced = False
+        self.on_open: Callable[[], None] | None = None
         self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
@@ -106,6 +107,8 @@ class ElementHandler:
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
                 site.open_session(self.peer)
                 self.introduced = True
+                if self.on_open is not None:
+                    self.on_open()
                 self._daq_sizes = sid.daq
                 log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
                          self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
@@ -133,6 +136,7 @@ class ActorHandler:
         self.peer = peer
         self.size_out: SignalSizes | None = None
         self.introduced = False
+        self.on_open: Callable[[], None] | None = None
 
     def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None] | None:
         """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it."""
@@ -160,6 +164,8 @@ class ActorHandler:
                 if not self.introduced:
                     site.open_session(self.peer)
                     self.introduced = True
+                    if self.on_open is not None:
+                        self.on_open()
                 self.size_out = size_out
             case DieReceived():
                 self.send(session.send_die_reply(site.cfg.actor_tag))
