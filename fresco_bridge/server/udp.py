@@ -11,7 +11,8 @@ handshake from the same peer ends its old session at once.
 OpenSees sends its handshake once and then waits for the answer, without retrying: a handshake
 from another address while a session is open is therefore queued, not dropped (the latest one),
 and answered as soon as that session ends (DIE, idle deadline, ``ctl abort``), so an integrator
-started while a vanished one still holds the site starts by itself. A peer that has not
+started while a vanished one still holds the site starts by itself (after an operator abort,
+once the site is resumed). A peer that has not
 introduced itself (no size ID that fits yet) holds nothing: another peer's datagram replaces
 it.
 """
@@ -28,6 +29,8 @@ from ..sites import SiteError
 from .connection import SessionPump, SiteListener
 
 log = logging.getLogger("fresco_bridge.server")
+QUEUED_RETRY = 1.0
+"""Seconds between two tries to answer a queued handshake while the site takes no session."""
 
 
 class UdpSiteEndpoint(asyncio.DatagramProtocol):
@@ -40,6 +43,7 @@ class UdpSiteEndpoint(asyncio.DatagramProtocol):
         self.peer_addr: tuple[str, int] | None = None
         self.queued: tuple[str, int] | None = None
         """The handshake waiting for the open session to end (its address)."""
+        self._retry: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]
@@ -53,12 +57,30 @@ class UdpSiteEndpoint(asyncio.DatagramProtocol):
     def _session_over(self) -> None:
         self.pump = None
         self.framing = None
-        queued, self.queued = self.queued, None
-        if queued is not None:  # answered once the ending session is finished with
-            asyncio.get_running_loop().call_soon(self._answer_queued, queued)
+        if self.queued is not None:  # answered once the ending session is finished with
+            self._answer_queued()
 
-    def _answer_queued(self, addr: tuple[str, int]) -> None:
-        if self.pump is not None and not self.pump.closed:  # another session started first
+    def _answer_queued(self) -> None:
+        """Answer the queued handshake if the site takes a session now; if it does not (an
+        operator abort until ``ctl resume``, a record that cannot be written), ask again
+        every ``QUEUED_RETRY`` s: the integrator is still waiting for its answer."""
+        if self._retry is not None:
+            self._retry.cancel()
+            self._retry = None
+        addr = self.queued
+        if addr is None or (self.pump is not None and not self.pump.closed):
+            return  # answered, or another session started first: its end answers it
+        loop = asyncio.get_running_loop()
+        try:
+            self.site.claim(f"{addr[0]}:{addr[1]}")
+        except SiteError:
+            self._retry = loop.call_later(QUEUED_RETRY, self._answer_queued)
+            return
+        self.queued = None
+        loop.call_soon(self._replay_queued, addr)
+
+    def _replay_queued(self, addr: tuple[str, int]) -> None:
+        if self.pump is not None and not self.pump.closed:  # a peer came first: wait again
             self.queued = self.queued or addr
             return
         log.info("site %s: answering the UDP handshake of %s:%d queued while the site was busy",

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from fresco_bridge.cli import main as cli_main
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
@@ -27,7 +28,7 @@ from fresco_bridge.loops import LoopKind
 from fresco_bridge.ratelog import RateLimitedLog
 from protocol import ElementClientSession, SizeID
 from tests.support.bridge import RunningBridge
-from tests.support.sessions import K, closes, config, peer, refusals, served
+from tests.support.sessions import K, closes, config, peer, refusals, served, vanish
 from tests.support.spied_bridge import refused, wait_for
 
 IDLE = 1.5  # longer than the trickle's byte interval: the idle clock alone never ends it
@@ -175,6 +176,29 @@ def test_a_udp_handshake_while_a_vanished_peer_holds_the_site_is_answered_when_i
     assert "client sent DIE" in udp_closes[1]
     said = " ".join(r.getMessage() for r in caplog.records)
     assert "queued, answered when that session ends" in said
+
+
+def test_a_queued_udp_handshake_is_answered_when_the_operator_resumes_an_aborted_site(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The README's advice: ``ctl abort`` ends the vanished client's session at once, the
+    site stays in FAULT (the queued handshake waits), ``ctl resume`` lets the new one in."""
+    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 0.5)
+    with RunningBridge(config(), tmp_path) as bridge:  # the idle deadline: 60 s
+        port = bridge.ports["udp"]
+        run_dir = str(bridge.run_dir)
+        vanished = GenericClientLink("127.0.0.1", port, 1, data_size=1, transport="udp",
+                                     timeout=5.0).connect()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.settimeout(10.0)
+            s.sendto(b"a", ("127.0.0.1", port))  # queued
+            wait_for(lambda: refusals(bridge, "udp") == {"busy": 1}, "the handshake queued")
+            assert cli_main(["ctl", "abort", "--site", "udp", "--run-dir", run_dir]) == 0
+            wait_for(lambda: peer(bridge, "udp") == "", "the aborted session to end")
+            assert cli_main(["ctl", "resume", "--site", "udp", "--run-dir", run_dir]) == 0
+            capsys.readouterr()
+            assert s.recv(1) == b"b"  # answered (within the socket's timeout)
+        vanish(vanished)
 
 
 def test_a_udp_peer_without_a_size_id_is_replaced_by_the_next(tmp_path: Path) -> None:
