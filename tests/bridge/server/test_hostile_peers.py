@@ -9,13 +9,11 @@ the site is answered once the site is free (its one handshake is queued, not dro
 
 from __future__ import annotations
 
-import contextlib
 import importlib.util
 import logging
 import socket
 import struct
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -28,6 +26,7 @@ from fresco_bridge.loops import LoopKind
 from fresco_bridge.ratelog import RateLimitedLog
 from protocol import ElementClientSession, SizeID
 from tests.support.bridge import RunningBridge
+from tests.support.net import BATCH, connect_and_reset, loop_held
 from tests.support.sessions import K, closes, config, peer, refusals, served, vanish
 from tests.support.spied_bridge import refused, wait_for
 
@@ -95,37 +94,6 @@ def test_a_trickling_client_is_ended_by_the_message_deadline_and_another_is_serv
         assert len(closes(bridge, "tcp")) == 2  # the good clients' sessions only
 
 
-def _connect_and_reset(port: int) -> None:
-    with socket.socket() as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
-        s.settimeout(5.0)
-        s.connect(("127.0.0.1", port))
-    # closed with linger 0: a RST, often before the bridge has accepted it
-
-
-BATCH = 30
-"""Connections reset while the loop is held (within the listener's backlog)."""
-
-
-@contextlib.contextmanager
-def _loop_held(bridge: BridgeThread) -> Iterator[None]:
-    """The bridge's loop blocked (as by a burst of work): connections wait in the backlog."""
-    held, release = threading.Event(), threading.Event()
-
-    def hold() -> None:
-        held.set()
-        release.wait(10)
-
-    holder = threading.Thread(target=bridge.call, args=(hold,), daemon=True)
-    holder.start()
-    assert held.wait(10), "the bridge's loop was not held"
-    try:
-        yield
-    finally:
-        release.set()
-        holder.join(10)
-
-
 @pytest.mark.parametrize("event_loop", ["asyncio", "uvloop"])
 def test_a_connect_reset_flood_leaves_a_few_log_lines_and_the_bridge_serves(
     tmp_path: Path, caplog: pytest.LogCaptureFixture, event_loop: LoopKind
@@ -140,11 +108,11 @@ def test_a_connect_reset_flood_leaves_a_few_log_lines_and_the_bridge_serves(
         port = bridge.ports["tcp"]
         caplog.clear()
         for _ in range(n // 2):  # reset after the bridge accepted them
-            _connect_and_reset(port)
+            connect_and_reset(port)
         for _ in range(n // 2 // BATCH):  # reset before: the peer's address is already gone
-            with _loop_held(bridge):
+            with loop_held(bridge):
                 for _ in range(BATCH):
-                    _connect_and_reset(port)
+                    connect_and_reset(port)
         wait_for(lambda: sum(refusals(bridge, "tcp").values()) == n,
             f"all {n} connections to be counted as refused")
         served(port)
