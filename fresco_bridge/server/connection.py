@@ -208,9 +208,10 @@ class SessionPump:
             return
         self._write_blocked = paused
         if paused:
-            log.warning("site %s: client %s does not read its replies (over %d KiB queued): "
-                        "not reading nor answering it until it does", self.site.name, self.peer,
-                        WRITE_HIGH_WATER // 1024)
+            self.listener.ratelog.warning(
+                "unread", "site %s: client %s does not read its replies (over %d KiB queued): "
+                "not reading nor answering it until it does", self.site.name, self.peer,
+                WRITE_HIGH_WATER // 1024)
             if not self._held_paused:
                 self._pause(True)
             return

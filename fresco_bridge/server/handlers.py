@@ -34,6 +34,7 @@ from protocol import (
     TrialReceived,
 )
 
+from ..ratelog import RateLimitedLog
 from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
@@ -58,6 +59,8 @@ class ElementHandler:
         self.peer = peer
         self.introduced = False
         self.on_open: Callable[[], None] | None = None
+        self._says = RateLimitedLog(log)
+        """What the client's messages make us say, once per cause per interval."""
         self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
@@ -122,8 +125,9 @@ class ElementHandler:
                     f"({pending} byte(s) of a partial item discarded)"
                 )
             case Ignored(code=code):
-                log.info("site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
-                         site.name, code, self.peer)
+                self._says.log(logging.INFO, "ignored",
+                               "site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
+                               site.name, code, self.peer)
 
 
 class ActorHandler:
@@ -137,6 +141,8 @@ class ActorHandler:
         self.size_out: SignalSizes | None = None
         self.introduced = False
         self.on_open: Callable[[], None] | None = None
+        self._says = RateLimitedLog(log)
+        """What the client's messages make us say, once per cause per interval."""
 
     def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None] | None:
         """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it."""
@@ -155,8 +161,9 @@ class ActorHandler:
             case ProbeReceived():
                 self.send(session.send_probe_reply())
             case OpenReceived(shadow_tag=shadow_tag, version=version):
-                log.info("site %s: ShadowExpSite %d (OpenFresco %s) opened from %s", site.name,
-                         shadow_tag, version, self.peer)
+                self._says.log(logging.INFO, "open",
+                               "site %s: ShadowExpSite %d (OpenFresco %s) opened from %s",
+                               site.name, shadow_tag, version, self.peer)
                 # The shadow exits on a version mismatch: echo its own version.
                 self.send(session.send_open_reply(site.cfg.actor_tag, version))
             case SetupReceived(size_trial=size_trial, size_out=size_out):
@@ -175,7 +182,8 @@ class ActorHandler:
             case ConnectionClosed():
                 raise SiteError(f"shadow site {self.peer} closed the connection mid-message")
             case Ignored(code=code):
-                log.info("site %s: ignoring action code %r from %s", site.name, code, self.peer)
+                self._says.log(logging.INFO, "ignored", "site %s: ignoring action code %r from %s",
+                               site.name, code, self.peer)
         return None
 
     async def _send_daq_later(self, out: Coroutine[Any, Any, Signals]) -> None:

@@ -144,7 +144,8 @@ def test_unknown_action_codes_are_ignored_and_stream_stays_in_sync(bridge, caplo
     assert struct.unpack("<5d", reply)[0] == pytest.approx(5.0)
     s.sendall(_vector(99.0))
     s.close()
-    assert sum("ignoring action code" in r.getMessage() for r in caplog.records) == 5
+    # said once (the first), the others counted: a peer's repeats cannot flood the log
+    assert sum("ignoring action code" in r.getMessage() for r in caplog.records) == 1
     _after_bad_client(bridge, caplog, "ignoring action code 42.0")
 
 
