@@ -213,6 +213,9 @@ class BridgeConfig(_Strict):
     answered, no operator wait, no controller call) before it is ended; also a client that
     does not read its replies. Frees a site whose client vanished without a word (UDP, a
     half-open TCP connection)."""
+    message_deadline: float = Field(default=5.0, gt=0, le=3_600)
+    """Seconds a client has to complete a message it has begun (its size ID included), however
+    often bytes arrive: a client trickling a byte now and then cannot hold a site."""
     controller_timeout: float = Field(default=5.0, gt=0)
     """Deadline in seconds for every controller call; past it the site goes to HOLD."""
     controller_recovery: float = Field(default=30.0, ge=0)

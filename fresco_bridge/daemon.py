@@ -18,13 +18,14 @@ from typing import TypeVar
 
 from pydantic import SecretStr
 
-from . import __version__
+from . import __version__, loops
 from .config import ConfigError, LabConfig, SiteConfig, TelemetryConfig
 from .config_model import redact_config_text, secret_values
 from .controls import registry as controls
 from .controls.base import Controller, ControllerError
 from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
+from .loops import LoopKind
 from .record import RunRecord
 from .record.recovery import LastCommit, flag_interrupted, last_commits
 from .server.connection import SiteListener
@@ -241,7 +242,8 @@ class Bridge:
             log.warning("site %s ADMITS CLIENTS FROM ANY ADDRESS (allow_any_client = true; "
                         "bound to %s): anyone who can reach the port can drive the actuator",
                         site.name, bcfg.host)
-        return SiteListener(site, allowlist, bcfg.max_data_size, bcfg.session_idle_timeout)
+        return SiteListener(site, allowlist, bcfg.max_data_size, bcfg.session_idle_timeout,
+                            bcfg.message_deadline)
 
     async def _abandon_start(self) -> None:
         """A start that failed closes what it opened; a run directory that recorded nothing
@@ -357,8 +359,10 @@ class BridgeThread:
     """
 
     def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
-                 resume: Path | None = None) -> None:
+                 resume: Path | None = None, event_loop: LoopKind = "asyncio") -> None:
         self.bridge = Bridge(config, config_text, run_dir=run_dir, resume=resume)
+        self.event_loop = event_loop
+        """The loop the thread runs (asyncio's unless asked: ``serve`` follows the config)."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._ready = threading.Event()
@@ -382,7 +386,7 @@ class BridgeThread:
                 await self.bridge.close()
 
         try:
-            asyncio.run(run())
+            loops.run(run(), self.event_loop)
         except BaseException as exc:  # reported to the owner by __enter__/stop
             self._error = self._error or exc
             self._ready.set()

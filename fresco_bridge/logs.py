@@ -10,6 +10,10 @@ holds one session at a time.
 A handler that cannot write (a full disk, a closed stream) must not take the bridge down or
 print a traceback per line to stderr: ``configure`` sets ``logging.raiseExceptions = False``,
 so ``Handler.handleError`` drops the line silently and the caller (the step path) goes on.
+
+``RateLimitedLog`` is the same rule where the caller names the cause itself (a transport's
+refusals, ICMP errors, ignored action codes): it holds wherever the bridge runs, with or
+without ``configure`` (an embedded ``BridgeThread`` in a test or a notebook).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 
-__all__ = ["LOG_INTERVAL", "RateLimitFilter", "configure"]
+__all__ = ["LOG_INTERVAL", "RateLimitFilter", "RateLimitedLog", "configure"]
 
 LOG_INTERVAL = 10.0
 """Seconds between two warning or error lines of one cause."""
@@ -90,3 +94,35 @@ def configure(verbose: bool, interval: float = LOG_INTERVAL) -> None:
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
     handler.addFilter(RateLimitFilter(interval))
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO, handlers=[handler])
+
+
+class RateLimitedLog:
+    """One logger's lines, at most one per cause per ``interval``."""
+
+    def __init__(self, logger: logging.Logger, interval: float = LOG_INTERVAL,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.logger = logger
+        self.interval = interval
+        self._clock = clock
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+    def log(self, level: int, cause: str, msg: str, *args: object) -> bool:
+        """Log ``msg % args`` unless ``cause`` was logged less than ``interval`` ago (then
+        only count it); True if logged. ``cause`` is a fixed string, never peer data, so the
+        bookkeeping stays bounded."""
+        now = self._clock()
+        last = self._last.get(cause)
+        if last is not None and now - last < self.interval:
+            self._suppressed[cause] = self._suppressed.get(cause, 0) + 1
+            return False
+        self._last[cause] = now
+        suppressed = self._suppressed.pop(cause, 0)
+        if suppressed:
+            msg += " (%d more not logged in the last %g s)"
+            args = (*args, suppressed, self.interval)
+        self.logger.log(level, msg, *args)
+        return True
+
+    def warning(self, cause: str, msg: str, *args: object) -> bool:
+        return self.log(logging.WARNING, cause, msg, *args)

@@ -64,6 +64,13 @@ class SiteBase:
         return self._state
 
     @property
+    def partial_message(self) -> tuple[int, int]:
+        """(stream offset of the next unread byte, unread bytes): a transport's message
+        deadline sees whether a message has been only partly received, and for how long."""
+        buffered = self._in
+        return buffered.consumed, len(buffered.data) - buffered.pos
+
+    @property
     def transport(self) -> SiteTransport:
         """``"tcp"`` (with endianness probe) or ``"udp"`` (handshake done by udp.py)."""
         return self._transport

@@ -214,6 +214,13 @@ class ElementServerSession:
         return self._state
 
     @property
+    def partial_message(self) -> tuple[int, int]:
+        """(stream offset of the next unread byte, unread bytes): a transport's message
+        deadline sees whether a message has been only partly received, and for how long."""
+        buffered = self._in
+        return buffered.consumed, len(buffered.data) - buffered.pos
+
+    @property
     def size_id(self) -> SizeID | None:
         """The accepted size ID, None before it arrived."""
         return self._size_id

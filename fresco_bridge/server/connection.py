@@ -14,6 +14,12 @@ so what is queued never exceeds the high-water mark plus one reply; a client tha
 unread for ``session_idle_timeout`` is ended with the reason. The same deadline ends a session
 that sends nothing while the bridge owes it nothing (no request being answered, no operator
 wait, no controller call): a vanished UDP peer or a half-open TCP connection frees its site.
+
+A message once begun must be complete within ``message_deadline`` (``bridge.message_deadline``),
+whatever the idle clock says: a client trickling a byte now and then is ended. A connection
+holds its site only from its size ID (or site setup) on, so one that never completes it keeps
+nobody out. The deadline is a check every half deadline, not a timer per message: the step
+path pays nothing for it.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from typing import Any, Literal, Protocol
 from protocol import ActorSession, ElementServerSession, ProtocolError, Sentinel
 
 from ..eager import Suspended, start_eager
+from ..logs import RateLimitedLog
 from ..sites import Site, SiteError
 from ..sites.access import Allowlist, RejectionLog
 from .handlers import ActorHandler, ElementHandler, SessionEnded
@@ -49,7 +56,11 @@ class SiteListener:
     allowlist: Allowlist
     max_data_size: int
     idle_timeout: float
+    message_deadline: float = 5.0
+    """Seconds a client has to complete a message it has begun (``bridge.message_deadline``)."""
     rejections: RejectionLog = field(default_factory=RejectionLog)
+    ratelog: RateLimitedLog = field(default_factory=lambda: RateLimitedLog(log))
+    """The listener's log lines about peers (errors, resets): one per cause per interval."""
 
     def __post_init__(self) -> None:
         self.site.rejections = self.rejections
@@ -68,6 +79,8 @@ class SiteListener:
 class _Handler(Protocol):
     introduced: bool
     """The client's size ID (or site setup) fitted: its session is open."""
+    on_open: Callable[[], None] | None
+    """Called once the session opened (the site is then this client's)."""
 
     def dispatch(self, ev: Any) -> Coroutine[Any, Any, None] | None:
         """Handle ``ev`` at once (None) or return the coroutine that finishes it."""
@@ -90,7 +103,9 @@ class SessionPump:
         self.listener = listener
         self.site = site = listener.site
         self.peer = peer
-        site.claim(peer)  # SiteError (busy, aborted): the transport refuses the connection
+        # refused now if the site cannot take a session (busy, aborted: SiteError, and the
+        # transport refuses the connection); held only from the size ID on (``open_session``)
+        site.claim(peer)
         self._close = close
         self._pause = pause
         self._pending: asyncio.Task[None] | None = None
@@ -104,7 +119,10 @@ class SessionPump:
         self._activity = self._loop.time()
         self._idle_handle: asyncio.TimerHandle | None = self._loop.call_later(
             idle_timeout, self._idle_check)
-        site.attach_session_end(self.end_by_bridge)
+        self._deadline = deadline = listener.message_deadline
+        self._begun = (-1, 0.0)  # (stream offset, time) of a partial message first seen
+        self._deadline_handle: asyncio.TimerHandle | None = self._loop.call_later(
+            deadline / 2, self._deadline_check)
         self.session: ElementServerSession | ActorSession
         self.handler: _Handler
         if site.cfg.protocol == "element":
@@ -113,6 +131,7 @@ class SessionPump:
         else:
             actor = ActorSession(transport=transport)
             self.session, self.handler = actor, ActorHandler(site, actor, send, peer)
+        self.handler.on_open = self._opened
         # bound once: the per-message path calls each of them (``feed``, ``_run``)
         self._time = self._loop.time
         self._receive: Callable[[bytes], None] = self.session.receive_data
@@ -159,15 +178,40 @@ class SessionPump:
             return
         self._idle_handle = self._loop.call_later(self._idle_timeout - idle, self._idle_check)
 
+    def _deadline_check(self) -> None:
+        """The message deadline: a message begun (unread bytes, no request in progress) and
+        not finished within ``message_deadline`` ends the session; checked every half
+        deadline, so it ends within one and a half."""
+        self._deadline_handle = None
+        if self.closed:
+            return
+        now = self._loop.time()
+        offset, unread = self.session.partial_message
+        if unread == 0 or self._pending is not None or self._write_blocked:
+            self._begun = (-1, now)  # nothing begun, or its bytes wait for us, not the client
+        elif self._begun[0] != offset:
+            self._begun = (offset, now)
+        elif now - self._begun[1] >= self._deadline:
+            what = "its size ID" if not self.handler.introduced else "a message"
+            self.abort(f"client did not complete {what} within {self._deadline:g} s "
+                       f"({unread} byte(s) of it received; bridge.message_deadline)")
+            return
+        self._deadline_handle = self._loop.call_later(self._deadline / 2, self._deadline_check)
+
+    def _opened(self) -> None:
+        """The client introduced itself and its session opened: the site ends it through us."""
+        self.site.attach_session_end(self.end_by_bridge)
+
     def writing_paused(self, paused: bool) -> None:
         """The transport's write buffer crossed its high (True) or low (False) water mark."""
         if self.closed or paused == self._write_blocked:
             return
         self._write_blocked = paused
         if paused:
-            log.warning("site %s: client %s does not read its replies (over %d KiB queued): "
-                        "not reading nor answering it until it does", self.site.name, self.peer,
-                        WRITE_HIGH_WATER // 1024)
+            self.listener.ratelog.warning(
+                "unread", "site %s: client %s does not read its replies (over %d KiB queued): "
+                "not reading nor answering it until it does", self.site.name, self.peer,
+                WRITE_HIGH_WATER // 1024)
             if not self._held_paused:
                 self._pause(True)
             return
@@ -247,11 +291,13 @@ class SessionPump:
         if self.closed:
             return
         self.closed = True
-        if self._idle_handle is not None:
-            self._idle_handle.cancel()
-            self._idle_handle = None
-        self.site.close_session(reason, error=error)
-        if not self.handler.introduced:
+        for handle in (self._idle_handle, self._deadline_handle):
+            if handle is not None:
+                handle.cancel()
+        self._idle_handle = self._deadline_handle = None
+        if self.handler.introduced:
+            self.site.close_session(reason, error=error)
+        else:
             # never introduced itself (no size ID that fits): a refused connection, counted
             # and reported within the rate limit, so hostile churn grows neither log nor record
             self.listener.refuse("handshake", self.peer, f"ended before a valid size ID: "

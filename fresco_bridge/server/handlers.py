@@ -34,6 +34,7 @@ from protocol import (
     TrialReceived,
 )
 
+from ..logs import RateLimitedLog
 from ..sites import Site, SiteError
 
 log = logging.getLogger("fresco_bridge.session")
@@ -57,6 +58,9 @@ class ElementHandler:
         self.send = send
         self.peer = peer
         self.introduced = False
+        self.on_open: Callable[[], None] | None = None
+        self._says = RateLimitedLog(log)
+        """What the client's messages make us say, once per cause per interval."""
         self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
@@ -106,6 +110,8 @@ class ElementHandler:
                 site.check_sizes(sid.ctrl, sid.daq, f"client {self.peer}")
                 site.open_session(self.peer)
                 self.introduced = True
+                if self.on_open is not None:
+                    self.on_open()
                 self._daq_sizes = sid.daq
                 log.info("site %s: client %s sizes ctrl=%s daq=%s dataSize=%d", site.name,
                          self.peer, sid.ctrl.as_tuple(), sid.daq.as_tuple(), sid.data_size)
@@ -119,8 +125,9 @@ class ElementHandler:
                     f"({pending} byte(s) of a partial item discarded)"
                 )
             case Ignored(code=code):
-                log.info("site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
-                         site.name, code, self.peer)
+                self._says.log(logging.INFO, "ignored",
+                               "site %s: ignoring action code %r from %s (no reply, as OpenFresco)",
+                               site.name, code, self.peer)
 
 
 class ActorHandler:
@@ -133,6 +140,9 @@ class ActorHandler:
         self.peer = peer
         self.size_out: SignalSizes | None = None
         self.introduced = False
+        self.on_open: Callable[[], None] | None = None
+        self._says = RateLimitedLog(log)
+        """What the client's messages make us say, once per cause per interval."""
 
     def dispatch(self, ev: ActorEvent) -> Coroutine[Any, Any, None] | None:
         """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it."""
@@ -151,8 +161,9 @@ class ActorHandler:
             case ProbeReceived():
                 self.send(session.send_probe_reply())
             case OpenReceived(shadow_tag=shadow_tag, version=version):
-                log.info("site %s: ShadowExpSite %d (OpenFresco %s) opened from %s", site.name,
-                         shadow_tag, version, self.peer)
+                self._says.log(logging.INFO, "open",
+                               "site %s: ShadowExpSite %d (OpenFresco %s) opened from %s",
+                               site.name, shadow_tag, version, self.peer)
                 # The shadow exits on a version mismatch: echo its own version.
                 self.send(session.send_open_reply(site.cfg.actor_tag, version))
             case SetupReceived(size_trial=size_trial, size_out=size_out):
@@ -160,6 +171,8 @@ class ActorHandler:
                 if not self.introduced:
                     site.open_session(self.peer)
                     self.introduced = True
+                    if self.on_open is not None:
+                        self.on_open()
                 self.size_out = size_out
             case DieReceived():
                 self.send(session.send_die_reply(site.cfg.actor_tag))
@@ -169,7 +182,8 @@ class ActorHandler:
             case ConnectionClosed():
                 raise SiteError(f"shadow site {self.peer} closed the connection mid-message")
             case Ignored(code=code):
-                log.info("site %s: ignoring action code %r from %s", site.name, code, self.peer)
+                self._says.log(logging.INFO, "ignored", "site %s: ignoring action code %r from %s",
+                               site.name, code, self.peer)
         return None
 
     async def _send_daq_later(self, out: Coroutine[Any, Any, Signals]) -> None:

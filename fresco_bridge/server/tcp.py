@@ -10,6 +10,10 @@ TCP keepalive probes a silent peer (a lost host, a cut cable) even while the bri
 the controller or an operator, when the session-idle deadline does not run: a dead peer is
 noticed within ``KEEPALIVE_IDLE + KEEPALIVE_COUNT * KEEPALIVE_INTERVAL`` s. With ``tls = true``
 the connection is upgraded to mutual TLS (``server/tls.py``) before a session is opened.
+
+A peer gone before it was accepted (connect then reset: no peer name, socket options failing)
+or during the TLS handshake is a refused connection, counted and logged within the rate limit,
+never a traceback.
 """
 
 from __future__ import annotations
@@ -58,7 +62,11 @@ class TcpConnection(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         # a stream transport; uvloop's do not subclass asyncio.Transport, so no isinstance
         self.transport = transport = cast(asyncio.Transport, transport)
-        host, port = transport.get_extra_info("peername")[:2]
+        peername = transport.get_extra_info("peername")
+        if not peername:  # reset before we got to it: the kernel no longer knows the peer
+            self._vanished(transport, "an unknown peer", "no peer address")
+            return
+        host, port = peername[:2]
         peer = f"{host}:{port}"
         if not self.listener.allowlist.admits(host):
             self.listener.refuse("address", peer, "address not in allowed_clients "
@@ -67,28 +75,41 @@ class TcpConnection(asyncio.Protocol):
             return
         sock = transport.get_extra_info("socket")
         if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            _keepalive(sock)
-            if _QUICKACK is not None:
-                sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
-                # uvloop's transport socket builds a socket object for every call, up to 4
-                # re-arms a step on the step path: re-arm through our own handle of the same
-                # connection (a duplicate descriptor, closed with the connection)
-                self._ack_sock = socket.socket(sock.family, sock.type, sock.proto,
-                                               fileno=os.dup(sock.fileno()))
-                self._quickack = self._ack_sock.setsockopt
+            try:
+                self._tune(sock)
+            except OSError as exc:
+                self._vanished(transport, peer, str(exc))
+                return
         if self.tls is None:
             self._open(transport, peer)
         else:
             self._handshake = asyncio.get_running_loop().create_task(
                 self._start_tls(transport, self.tls, peer), name=f"{self.site.name}.tls")
 
+    def _tune(self, sock: socket.socket) -> None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        _keepalive(sock)
+        if _QUICKACK is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
+            # uvloop's transport socket builds a socket object for every call, up to 4
+            # re-arms a step on the step path: re-arm through our own handle of the same
+            # connection (a duplicate descriptor, closed with the connection)
+            self._ack_sock = socket.socket(sock.family, sock.type, sock.proto,
+                                           fileno=os.dup(sock.fileno()))
+            self._quickack = self._ack_sock.setsockopt
+
+    def _vanished(self, transport: asyncio.Transport, peer: str, why: str) -> None:
+        """The peer left before its connection was accepted (connect then reset)."""
+        self.listener.refuse("vanished", peer, f"connection gone before it was accepted ({why})")
+        transport.abort()
+
     async def _start_tls(self, raw: asyncio.Transport, ctx: ssl.SSLContext, peer: str) -> None:
         loop = asyncio.get_running_loop()
         try:
             transport = await loop.start_tls(raw, self, ctx, server_side=True,
                                              ssl_handshake_timeout=HANDSHAKE_TIMEOUT)
-        except (OSError, ssl.SSLError, TimeoutError, ConnectionError) as exc:
+        except Exception as exc:  # whatever a peer does to the handshake is its
+            # refusal (reset, garbage, a closed transport), never a task's traceback
             self.listener.refuse("tls", peer, describe_failure(exc))
             raw.abort()
             return
@@ -144,7 +165,10 @@ class TcpConnection(asyncio.Protocol):
             replies = self._replies
             pump.feed(data)
             if self._replies == replies and self._quickack is not None and not pump.closed:
-                self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)  # nothing carries our ACK
+                try:  # noqa: SIM105 - contextlib.suppress costs a call on the step path
+                    self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)  # nothing carries our ACK
+                except OSError:  # the peer is gone: connection_lost follows
+                    pass
         elif self._handshake is not None and sum(map(len, self._early)) < HELD_BYTES_CAP:
             self._early.append(data)  # the handshake task has not resumed yet
 

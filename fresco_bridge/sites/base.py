@@ -47,15 +47,14 @@ class Site(Protocol):
 
     @property
     def busy(self) -> bool:
-        """A client holds the site: its session is open, or it connected and has not
-        introduced itself yet (one client per site)."""
+        """A client holds the site: its session is open (one client per site)."""
         ...
 
     # -- sessions (the transports, the protocol handlers) --------------------------------------
     def claim(self, peer: str) -> None:
-        """``peer`` connected: hold the site for it, or raise :class:`SiteError` (busy, a
-        state that accepts no session, a run record that cannot be written). Nothing is
-        recorded until ``open_session``."""
+        """``peer`` connected: raise :class:`SiteError` if the site cannot take a session now
+        (busy, a state that accepts none, a run record that cannot be written). Nothing is held
+        nor recorded: the site is the client's from ``open_session`` (its sizes fit) on."""
         ...
 
     def open_session(self, peer: str) -> int:
@@ -63,7 +62,7 @@ class Site(Protocol):
         ...
 
     def close_session(self, reason: str, *, error: bool = False) -> bool:
-        """End the session (True), or release a claim that never became one (False)."""
+        """End the session (True); False if none is open."""
         ...
 
     def attach_session_end(self, end: Callable[[str], None]) -> None:

@@ -149,13 +149,13 @@ class ExperimentalSite(CommandGate):
         return self.peer != ""
 
     def claim(self, peer: str) -> None:
-        """``peer`` connected: the site is its until it introduces itself (``open_session``,
-        sizes that fit) or leaves. Nothing is logged or recorded: a connection that never
-        introduces itself is a refused one (counted by the transport), not a session."""
+        """Refuse ``peer`` (SiteError) if the site cannot take a session now (busy, a state
+        that accepts none). Nothing is held: the site becomes the client's only when it
+        introduces itself (``open_session``, sizes that fit), so a connection that never
+        completes its size ID keeps nobody out. Nothing is logged or recorded."""
         if self.busy:
             raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
         self._check_accepting(peer)
-        self.peer = peer
 
     def _check_accepting(self, peer: str) -> None:
         try:
@@ -183,10 +183,8 @@ class ExperimentalSite(CommandGate):
                                 f"client did not leave within {ABORT_GRACE:g} s")
 
     def open_session(self, peer: str) -> int:
-        """Open ``peer``'s session (claiming the site first unless ``peer`` holds the claim)."""
-        if self.in_session or self.peer not in ("", peer):
-            raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
-        self._check_accepting(peer)
+        """Open ``peer``'s session: the site is its from now on (``claim``'s checks first)."""
+        self.claim(peer)
         self.session += 1
         self._reset_signals()
         if self._resume_at is not None:  # the first session after a crash: numbering goes on
@@ -203,7 +201,7 @@ class ExperimentalSite(CommandGate):
         return self.session
 
     def close_session(self, reason: str, *, error: bool = False) -> bool:
-        """End the session (True), or release a claim that never became one (False)."""
+        """End the session (True); False if none is open."""
         if not self.in_session:
             self.peer, self._end_session = "", None
             return False

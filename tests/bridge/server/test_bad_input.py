@@ -17,6 +17,7 @@ from fresco_bridge.record.export import committed_steps
 from fresco_bridge.sites import SiteState
 from protocol import Action, SizeID
 from tests.support.bridge import RunningBridge
+from tests.support.spied_bridge import wait_for
 
 CONFIG = """
 [bridge]
@@ -143,7 +144,8 @@ def test_unknown_action_codes_are_ignored_and_stream_stays_in_sync(bridge, caplo
     assert struct.unpack("<5d", reply)[0] == pytest.approx(5.0)
     s.sendall(_vector(99.0))
     s.close()
-    assert sum("ignoring action code" in r.getMessage() for r in caplog.records) == 5
+    # said once (the first), the others counted: a peer's repeats cannot flood the log
+    assert sum("ignoring action code" in r.getMessage() for r in caplog.records) == 1
     _after_bad_client(bridge, caplog, "ignoring action code 42.0")
 
 
@@ -191,6 +193,7 @@ def test_client_from_disallowed_address(bridge, caplog) -> None:  # type: ignore
 def test_second_concurrent_client_is_refused(bridge, caplog) -> None:  # type: ignore[no-untyped-def]
     caplog.set_level(logging.INFO, logger="fresco_bridge")
     with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as first:
+        wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["spring"].busy), "the session")
         intruder = _raw(bridge.ports["spring"])
         assert _closed_by_bridge(intruder)
         intruder.close()

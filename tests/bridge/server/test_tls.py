@@ -2,26 +2,34 @@
 ``openssl`` CLI; a Python ``ssl`` client and ``openssl s_client`` speak the element protocol.
 
 Refused and logged: a client certificate from another CA, an expired one, one issued through an
-intermediate CA (OpenFresco verifies at depth 1), no client certificate, and plain TCP.
+intermediate CA (OpenFresco verifies at depth 1), no client certificate, and plain TCP; peers
+reset before or during the handshake leave no traceback.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
+import logging
 import shutil
 import socket
 import ssl
+import struct
 import subprocess
 import textwrap
 from pathlib import Path
 
 import pytest
 
+from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.loops import LoopKind
 from fresco_bridge.record import read_record
 from protocol import Action, ElementClientSession, Signals, SizeID
 from tests.support.bridge import RunningBridge
+from tests.support.net import BATCH, connect_and_reset, loop_held
+from tests.support.sessions import refusals
 from tests.support.spied_bridge import wait_for
 
 K = 10.0
@@ -204,3 +212,33 @@ def test_openssl_s_client_speaks_the_element_protocol(pki: Path, tmp_path: Path)
     assert getattr(reply, "values", (None,))[0] == pytest.approx(K * 0.5), (out.stdout,
                                                                           out.stderr[-500:])
     assert refused.stdout == b""
+
+
+@pytest.mark.parametrize("event_loop", ["asyncio", "uvloop"])
+def test_peers_reset_before_or_during_the_handshake_leave_no_traceback(
+    pki: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, event_loop: LoopKind
+) -> None:
+    if event_loop == "uvloop" and importlib.util.find_spec("uvloop") is None:
+        pytest.skip("uvloop is not installed")
+    caplog.set_level(logging.INFO)
+    text = _config(pki)
+    with BridgeThread(parse_config(text, "<test config>"), text, run_dir=tmp_path,
+                      event_loop=event_loop) as bridge:
+        port = bridge.ports["secure"]
+        caplog.clear()
+        with loop_held(bridge):  # reset before the bridge accepts them
+            for _ in range(BATCH):
+                connect_and_reset(port)
+        for _ in range(BATCH):  # reset during the handshake: half a ClientHello, then RST
+            with socket.create_connection(("127.0.0.1", port), timeout=5.0) as s:
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                s.sendall(bytes.fromhex("16030100c8010000c40303"))
+        wait_for(lambda: sum(refusals(bridge, "secure").values()) == 2 * BATCH,
+                 "every reset connection to be counted")
+        link = _tls_link(port, pki)
+        _steps(link)
+        link.close()
+    noisy = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert not [r for r in noisy if r.exc_info or r.levelno >= logging.ERROR], \
+        [r.getMessage() for r in noisy]
+    assert 1 <= len(noisy) <= 4, [r.getMessage() for r in noisy]
