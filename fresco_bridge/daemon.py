@@ -25,6 +25,8 @@ from .controls import registry as controls
 from .controls.base import Controller, ControllerError
 from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
+from .loops import LoopKind
+from .loops import run as run_on_loop
 from .record import RunRecord
 from .record.recovery import LastCommit, flag_interrupted, last_commits
 from .server.connection import SiteListener
@@ -351,8 +353,9 @@ class BridgeThread:
     """
 
     def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
-                 resume: Path | None = None) -> None:
+                 resume: Path | None = None, event_loop: LoopKind = "asyncio") -> None:
         self.bridge = Bridge(config, config_text, run_dir=run_dir, resume=resume)
+        self._event_loop: LoopKind = event_loop
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._ready = threading.Event()
@@ -376,7 +379,7 @@ class BridgeThread:
                 await self.bridge.close()
 
         try:
-            asyncio.run(run())
+            run_on_loop(run(), self._event_loop)
         except BaseException as exc:  # reported to the owner by __enter__/stop
             self._error = self._error or exc
             self._ready.set()

@@ -42,6 +42,25 @@ def _keepalive(sock: socket.socket) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, opt, value)
 
 
+def _hand_to_tls(raw: asyncio.Transport, data: bytes) -> None:
+    """Give ``data`` read off ``raw`` before ``start_tls`` to the TLS protocol now reading it.
+
+    Runs before that protocol's ``connection_made`` (``start_tls`` schedules it after this):
+    the bytes wait in its input, and its handshake starts from them. Through the protocol
+    interface only (asyncio's is a ``BufferedProtocol``; uvloop's has the same two methods).
+    """
+    proto = cast(asyncio.BufferedProtocol, raw.get_protocol())
+    if isinstance(proto, TcpConnection):  # start_tls refused before taking the transport
+        return
+    view = memoryview(data)
+    while view:
+        buf = memoryview(proto.get_buffer(len(view)))
+        n = min(len(buf), len(view))
+        buf[:n] = view[:n]
+        proto.buffer_updated(n)
+        view = view[n:]
+
+
 class TcpConnection(asyncio.Protocol):
     def __init__(self, listener: SiteListener, tls: ssl.SSLContext | None = None) -> None:
         self.listener = listener
@@ -52,7 +71,7 @@ class TcpConnection(asyncio.Protocol):
         self._quickack: Any = None
         self._ack_sock: socket.socket | None = None
         self._handshake: asyncio.Task[None] | None = None
-        self._early: list[bytes] = []  # decrypted before the TLS handshake task resumed
+        self._early: list[bytes] = []  # TLS: raw before start_tls, then decrypted before _open
         self._replies = 0  # writes to the client so far
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -85,6 +104,12 @@ class TcpConnection(asyncio.Protocol):
 
     async def _start_tls(self, raw: asyncio.Transport, ctx: ssl.SSLContext, peer: str) -> None:
         loop = asyncio.get_running_loop()
+        # uvloop starts reading right after ``connection_made`` (pausing there is a no-op), so
+        # the ClientHello may already have come to us as plain bytes; left there, the handshake
+        # waited for it until its timeout. They go to the TLS layer before it starts.
+        hello, self._early = b"".join(self._early), []
+        if hello:
+            loop.call_soon(_hand_to_tls, raw, hello)
         try:
             transport = await loop.start_tls(raw, self, ctx, server_side=True,
                                              ssl_handshake_timeout=HANDSHAKE_TIMEOUT)
@@ -146,7 +171,7 @@ class TcpConnection(asyncio.Protocol):
             if self._replies == replies and self._quickack is not None and not pump.closed:
                 self._quickack(socket.IPPROTO_TCP, _QUICKACK, 1)  # nothing carries our ACK
         elif self._handshake is not None and sum(map(len, self._early)) < HELD_BYTES_CAP:
-            self._early.append(data)  # the handshake task has not resumed yet
+            self._early.append(data)  # the handshake task has not run or not resumed yet
 
     def eof_received(self) -> bool | None:
         if self.pump is not None:

@@ -8,6 +8,7 @@ intermediate CA (OpenFresco verifies at depth 1), no client certificate, and pla
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import shutil
 import socket
 import ssl
@@ -19,6 +20,7 @@ import pytest
 
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.loops import LoopKind
 from fresco_bridge.record import read_record
 from protocol import Action, ElementClientSession, Signals, SizeID
 from tests.support.bridge import RunningBridge
@@ -26,6 +28,8 @@ from tests.support.spied_bridge import wait_for
 
 K = 10.0
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
+LOOPS = ["asyncio", pytest.param("uvloop", marks=pytest.mark.skipif(
+    importlib.util.find_spec("uvloop") is None, reason="uvloop is not installed"))]
 EC = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
 
 
@@ -125,14 +129,15 @@ def test_a_client_with_a_certificate_of_the_ca_is_served(pki: Path, tmp_path: Pa
         assert _refused(bridge) == 0
 
 
+@pytest.mark.parametrize("loop", LOOPS)
 @pytest.mark.parametrize(("cert", "why"), [
-    ("stranger", "issuer certificate"),
+    ("stranger", "unable to get local issuer certificate"),
     ("expired", "expired"),
     (None, "no certificate"),
 ])
 def test_refused_client_certificates(pki: Path, tmp_path: Path, cert: str | None, why: str,
-                                     caplog: pytest.LogCaptureFixture) -> None:
-    with RunningBridge(_config(pki), tmp_path) as bridge:
+                                     loop: LoopKind, caplog: pytest.LogCaptureFixture) -> None:
+    with RunningBridge(_config(pki), tmp_path, event_loop=loop) as bridge:
         port = bridge.ports["secure"]
         with pytest.raises((ssl.SSLError, ConnectionError, OSError)):
             link = _tls_link(port, pki, cert)
@@ -204,3 +209,41 @@ def test_openssl_s_client_speaks_the_element_protocol(pki: Path, tmp_path: Path)
     assert getattr(reply, "values", (None,))[0] == pytest.approx(K * 0.5), (out.stdout,
                                                                           out.stderr[-500:])
     assert refused.stdout == b""
+
+
+
+def _refused_at_once(port: int, pki: Path, cert: str | None) -> None:
+    """The server's refusal reaches the client within 1 s (a handshake it let stall does not)."""
+    raw = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+    try:
+        with _client_context(pki, cert).wrap_socket(raw, server_hostname="127.0.0.1") as s:
+            data = s.recv(1)  # TLS 1.3: the client's handshake ends before the server verifies
+    except TimeoutError:
+        pytest.fail(f"a client with {cert or 'no'} certificate was not refused within 1 s")
+    except (ssl.SSLError, ConnectionError):
+        return
+    finally:
+        raw.close()
+    assert data == b"", data
+
+
+@pytest.mark.parametrize("loop", LOOPS)
+def test_refusals_are_immediate_and_say_why_on_both_loops(
+        pki: Path, tmp_path: Path, loop: LoopKind, caplog: pytest.LogCaptureFixture) -> None:
+    """uvloop reads before the handshake task runs: a ClientHello read then was once lost and
+    the handshake stalled to its timeout, for bad and good clients alike (a race: many tries)."""
+    tries = 12
+    with RunningBridge(_config(pki), tmp_path, event_loop=loop) as bridge:
+        port = bridge.ports["secure"]
+        for i in range(tries):
+            _refused_at_once(port, pki, "stranger" if i % 2 else None)
+        wait_for(lambda: _refused(bridge) == tries, "the refusals to be counted")
+        for _ in range(3):
+            link = _tls_link(port, pki)
+            assert link.sock is not None
+            link.sock.settimeout(1.0)
+            _steps(link)
+            link.close()
+    logged = " ".join(r.getMessage() for r in caplog.records)
+    assert "client presented no certificate" in logged  # the first refusal (then rate-limited)
+    assert "not completed within" not in logged
