@@ -6,13 +6,14 @@ stayed flat). A leak, or the allocator's working set filling up? Target: RSS fla
 
 Method: the bridge is its own process (``python -m fresco_bridge.cli serve``) with ``--sites``
 mutual-TLS sites (certificates made here with the ``openssl`` CLI), recording on. One client
-per site in this process connects, one connection after another, over loopback: four of five
-present a certificate of the site's CA and run a short session (size ID, trial, getForce,
-commit, DIE: the force is checked), the fifth one of another CA and is refused. After each
-round of ``--round`` connections the bridge's VmRSS and open fds are read from ``/proc``.
+per site in this process connects over loopback, one connection after another (``--burst``:
+that many at once; all but one are then refused busy): four of five present a certificate of
+the site's CA and run a short session (size ID, trial, getForce, commit, DIE: the force is
+checked), the fifth one of another CA and is refused. After each round of ``--round``
+connections the bridge's VmRSS and open fds are read from ``/proc``.
 
     .venv/bin/python -m benchmarks.bench_tls_memory [--quick] [--connections 50000]
-        [--round 5000] [--sites 2] [--event-loop uvloop|asyncio] [--json FILE]
+        [--round 5000] [--sites 2] [--burst 1] [--event-loop uvloop|asyncio] [--json FILE]
 
 Feeds BENCHMARKS.md, "Fuzz and soak". ``--quick``: 2,000 connections in rounds of 500.
 """
@@ -30,6 +31,7 @@ import sys
 import tempfile
 import textwrap
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -89,38 +91,46 @@ def _client_context(pki: Path, cert: str) -> ssl.SSLContext:
     return ctx
 
 
-async def _session(port: int, ctx: ssl.SSLContext, d: float) -> None:
-    """One served connection: size ID, trial, getForce (checked), commit, DIE."""
+async def _session(port: int, ctx: ssl.SSLContext, d: float) -> str:
+    """A client of the site's CA: size ID, trial, getForce (checked), commit, DIE ("served"),
+    or "busy" when another client holds the site (bursts)."""
     session = ElementClientSession(SizeID.for_generic_client(1, 1))
-    reader, writer = await asyncio.open_connection("127.0.0.1", port, ssl=ctx,
-                                                   server_hostname="127.0.0.1")
+    try:
+        reader, writer = await asyncio.open_connection("127.0.0.1", port, ssl=ctx,
+                                                       server_hostname="127.0.0.1")
+    except (OSError, ssl.SSLError):
+        return "busy"  # refused before the handshake
     try:
         writer.write(session.start() + session.send_trial(
             Signals(disp=(d,), vel=(0.0,), accel=(0.0,), time=(d,)))
             + session.send_request(Action.GET_FORCE))
         while (ev := session.next_event()) is NEED_DATA:
-            data = await reader.read(65536)
+            try:
+                data = await reader.read(65536)
+            except (OSError, ssl.SSLError):
+                data = b""
             if not data:
-                raise ConnectionError("the bridge closed a served connection")
+                return "busy"
             session.receive_data(data)
         force = ev.values[0]  # type: ignore[union-attr]
         if abs(force - K * d) > 1e-9:
             raise AssertionError(f"force {force} for d {d}, expected {K * d}")
         writer.write(session.send_commit() + session.send_die())
         await writer.drain()
+        return "served"
     finally:
         writer.close()
         with contextlib.suppress(OSError, ssl.SSLError):
             await writer.wait_closed()
 
 
-async def _refused(port: int, ctx: ssl.SSLContext) -> None:
+async def _refused(port: int, ctx: ssl.SSLContext) -> str:
     """One connection with another CA's certificate: the bridge must refuse it."""
     try:
         reader, writer = await asyncio.open_connection("127.0.0.1", port, ssl=ctx,
                                                        server_hostname="127.0.0.1")
     except (OSError, ssl.SSLError):
-        return  # refused in the handshake (TLS 1.2)
+        return "refused"  # in the handshake (TLS 1.2)
     try:
         data = await reader.read(1)  # TLS 1.3: the refusal arrives at the first read
     except (OSError, ssl.SSLError):
@@ -129,22 +139,26 @@ async def _refused(port: int, ctx: ssl.SSLContext) -> None:
         writer.close()
     if data:
         raise AssertionError("a client of another CA was served")
+    return "refused"
 
 
-async def _rounds(ports: list[int], pki: Path, pid: int, total: int,
-                  round_size: int) -> list[dict[str, Any]]:
+async def _rounds(ports: list[int], pki: Path, pid: int, total: int, round_size: int,
+                  burst: int, outcomes: Counter[str]) -> list[dict[str, Any]]:
     good, stranger = _client_context(pki, "client"), _client_context(pki, "stranger")
     rounds: list[dict[str, Any]] = []
     done = 0
     t0 = time.monotonic()
 
+    async def one(port: int, n: int) -> str:
+        async with asyncio.timeout(60):
+            if n % REFUSED_EVERY == REFUSED_EVERY - 1:
+                return await _refused(port, stranger)
+            return await _session(port, good, 0.001 * (n % 1000))
+
     async def worker(port: int, start: int, stop: int) -> None:
-        for n in range(start, stop):
-            async with asyncio.timeout(30):
-                if n % REFUSED_EVERY == REFUSED_EVERY - 1:
-                    await _refused(port, stranger)
-                else:
-                    await _session(port, good, 0.001 * (n % 1000))
+        for first in range(start, stop, burst):  # ``burst`` connections at once
+            outcomes.update(await asyncio.gather(
+                *(one(port, n) for n in range(first, min(first + burst, stop)))))
 
     rounds.append({"connections": 0, "rss_mib": round(proc_rss(pid) / 2**20, 1),
                    "fds": proc_fds(pid), "s": 0.0})
@@ -162,18 +176,19 @@ async def _rounds(ports: list[int], pki: Path, pid: int, total: int,
     return rounds
 
 
-def run(total: int, round_size: int, sites: int, event_loop: str,
-        work: Path) -> dict[str, Any]:
+def run(total: int, round_size: int, sites: int, event_loop: str, work: Path,
+        burst: int = 1) -> dict[str, Any]:
     pki = work / "pki"
     pki.mkdir()
     make_pki(pki)
     cfg = work / "tls.toml"
     cfg.write_text(config(pki, sites, work / "runs", event_loop), encoding="utf-8")
     with serving(cfg, work) as (pid, ports):
-        rounds = asyncio.run(_rounds(ports, pki, pid, total, round_size))
+        outcomes: Counter[str] = Counter()
+        rounds = asyncio.run(_rounds(ports, pki, pid, total, round_size, burst, outcomes))
     half = [r["rss_mib"] for r in rounds if r["connections"] >= total / 2]
-    return {"event_loop": event_loop, "sites": sites, "connections": total,
-            "refused_share": 1 / REFUSED_EVERY, "rounds": rounds,
+    return {"event_loop": event_loop, "sites": sites, "connections": total, "burst": burst,
+            "outcomes": dict(outcomes), "rounds": rounds,
             "rss_last_half_min_mib": min(half), "rss_last_half_max_mib": max(half),
             "rss_last_half_growth_pct": round(100 * (max(half) / min(half) - 1), 2)}
 
@@ -184,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--round", type=int, default=5_000, help="connections between RSS samples")
     ap.add_argument("--sites", type=int, default=2, help="TLS sites, one client each")
     ap.add_argument("--event-loop", choices=("uvloop", "asyncio"), default="uvloop")
+    ap.add_argument("--burst", type=int, default=1,
+                    help="connections each client opens at once (> 1: most are refused busy)")
     ap.add_argument("--json", type=Path, default=None, help="also write the summary here")
     ap.add_argument("--quick", action="store_true", help="2,000 connections, rounds of 500")
     args = ap.parse_args(argv)
@@ -191,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         args.connections, args.round = min(args.connections, 2_000), min(args.round, 500)
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="fresco-tls-memory-") as tmp:
-        summary = run(args.connections, args.round, args.sites, args.event_loop, Path(tmp))
+        summary = run(args.connections, args.round, args.sites, args.event_loop, Path(tmp),
+                      args.burst)
     summary["load_average_start"] = load_start
     summary["load_average_end"] = os.getloadavg()
     text = json.dumps(summary, indent=2)

@@ -50,6 +50,8 @@ class SiteListener:
     max_data_size: int
     idle_timeout: float
     rejections: RejectionLog = field(default_factory=RejectionLog)
+    tls_handshakes: int = 0
+    """TLS handshakes in flight (bounded by ``tls.MAX_HANDSHAKES``)."""
 
     def __post_init__(self) -> None:
         self.site.rejections = self.rejections

@@ -23,7 +23,7 @@ from typing import Any, cast
 
 from ..sites import SiteError
 from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
-from .tls import HANDSHAKE_TIMEOUT, check_issued_directly, describe_failure
+from .tls import HANDSHAKE_TIMEOUT, MAX_HANDSHAKES, check_issued_directly, describe_failure
 
 log = logging.getLogger("fresco_bridge.server")
 _QUICKACK = getattr(socket, "TCP_QUICKACK", None)
@@ -103,6 +103,22 @@ class TcpConnection(asyncio.Protocol):
                 self._start_tls(transport, self.tls, peer), name=f"{self.site.name}.tls")
 
     async def _start_tls(self, raw: asyncio.Transport, ctx: ssl.SSLContext, peer: str) -> None:
+        listener = self.listener
+        busy = ("another client holds the site" if self.site.busy else
+                f"{MAX_HANDSHAKES} TLS handshakes in flight already"
+                if listener.tls_handshakes >= MAX_HANDSHAKES else None)
+        if busy is not None:  # refused before the handshake: no SSL object, no read buffer
+            listener.refuse("busy", peer, busy)
+            raw.abort()
+            return
+        listener.tls_handshakes += 1
+        try:
+            await self._handshake_then_open(raw, ctx, peer)
+        finally:
+            listener.tls_handshakes -= 1
+
+    async def _handshake_then_open(self, raw: asyncio.Transport, ctx: ssl.SSLContext,
+                                   peer: str) -> None:
         loop = asyncio.get_running_loop()
         # uvloop starts reading right after ``connection_made`` (pausing there is a no-op), so
         # the ClientHello may already have come to us as plain bytes; left there, the handshake

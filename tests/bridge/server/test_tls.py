@@ -22,6 +22,7 @@ from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.loops import LoopKind
 from fresco_bridge.record import read_record
+from fresco_bridge.server.tls import MAX_HANDSHAKES
 from protocol import Action, ElementClientSession, Signals, SizeID
 from tests.support.bridge import RunningBridge
 from tests.support.spied_bridge import wait_for
@@ -247,3 +248,33 @@ def test_refusals_are_immediate_and_say_why_on_both_loops(
     logged = " ".join(r.getMessage() for r in caplog.records)
     assert "client presented no certificate" in logged  # the first refusal (then rate-limited)
     assert "not completed within" not in logged
+
+
+def test_handshakes_in_flight_are_bounded_the_next_is_refused_busy_before_tls(
+        pki: Path, tmp_path: Path) -> None:
+    """Each handshake holds an SSL object and a read buffer: a burst of connections must not
+    hold a thousand (the site serves one client; the rest were refused busy after theirs)."""
+    with RunningBridge(_config(pki), tmp_path) as bridge:
+        port = bridge.ports["secure"]
+        silent = [socket.create_connection(("127.0.0.1", port), timeout=5.0)
+                  for _ in range(MAX_HANDSHAKES)]  # no ClientHello: handshakes in flight
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=5.0) as extra:
+                wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["secure"].status()
+                                             ["refused"].get("busy", 0)) == 1,
+                         "the connection past the bound to be refused busy")
+                assert _closed_by_bridge(extra)
+        finally:
+            for s in silent:
+                s.close()
+        wait_for(lambda: _refused(bridge) == MAX_HANDSHAKES, "the silent ones to end")
+        link = _tls_link(port, pki)  # the bound is free again
+        _steps(link)
+        link.close()
+
+
+def _closed_by_bridge(s: socket.socket) -> bool:
+    try:
+        return s.recv(1) == b""
+    except ConnectionResetError:
+        return True
