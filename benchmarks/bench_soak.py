@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import math
 import os
@@ -31,6 +32,7 @@ import sys
 import tempfile
 import textwrap
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -199,6 +201,18 @@ def soak(duration: float, *, sites: int = 32, rate: float = 20.0, warmup: float 
     cfg.write_text(config(sites, work / "runs"), encoding="utf-8")
     result = SoakResult(duration, warmup if warmup is not None else min(60.0, duration / 4),
                         sites, rate)
+    with serving(cfg, work) as (pid, ports):
+        asyncio.run(_drive(ports, pid, result, sample))
+    (run_dir,) = [p for p in (work / "runs").iterdir() if p.is_dir()]
+    return result, run_dir
+
+
+@contextlib.contextmanager
+def serving(cfg: Path, work: Path) -> Iterator[tuple[int, list[int]]]:
+    """``fresco-bridge serve --config cfg`` as its own process: (its pid, the sites' ports).
+
+    Its log goes to ``work/bridge.log``; it is terminated on exit.
+    """
     log = (work / "bridge.log").open("w")
     proc = subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", "serve", "--config",
                              str(cfg)], stdout=subprocess.PIPE, stderr=log, text=True)
@@ -208,14 +222,11 @@ def soak(duration: float, *, sites: int = 32, rate: float = 20.0, warmup: float 
         m = READY.search(line)
         if m is None:
             raise RuntimeError(f"bridge did not start: {line!r} (see {work / 'bridge.log'})")
-        ports = [int(p.split("=")[1]) for p in m.group(1).split(", ")]
-        asyncio.run(_drive(ports, proc.pid, result, sample))
+        yield proc.pid, [int(p.split("=")[1]) for p in m.group(1).split(", ")]
     finally:
         proc.terminate()
         proc.wait(30)
         log.close()
-    (run_dir,) = [p for p in (work / "runs").iterdir() if p.is_dir()]
-    return result, run_dir
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,6 +26,7 @@ BENCHMARKS: dict[str, str] = {
     "safety": "Safety layer",
     "fuzz": "Fuzz and soak",
     "soak": "Fuzz and soak",
+    "tls_memory": "Fuzz and soak",
     "online_improved": "Online updating",
     "online_ann": "Online updating",
     "ann_equivalence": "Online updating",

@@ -61,6 +61,8 @@ class SiteListener:
     rejections: RejectionLog = field(default_factory=RejectionLog)
     ratelog: RateLimitedLog = field(default_factory=lambda: RateLimitedLog(log))
     """The listener's log lines about peers (errors, resets): one per cause per interval."""
+    tls_handshakes: int = 0
+    """TLS handshakes in flight (bounded by ``tls.MAX_HANDSHAKES``)."""
 
     def __post_init__(self) -> None:
         self.site.rejections = self.rejections

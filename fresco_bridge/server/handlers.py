@@ -10,6 +10,7 @@ handled at once.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Coroutine
 from typing import Any
 
@@ -64,7 +65,9 @@ class ElementHandler:
         self._daq_sizes: SignalSizes | None = None  # the client's, from its size ID
         self._constant = {Action.GET_DAMP: site.damping, Action.GET_MASS: site.mass}
         """Requests answered from the site's configuration (GenericClient asks for the damping
-        matrix several times per step): no controller call, no coroutine."""
+        matrix several times per step): no controller call, no coroutine. NaN too when the
+        integrator must stop, as every other answer."""
+        self._nan_matrix = (math.nan,) * len(site.damping)
 
     def dispatch(self, ev: ElementServerEvent) -> Coroutine[Any, Any, None] | None:
         """Handle ``ev``: at once when it can be (None), else the coroutine that finishes it.
@@ -73,7 +76,8 @@ class ElementHandler:
             action = ev.action
             matrix = self._constant.get(action)
             if matrix is not None:
-                self.send(self.session.send_matrix(matrix))
+                stop = self.site.stopping()
+                self.send(self.session.send_matrix(self._nan_matrix if stop else matrix))
                 return None
             if action is _TANGENT:
                 k = self.site.tangent_eager()

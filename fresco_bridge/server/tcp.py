@@ -27,7 +27,7 @@ from typing import Any, cast
 
 from ..sites import SiteError
 from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
-from .tls import HANDSHAKE_TIMEOUT, check_issued_directly, describe_failure
+from .tls import HANDSHAKE_TIMEOUT, MAX_HANDSHAKES, check_issued_directly, describe_failure
 
 log = logging.getLogger("fresco_bridge.server")
 _QUICKACK = getattr(socket, "TCP_QUICKACK", None)
@@ -46,6 +46,25 @@ def _keepalive(sock: socket.socket) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, opt, value)
 
 
+def _hand_to_tls(raw: asyncio.Transport, data: bytes) -> None:
+    """Give ``data`` read off ``raw`` before ``start_tls`` to the TLS protocol now reading it.
+
+    Runs before that protocol's ``connection_made`` (``start_tls`` schedules it after this):
+    the bytes wait in its input, and its handshake starts from them. Through the protocol
+    interface only (asyncio's is a ``BufferedProtocol``; uvloop's has the same two methods).
+    """
+    proto = cast(asyncio.BufferedProtocol, raw.get_protocol())
+    if isinstance(proto, TcpConnection):  # start_tls refused before taking the transport
+        return
+    view = memoryview(data)
+    while view:
+        buf = memoryview(proto.get_buffer(len(view)))
+        n = min(len(buf), len(view))
+        buf[:n] = view[:n]
+        proto.buffer_updated(n)
+        view = view[n:]
+
+
 class TcpConnection(asyncio.Protocol):
     def __init__(self, listener: SiteListener, tls: ssl.SSLContext | None = None) -> None:
         self.listener = listener
@@ -56,7 +75,7 @@ class TcpConnection(asyncio.Protocol):
         self._quickack: Any = None
         self._ack_sock: socket.socket | None = None
         self._handshake: asyncio.Task[None] | None = None
-        self._early: list[bytes] = []  # decrypted before the TLS handshake task resumed
+        self._early: list[bytes] = []  # TLS: raw before start_tls, then decrypted before _open
         self._replies = 0  # writes to the client so far
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -104,7 +123,29 @@ class TcpConnection(asyncio.Protocol):
         transport.abort()
 
     async def _start_tls(self, raw: asyncio.Transport, ctx: ssl.SSLContext, peer: str) -> None:
+        listener = self.listener
+        busy = ("another client holds the site" if self.site.busy else
+                f"{MAX_HANDSHAKES} TLS handshakes in flight already"
+                if listener.tls_handshakes >= MAX_HANDSHAKES else None)
+        if busy is not None:  # refused before the handshake: no SSL object, no read buffer
+            listener.refuse("busy", peer, busy)
+            raw.abort()
+            return
+        listener.tls_handshakes += 1
+        try:
+            await self._handshake_then_open(raw, ctx, peer)
+        finally:
+            listener.tls_handshakes -= 1
+
+    async def _handshake_then_open(self, raw: asyncio.Transport, ctx: ssl.SSLContext,
+                                   peer: str) -> None:
         loop = asyncio.get_running_loop()
+        # uvloop starts reading right after ``connection_made`` (pausing there is a no-op), so
+        # the ClientHello may already have come to us as plain bytes; left there, the handshake
+        # waited for it until its timeout. They go to the TLS layer before it starts.
+        hello, self._early = b"".join(self._early), []
+        if hello:
+            loop.call_soon(_hand_to_tls, raw, hello)
         try:
             transport = await loop.start_tls(raw, self, ctx, server_side=True,
                                              ssl_handshake_timeout=HANDSHAKE_TIMEOUT)
@@ -170,7 +211,7 @@ class TcpConnection(asyncio.Protocol):
                 except OSError:  # the peer is gone: connection_lost follows
                     pass
         elif self._handshake is not None and sum(map(len, self._early)) < HELD_BYTES_CAP:
-            self._early.append(data)  # the handshake task has not resumed yet
+            self._early.append(data)  # the handshake task has not run or not resumed yet
 
     def eof_received(self) -> bool | None:
         if self.pump is not None:

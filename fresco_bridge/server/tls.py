@@ -19,6 +19,12 @@ from ..config import ConfigError
 
 HANDSHAKE_TIMEOUT = 10.0
 """Seconds a client has to complete the TLS handshake."""
+MAX_HANDSHAKES = 8
+"""TLS handshakes in flight per site; more connections are refused busy before theirs.
+
+A site serves one client: the others of a burst were refused busy after their handshake
+anyway, and each handshake in flight holds an SSL object and a read buffer of up to
+256 KiB, whose freed memory the allocator keeps (BENCHMARKS.md, "Fuzz and soak")."""
 
 
 class TlsConfigError(ConfigError):

@@ -98,6 +98,10 @@ class Site(Protocol):
 
     async def initial(self) -> tuple[float, ...]: ...
 
+    def stopping(self) -> bool:
+        """The integrator is being told to stop: every answer of the session is NaN."""
+        ...
+
     # -- the operator (ctl.py: control socket, MQTT commands) ----------------------------------
     def operator_pause(self, source: str) -> str: ...
 

@@ -616,6 +616,10 @@ class ExperimentalSite(CommandGate):
             (self.time,) if sizes.time else (),
         )
 
+    def stopping(self) -> bool:
+        """True when this session's answers are NaN, the constant ones (damping, mass) too."""
+        return self._stopping()
+
     async def tangent(self) -> tuple[float, ...]:
         """Tangent in basic DOFs (see ``tangent_eager``)."""
         k = self.tangent_eager()

@@ -85,6 +85,19 @@ def _reraise_lost_cancel() -> None:
         raise asyncio.CancelledError
 
 
+def _utf8(value: object) -> bytes | None:
+    """``value``'s UTF-8 bytes, or None if it is not a string UTF-8 can encode.
+
+    JSON's ``\\ud800`` escapes decode to lone surrogates, which ``str.encode`` refuses.
+    """
+    if not isinstance(value, str):
+        return None
+    try:
+        return value.encode()
+    except UnicodeEncodeError:
+        return None
+
+
 class _RateLimitedLog:
     """At most ``burst`` lines per ``period`` seconds; the rest are counted and summarised."""
 
@@ -504,9 +517,13 @@ class MqttTelemetry:
         Accepted: topic ``<prefix>/<site>/cmd``, not retained, at most 1 KiB of UTF-8 JSON
         ``{"command": "pause"|"resume"|"abort", "token": "<command_token>", "id": "..."}``
         (``id`` optional, no other keys). Anything else is ignored with a warning that never
-        includes the token.
+        includes the token. Never raises: a message's content must not end the MQTT session
+        (its listener), which carries the telemetry and the remote abort.
         """
-        reason = self._command_problem(topic, payload, retain)
+        try:
+            reason = self._command_problem(topic, payload, retain)
+        except Exception as exc:  # a payload this check did not foresee is still only ignored
+            reason = f"unreadable payload ({type(exc).__name__})"
         if isinstance(reason, OperatorCommand):
             command = reason
             assert self._handler is not None  # guaranteed by accept_commands' config check
@@ -540,6 +557,8 @@ class MqttTelemetry:
             return "retained command (a stale command must never move an actuator)"
         if not isinstance(payload, bytes | bytearray):
             return f"payload is {type(payload).__name__}, expected bytes"
+        # paho has read the whole message by now (no public API caps it sooner): the broker's
+        # ``message_size_limit`` is what keeps a huge one away (README.md, "Operator commands")
         if len(payload) > MAX_COMMAND_BYTES:
             return f"payload of {len(payload)} bytes exceeds {MAX_COMMAND_BYTES}"
         try:
@@ -553,15 +572,16 @@ class MqttTelemetry:
         unknown = sorted(set(body) - {"command", "token", "id"})
         if unknown:
             return f"unknown key(s) {unknown}"
-        token = body.get("token")
-        if not isinstance(token, str) or not hmac.compare_digest(token.encode(), self._token):
+        token = _utf8(body.get("token"))
+        if token is None or not hmac.compare_digest(token, self._token):
             return "missing or wrong token (unauthorised)"
         command = body.get("command")
         if not isinstance(command, str) or command not in COMMANDS:
             return f"unknown command {command!r}; expected one of {sorted(COMMANDS)}"
         request_id = body.get("id")
-        if request_id is not None and not (isinstance(request_id, str) and len(request_id) <= 64):
-            return "id must be a string of at most 64 characters"
+        if request_id is not None and not (isinstance(request_id, str) and len(request_id) <= 64
+                                           and _utf8(request_id) is not None):
+            return "id must be a string of at most 64 characters (UTF-8)"
         return OperatorCommand(site=site, command=cast(CommandName, command),
                                request_id=request_id)
 

@@ -12,14 +12,17 @@ from typing import Any
 
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
+from fresco_bridge.loops import LoopKind
 
 OPENSEES_SCRIPT = Path(__file__).resolve().parent / "opensees_client.py"
 """The OpenSeesPy client scenarios, run as a script in its own process."""
 
 
-def RunningBridge(config_toml: str, run_root: Path) -> BridgeThread:
+def RunningBridge(config_toml: str, run_root: Path,
+                  event_loop: LoopKind = "asyncio") -> BridgeThread:
     """``with RunningBridge(toml, tmp_path) as b: b.ports['site']`` — a real bridge in a thread."""
-    return BridgeThread(parse_config(config_toml, "<test config>"), config_toml, run_dir=run_root)
+    return BridgeThread(parse_config(config_toml, "<test config>"), config_toml, run_dir=run_root,
+                        event_loop=event_loop)
 
 
 def opensees_env() -> dict[str, str]:

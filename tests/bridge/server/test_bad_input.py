@@ -156,10 +156,13 @@ def test_non_finite_trial_holds_and_is_never_forwarded(bridge, caplog, bad: floa
     link = GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1).connect()
     link.set_trial((0.1,), time=1.0)
     assert link.force()[0] == pytest.approx(10.0)
+    assert link.matrix(Action.GET_DAMP) == link.matrix(Action.GET_MASS) == ((0.0,),)
     link.commit()
     link.set_trial((bad,), time=2.0)
     # the client still gets answers (it would hang forever otherwise): NaN, so it stops
     assert math.isnan(link.force()[0])
+    for action in (Action.GET_DAMP, Action.GET_MASS):  # the configured ones answer NaN too
+        assert all(math.isnan(v) for row in link.matrix(action) for v in row), action
     link.set_trial((0.15,), time=3.0)  # not forwarded while in HOLD either
     assert math.isnan(link.force()[0])
     assert bridge.call(lambda: site.state) is SiteState.HOLD

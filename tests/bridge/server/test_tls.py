@@ -26,6 +26,7 @@ from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.loops import LoopKind
 from fresco_bridge.record import read_record
+from fresco_bridge.server.tls import MAX_HANDSHAKES
 from protocol import Action, ElementClientSession, Signals, SizeID
 from tests.support.bridge import RunningBridge
 from tests.support.net import BATCH, connect_and_reset, loop_held
@@ -34,6 +35,8 @@ from tests.support.spied_bridge import wait_for
 
 K = 10.0
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
+LOOPS = ["asyncio", pytest.param("uvloop", marks=pytest.mark.skipif(
+    importlib.util.find_spec("uvloop") is None, reason="uvloop is not installed"))]
 EC = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
 
 
@@ -133,14 +136,15 @@ def test_a_client_with_a_certificate_of_the_ca_is_served(pki: Path, tmp_path: Pa
         assert _refused(bridge) == 0
 
 
+@pytest.mark.parametrize("loop", LOOPS)
 @pytest.mark.parametrize(("cert", "why"), [
-    ("stranger", "issuer certificate"),
+    ("stranger", "unable to get local issuer certificate"),
     ("expired", "expired"),
     (None, "no certificate"),
 ])
 def test_refused_client_certificates(pki: Path, tmp_path: Path, cert: str | None, why: str,
-                                     caplog: pytest.LogCaptureFixture) -> None:
-    with RunningBridge(_config(pki), tmp_path) as bridge:
+                                     loop: LoopKind, caplog: pytest.LogCaptureFixture) -> None:
+    with RunningBridge(_config(pki), tmp_path, event_loop=loop) as bridge:
         port = bridge.ports["secure"]
         with pytest.raises((ssl.SSLError, ConnectionError, OSError)):
             link = _tls_link(port, pki, cert)
@@ -242,3 +246,69 @@ def test_peers_reset_before_or_during_the_handshake_leave_no_traceback(
     assert not [r for r in noisy if r.exc_info or r.levelno >= logging.ERROR], \
         [r.getMessage() for r in noisy]
     assert 1 <= len(noisy) <= 4, [r.getMessage() for r in noisy]
+
+def _refused_at_once(port: int, pki: Path, cert: str | None) -> None:
+    """The server's refusal reaches the client within 1 s (a handshake it let stall does not)."""
+    raw = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+    try:
+        with _client_context(pki, cert).wrap_socket(raw, server_hostname="127.0.0.1") as s:
+            data = s.recv(1)  # TLS 1.3: the client's handshake ends before the server verifies
+    except TimeoutError:
+        pytest.fail(f"a client with {cert or 'no'} certificate was not refused within 1 s")
+    except (ssl.SSLError, ConnectionError):
+        return
+    finally:
+        raw.close()
+    assert data == b"", data
+
+
+@pytest.mark.parametrize("loop", LOOPS)
+def test_refusals_are_immediate_and_say_why_on_both_loops(
+        pki: Path, tmp_path: Path, loop: LoopKind, caplog: pytest.LogCaptureFixture) -> None:
+    """uvloop reads before the handshake task runs: a ClientHello read then was once lost and
+    the handshake stalled to its timeout, for bad and good clients alike (a race: many tries)."""
+    tries = 12
+    with RunningBridge(_config(pki), tmp_path, event_loop=loop) as bridge:
+        port = bridge.ports["secure"]
+        for i in range(tries):
+            _refused_at_once(port, pki, "stranger" if i % 2 else None)
+        wait_for(lambda: _refused(bridge) == tries, "the refusals to be counted")
+        for _ in range(3):
+            link = _tls_link(port, pki)
+            assert link.sock is not None
+            link.sock.settimeout(1.0)
+            _steps(link)
+            link.close()
+    logged = " ".join(r.getMessage() for r in caplog.records)
+    assert "client presented no certificate" in logged  # the first refusal (then rate-limited)
+    assert "not completed within" not in logged
+
+
+def test_handshakes_in_flight_are_bounded_the_next_is_refused_busy_before_tls(
+        pki: Path, tmp_path: Path) -> None:
+    """Each handshake holds an SSL object and a read buffer: a burst of connections must not
+    hold a thousand (the site serves one client; the rest were refused busy after theirs)."""
+    with RunningBridge(_config(pki), tmp_path) as bridge:
+        port = bridge.ports["secure"]
+        silent = [socket.create_connection(("127.0.0.1", port), timeout=5.0)
+                  for _ in range(MAX_HANDSHAKES)]  # no ClientHello: handshakes in flight
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=5.0) as extra:
+                wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["secure"].status()
+                                             ["refused"].get("busy", 0)) == 1,
+                         "the connection past the bound to be refused busy")
+                assert _closed_by_bridge(extra)
+        finally:
+            for s in silent:
+                s.close()
+        wait_for(lambda: _refused(bridge) == MAX_HANDSHAKES, "the silent ones to end")
+        link = _tls_link(port, pki)  # the bound is free again
+        _steps(link)
+        link.close()
+
+
+def _closed_by_bridge(s: socket.socket) -> bool:
+    try:
+        return s.recv(1) == b""
+    except ConnectionResetError:
+        return True

@@ -108,6 +108,11 @@ def payload(**body: object) -> bytes:
         ("lab/fresco/s1/cmd", payload(command="go", token=TOKEN), False, "unknown command 'go'"),
         ("lab/fresco/s1/cmd", payload(command="pause", token=TOKEN, x=1), False, "unknown key"),
         ("lab/fresco/s1/cmd", payload(command="pause", token=TOKEN, id=5), False, "id must be"),
+        # JSON's \ud800 is a lone surrogate: no UTF-8 bytes to compare, log or record
+        ("lab/fresco/s1/cmd", b'{"command":"pause","token":"\\ud800"}', False, "wrong token"),
+        ("lab/fresco/s1/cmd", payload(command="pause", token=TOKEN, id="\ud800"), False,
+         "id must be"),
+        ("lab/fresco/s1/cmd", payload(command="\udfff", token=TOKEN), False, "unknown command"),
         ("lab/fresco/s1/cmd", payload(command="abort", token=TOKEN), True, "retained command"),
         ("lab/fresco/s1/cmd", b" " * 1025, False, "exceeds 1024"),
         ("lab/fresco/a/b/cmd", payload(command="pause", token=TOKEN), False, "valid site name"),
@@ -154,3 +159,17 @@ def test_a_command_flood_is_logged_at_a_bounded_rate(caplog: pytest.LogCaptureFi
             tel.handle_command_message("lab/fresco/s1/cmd", b"garbage")
     assert tel.stats.commands_rejected == 500
     assert len([r for r in caplog.records if "ignored" in r.getMessage()]) == 10
+
+
+def test_a_payload_the_checks_did_not_foresee_is_counted_not_raised(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """An exception out of the checks would end the MQTT session (telemetry, remote abort)."""
+    def deep(_: str) -> object:
+        raise RecursionError("maximum recursion depth exceeded")
+
+    monkeypatch.setattr(json, "loads", deep)
+    tel = commanded([])
+    with caplog.at_level(logging.WARNING, logger="fresco_bridge.telemetry"):
+        tel.handle_command_message("lab/fresco/s1/cmd", payload(command="pause", token=TOKEN))
+    assert tel.stats.commands_rejected == 1
+    assert "unreadable payload (RecursionError)" in caplog.text
