@@ -128,8 +128,9 @@ def _frame_params(layout: str, specimen: str, motion: GroundMotion, steps: int,
     }
 
 
-def _run_opensees(params: dict[str, Any]) -> FloatArray:
-    """The floor displacements (steps, 2) of the frame run by OpenSeesPy in its own process."""
+def _run_opensees(params: dict[str, Any]) -> tuple[FloatArray, float]:
+    """The floor displacements (steps, 2) of the frame run by OpenSeesPy in its own process,
+    and the wall time of its step loop (s)."""
     try:
         proc = subprocess.run([sys.executable, "-m", "fresco_bridge.study.opensees_frame"],
                               input=json.dumps(params), env=opensees_env(), capture_output=True,
@@ -140,7 +141,8 @@ def _run_opensees(params: dict[str, Any]) -> FloatArray:
     if proc.returncode != 0 or not out:
         raise OpenSeesError(f"OpenSees failed (exit {proc.returncode}): "
                             f"{proc.stderr.strip()[-1500:]}")  # fmt: skip
-    return np.asarray(json.loads(out[-1][len("RESULT "):])["floors"], dtype=np.float64)
+    result = json.loads(out[-1][len("RESULT "):])
+    return np.asarray(result["floors"], dtype=np.float64), float(result["loop_seconds"])
 
 
 def simulate_case_opensees(
@@ -158,7 +160,8 @@ def simulate_case_opensees(
     The twin's one-step-ahead force is its served answer under ``previous-step``; under
     ``same-step`` it is replayed with ``ahead_updater`` (a fresh copy of the case's updater)
     over the recorded histories, learned through step i - 1. Update times are the worker's,
-    not reported per step here (``update_seconds`` is empty)."""
+    not reported per step here (``update_seconds`` is empty); ``extra["loop_seconds"]`` is the
+    wall time of OpenSees' step loop (start-up of the bridge, worker and OpenSees excluded)."""
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import BridgeThread
     from fresco_bridge.updating.histories import read_history
@@ -172,7 +175,7 @@ def simulate_case_opensees(
         text = _lab_toml(specimen, twin, causality, folder)
         with BridgeThread(parse_config(text, "<study>"), text, run_dir=folder) as bridge:
             ports = (bridge.ports["tested"], bridge.ports["twin"])
-            floors = _run_opensees(_frame_params(layout, specimen, motion, n, ports))
+            floors, loop_seconds = _run_opensees(_frame_params(layout, specimen, motion, n, ports))
             run_dir = bridge.run_dir
         tested = read_history(run_dir, site="tested")
         served = read_history(run_dir, site="twin")
@@ -196,5 +199,5 @@ def simulate_case_opensees(
         twin_ahead_force=ahead,
         update_seconds=np.zeros(0),
         floor_displacement=np.vstack((np.zeros((1, 2)), floors)),
-        extra={"integrator": "opensees"},
+        extra={"integrator": "opensees", "loop_seconds": loop_seconds},
     )
