@@ -45,6 +45,10 @@ SOURCE = ('[record]\nenabled = false\n[[sites]]\nname = "damper"\nport = 0\n'
 """The experimental site: a sim bilinear damper (the source of the twin)."""
 
 
+class RoundVoid(RuntimeError):
+    """A run that did not measure what it should (its twin's learner was lost)."""
+
+
 def _pin(cpu: int, pid: int = 0) -> bool:
     """Pin ``pid`` (0: this process) to ``cpu`` if the machine has it."""
     if not hasattr(os, "sched_setaffinity") or cpu not in os.sched_getaffinity(0):
@@ -119,6 +123,9 @@ def source_latency(messages: int, twin_toml: str | None, pace: float,
             period = (time.perf_counter() - start) / messages
         if twin_link is not None:
             twin_link.close()
+            lost = bridge.call(lambda: bridge.bridge.learners["damper"].losses)
+            if lost:  # the twin HOLDs from the loss on: not the run this benchmark measures
+                raise RoundVoid(f"the twin's learner was lost {lost} time(s) during the run")
     us = np.asarray(latency[20:]) * 1e6
     return float(np.percentile(us, 50)), float(np.percentile(us, 99)), period
 
@@ -172,13 +179,20 @@ def main(argv: list[str] | None = None) -> None:
         p99: dict[str, list[float]] = {k: [] for k in twins}
         periods: list[float] = []
         for _ in range(args.rounds):
-            period = 0.0
-            for name, toml in twins.items():
-                v50, v99, reached = source_latency(args.messages, toml, period, folder)
-                period = period or reached  # the online_ann run's period paces the others
+            period, results = 0.0, {}
+            try:
+                for name, toml in twins.items():
+                    results[name] = source_latency(args.messages, toml, period, folder)
+                    period = period or results[name][2]  # online_ann's period paces the rest
+            except RoundVoid as exc:
+                print(f"round void: {exc}")
+                continue
+            for name, (v50, v99, _) in results.items():
                 p50[name].append(v50)
                 p99[name].append(v99)
             periods.append(period * 1e3)
+        if not periods:
+            raise RoundVoid("every round of (b) was void")
     print(f"\nstep period of the twin run: {min(periods):.2f} / {statistics.median(periods):.2f} "
           "ms (min / median)")
     _table("(b) source round trip p50", p50, "us")
