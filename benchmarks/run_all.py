@@ -32,6 +32,7 @@ BENCHMARKS: dict[str, str] = {
     "ann_equivalence": "Online updating",
     "updater_design": "Online updating",
     "updater_measured": "Online updating",
+    "twin": "Online updating",
     "diagnosis": "Diagnosis",
     "diagnose_measured": "Diagnosis",
 }

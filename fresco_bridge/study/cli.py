@@ -14,6 +14,7 @@ from typing import Any
 
 from fresco_bridge.study.constants import (
     CASES,
+    INTEGRATORS,
     PAPER_PGA_M_S2,
     SPECIMENS,
     SYNTHETIC_DURATION_S,
@@ -75,6 +76,12 @@ def add_study_parser(sub: Any) -> None:
                         "step i, the paper's order, default) or previous-step (only through "
                         "step i-1, what a twin served live under OpenSees can honour); "
                         "repeatable; recorded in study.json")
+    p.add_argument("--integrator", choices=INTEGRATORS, default="builtin",
+                   help="builtin (the in-process explicit Newmark, default) or opensees "
+                        "(OpenSeesPy integrates the same frame; both dampers are genericClient "
+                        "elements served by a bridge started for each case: the tested one by "
+                        "a sim site with the true law, the twin by an updatable site; noise-"
+                        "free only); recorded in study.json")
     p.add_argument("--cases", default=None,
                    help=f"comma-separated subset of {','.join(CASES)} (default: all available)")
     p.add_argument("--steps", type=_positive_int, default=None,
@@ -178,7 +185,8 @@ def _run(args: argparse.Namespace) -> int:
                          f"{', '.join(CASES)}")  # fmt: skip
     runs = [
         RunSpec(label, motion, specimen, noise, seed, args.steps, args.ann_iterations,
-                args.pretrain_iterations, _ann_options(args.ann_option), causality)
+                args.pretrain_iterations, _ann_options(args.ann_option), causality,
+                args.integrator)
         for label, motion, seed in _motions(args, seeds)
         for specimen in (args.specimen or ["bwbn"])
         for noise in (args.noise or [0.0])

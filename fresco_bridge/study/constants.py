@@ -24,6 +24,9 @@ CASES: Final = (
 )
 """Every case of the study, in the paper's order (Table 2) plus ours."""
 
+INTEGRATORS: Final = ("builtin", "opensees")
+"""What integrates the frame: the in-process explicit Newmark, or OpenSeesPy against a bridge."""
+
 LAYOUTS: Final = ("paper", "generalisation")
 """paper: twin in story 1 beside the tested damper; generalisation: twin in story 2."""
 

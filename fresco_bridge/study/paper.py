@@ -9,7 +9,9 @@ A *run* is one (record, specimen, noise, seed). Each run has two phases, each a 
    steps); the calibrated Bilinear is fitted to it;
 2. *cases*: every (layout, case) simulated independently, with the run's ``causality``
    (``same-step``, the paper's order, or ``previous-step``: see ``study.simulate``); the fixed
-   models of phase 1 learn nothing, so it does not depend on it.
+   models of phase 1 learn nothing, so it does not depend on it. With ``integrator =
+   "opensees"`` each case runs from OpenSeesPy against a bridge (``study.opensees``); phase 1
+   stays in process (noise-free: the same numbers OpenSees gives, to 1e-12).
 
 Scores (``fresco_bridge.indicators``): paper layout against the tested damper's *measured*
 force (the paper's Table 3); generalisation layout against the twin's *true* force. MAESD is
@@ -28,8 +30,14 @@ import numpy as np
 from fresco_bridge import indicators
 from fresco_bridge.integrator import Causality, GroundMotion
 from fresco_bridge.lawfit import calibrate_bilinear
-from fresco_bridge.study.constants import CASES, LAYOUTS, OFFLINE_SAMPLES
-from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_model
+from fresco_bridge.study.constants import CASES, INTEGRATORS, LAYOUTS, OFFLINE_SAMPLES
+from fresco_bridge.study.opensees import TwinSite, simulate_case_opensees
+from fresco_bridge.study.simulate import (
+    CaseHistory,
+    simulate_case,
+    specimen_model,
+    specimen_params,
+)
 from fresco_bridge.sweeps import run_sweep
 from fresco_bridge.updating.base import Updater
 from fresco_bridge.updating.registry import PAPER_BILINEAR, UPDATERS, make_updater
@@ -43,6 +51,7 @@ __all__ = [
     "StudyError",
     "available_cases",
     "case_metrics",
+    "make_case_twin_site",
     "make_case_updater",
     "run_study",
 ]
@@ -75,6 +84,9 @@ class RunSpec:
     causality: Causality = "same-step"
     """What the twin's step i may learn from: the tested damper's step i (``same-step``, the
     paper's order) or only through step i - 1 (``previous-step``, a twin served live)."""
+    integrator: str = "builtin"
+    """``builtin`` (the in-process explicit Newmark) or ``opensees`` (OpenSeesPy, both dampers
+    served by a bridge: ``study.opensees``)."""
 
     def online_ann_options(self) -> dict[str, Any]:
         """The options ``online_ann`` gets in this run (``--ann-option`` wins over the cap)."""
@@ -88,6 +100,7 @@ class RunSpec:
     def label(self) -> str:
         noise = f"{self.noise_pct:g}".replace(".", "p")
         order = "" if self.causality == "same-step" else f"_{self.causality}"
+        order += "" if self.integrator == "builtin" else f"_{self.integrator}"
         return (f"{self.record.removesuffix('.AT2')}_{self.specimen}_noise{noise}_seed{self.seed}"
                 f"{order}")  # fmt: skip
 
@@ -132,6 +145,23 @@ def make_case_updater(case: str, prepared: Prepared) -> Updater:
                         **options)
 
 
+def make_case_twin_site(case: str, prepared: Prepared) -> TwinSite:
+    """The twin of one case as an updatable site (``make_case_updater``'s twin, configured)."""
+    if case == "reference":
+        kind, params = specimen_params(prepared.run.specimen)
+        return TwinSite("none", {"model": kind, "params": params})
+    if case == "conventional_paper":
+        return TwinSite("none", {"model": "bilinear", "params": dict(PAPER_BILINEAR)})
+    if case == "conventional_calibrated":
+        return TwinSite("none", {"model": "bilinear", "params": dict(prepared.calibrated)})
+    if case == "online_improved":
+        return TwinSite(case, offline=(prepared.offline_disp, prepared.offline_force))
+    if case == "online_ukf":
+        return TwinSite(case)
+    options = prepared.run.online_ann_options() if case == "online_ann" else {}
+    return TwinSite(case, {"seed": prepared.run.seed, **options}, model=prepared.ann)
+
+
 def _prepare(job: tuple[RunSpec, tuple[str, ...]]) -> Prepared:
     """Phase 1 of a run (a sweep task): noise scale, offline database, calibrated Bilinear and,
     when an ANN case is asked for, the network pre-trained on the offline database."""
@@ -167,6 +197,11 @@ def _run_case(task: _CaseTask) -> CaseHistory:
     """Phase 2 (a sweep task): one (layout, case) of a run."""
     run = task.prepared.run
     updater = make_case_updater(task.case, task.prepared)
+    if run.integrator == "opensees":
+        return simulate_case_opensees(task.layout, run.specimen,
+                                      make_case_twin_site(task.case, task.prepared), run.motion,
+                                      steps=run.steps, causality=run.causality,
+                                      ahead_updater=updater)  # fmt: skip
     return simulate_case(task.layout, run.specimen, updater, run.motion,
                          noise_std=task.prepared.noise_std, noise_seed=run.seed,
                          steps=run.steps, causality=run.causality)  # fmt: skip
@@ -178,6 +213,10 @@ def case_metrics(layout: str, history: CaseHistory, reference: CaseHistory) -> d
     truth = history.tested_force if layout == "paper" else history.twin_true_force
     peaks = indicators.peak_values(truth, history.twin_force)
     update_ms = history.update_seconds * 1000.0
+    update_time_ms = {  # none when not measured per step (an OpenSees-driven case)
+        "median": float(np.median(update_ms)) if update_ms.size else None,
+        "p99": float(np.percentile(update_ms, 99)) if update_ms.size else None,
+    }
     return {
         "pv_es_pos": peaks.pv_es_pos,
         "pv_es_neg": peaks.pv_es_neg,
@@ -189,10 +228,7 @@ def case_metrics(layout: str, history: CaseHistory, reference: CaseHistory) -> d
         "rmseth": indicators.rmseth(truth, history.twin_force),
         "maesd": indicators.maesd(history.floor_displacement, reference.floor_displacement),
         "one_step_rmse": indicators.one_step_rmse(truth, history.twin_ahead_force),
-        "update_time_ms": {
-            "median": float(np.median(update_ms)),
-            "p99": float(np.percentile(update_ms, 99)),
-        },
+        "update_time_ms": update_time_ms,
     }
 
 
@@ -209,6 +245,14 @@ def run_study(
     if unknown:
         raise StudyError(f"unknown or unavailable case(s) {', '.join(unknown)}; available: "
                          f"{', '.join(available_cases())}")  # fmt: skip
+    for run in runs:
+        if run.integrator not in INTEGRATORS:
+            raise StudyError(f"unknown integrator {run.integrator!r}; known: "
+                             f"{', '.join(INTEGRATORS)}")  # fmt: skip
+        if run.integrator == "opensees" and run.noise_pct > 0.0:
+            raise StudyError("--integrator opensees serves the tested damper's true law "
+                             "without load-cell noise (the study's seeded noise stream cannot "
+                             "be reproduced by a served site): use --noise 0")
     wanted = ["reference", *[c for c in cases if c != "reference"]]
     jobs = [(run, tuple(wanted)) for run in runs]
     prepared = run_sweep(_prepare, jobs, workers=workers, scheduler=scheduler)
@@ -233,6 +277,7 @@ def run_study(
             "noise_std_kN": p.noise_std,
             "seed": p.run.seed,
             "causality": p.run.causality,
+            "integrator": p.run.integrator,
             "steps": int(per_layout["paper"]["reference"].tested_drift.size),
             "offline": {"samples": int(p.offline_disp.size), "calibrated_bilinear": p.calibrated,
                         "paper_bilinear": dict(PAPER_BILINEAR),

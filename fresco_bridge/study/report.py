@@ -36,8 +36,8 @@ __all__ = [
 ]
 
 
-def _f(value: float) -> str:
-    return f"{value:.3f}"
+def _f(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3f}"
 
 
 _CAUSALITY = {
@@ -66,7 +66,7 @@ def markdown_tables(document: Mapping[str, Any]) -> str:
             parts.append(
                 f"| {case} | + | {_f(m['pv_es_pos'])} | {_f(m['pv_ums_pos'])} | "
                 f"{_f(m['aepv_pos'])} | {_f(m['maeth'])} | {_f(m['rmseth'])} | "
-                f"{_f(m['one_step_rmse'])} | {sd} | {ms['median']:.3f}/{ms['p99']:.3f} |\n"
+                f"{_f(m['one_step_rmse'])} | {sd} | {_f(ms['median'])}/{_f(ms['p99'])} |\n"
                 f"|  | − | {_f(m['pv_es_neg'])} | {_f(m['pv_ums_neg'])} | {_f(m['aepv_neg'])} "
                 f"|  |  |  |  |  |\n"
             )

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +11,7 @@ from typing import Any
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.loops import LoopKind
+from fresco_bridge.study.opensees import opensees_env as opensees_env  # the one home
 
 OPENSEES_SCRIPT = Path(__file__).resolve().parent / "opensees_client.py"
 """The OpenSeesPy client scenarios, run as a script in its own process."""
@@ -23,16 +22,6 @@ def RunningBridge(config_toml: str, run_root: Path,
     """``with RunningBridge(toml, tmp_path) as b: b.ports['site']`` — a real bridge in a thread."""
     return BridgeThread(parse_config(config_toml, "<test config>"), config_toml, run_dir=run_root,
                         event_loop=event_loop)
-
-
-def opensees_env() -> dict[str, str]:
-    """OpenSeesPy's Linux wheel bundles BLAS/LAPACK the loader must find before start-up."""
-    spec = importlib.util.find_spec("openseespylinux")
-    assert spec is not None and spec.submodule_search_locations, "openseespy is not installed"
-    lib = Path(next(iter(spec.submodule_search_locations))) / "lib"
-    env = dict(os.environ)
-    env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}".rstrip(":")
-    return env
 
 
 def run_opensees(scenario: str, timeout: float = 120.0, **params: Any) -> dict[str, Any]:
