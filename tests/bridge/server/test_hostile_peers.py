@@ -111,18 +111,17 @@ def test_a_connect_reset_flood_leaves_a_few_log_lines_and_the_bridge_serves(
             connect_and_reset(port)
         # Each held batch starts from an empty accept queue: the kernel's backlog is then never
         # the limit (a queue still holding the batch before made a connect time out).
-        done = n // 2
-        wait_for(lambda: sum(refusals(bridge, "tcp").values()) == done,
-                 f"the first {done} connections to be counted as refused")
-        for _ in range(n // 2 // BATCH):  # reset before: the peer's address is already gone
+
+        def counted(k: int) -> None:
+            wait_for(lambda: sum(refusals(bridge, "tcp").values()) == k,
+                     f"{k} connections to be counted as refused")
+
+        counted(n // 2)
+        for batch in range(n // 2 // BATCH):  # reset before: the peer's address is already gone
             with loop_held(bridge):
                 for _ in range(BATCH):
                     connect_and_reset(port)
-            done += BATCH
-            wait_for(lambda: sum(refusals(bridge, "tcp").values()) == done,
-                     f"{done} connections to be counted as refused")
-        wait_for(lambda: sum(refusals(bridge, "tcp").values()) == n,
-            f"all {n} connections to be counted as refused")
+            counted(n // 2 + BATCH * (batch + 1))
         served(port)
     noisy = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert not [r for r in noisy if r.exc_info or r.levelno >= logging.ERROR], \
