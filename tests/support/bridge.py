@@ -11,7 +11,7 @@ from typing import Any
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.loops import LoopKind
-from fresco_bridge.study.opensees import opensees_env as opensees_env  # the one home
+from fresco_bridge.opensees_runtime import opensees_env as opensees_env  # the one home
 
 OPENSEES_SCRIPT = Path(__file__).resolve().parent / "opensees_client.py"
 """The OpenSeesPy client scenarios, run as a script in its own process."""
