@@ -12,7 +12,8 @@
   (:func:`opensees_env`), set before it starts.
 - **A bridge that is not there.** A ``genericClient`` element connects once when the model is
   analysed; refused, OpenSees prints ``failed to setup connection`` and dies with a segfault.
-  :func:`require_listening` checks each element's port first and raises a clear error instead.
+  :func:`require_listening` checks each element's port first (in the kernel's socket table when
+  the bridge is local, so the bridge sees no probe) and raises a clear error instead.
 """
 
 from __future__ import annotations
@@ -128,14 +129,19 @@ def opensees_env(base: Mapping[str, str] | None = None) -> dict[str, str]:
 
 def require_listening(ports: Iterable[int], host: str = "127.0.0.1", *,
                       timeout: float = 2.0, hint: str = "") -> None:
-    """Raise :class:`BridgeNotListening` unless every one of ``ports`` on ``host`` accepts a TCP
-    connection within ``timeout`` seconds (``hint``: what to start, appended to the message).
+    """Raise :class:`BridgeNotListening` unless every one of ``ports`` on ``host`` accepts TCP
+    connections (``hint``: what to start, appended to the message).
 
-    The probe connects and closes without a byte: the bridge counts it as a refused connection
-    of kind ``handshake`` (as any health check), not as a session.
+    A listener of this machine is seen in the kernel's socket table without touching it: a
+    connect-and-close probe would reach the bridge as a connection that never sent its size
+    ID, logged as refused. Only what the table does not show (another host; no ``/proc``) is
+    probed by connecting, within ``timeout`` seconds.
     """
+    listening = _local_listeners()
     missing = []
     for port in ports:
+        if (host, port) in listening or ("0.0.0.0", port) in listening:
+            continue
         try:
             with socket.create_connection((host, port), timeout=timeout):
                 pass
@@ -146,3 +152,23 @@ def require_listening(ports: Iterable[int], host: str = "127.0.0.1", *,
             f"no bridge is listening on {', '.join(missing)}; the genericClient elements "
             "connect there, so the bridge must be serving before OpenSees starts"
             + (f" ({hint})" if hint else ""))
+
+
+def _local_listeners(table: Path = Path("/proc/net/tcp")) -> set[tuple[str, int]]:
+    """(IPv4 address, port) of every listening TCP socket of this machine (Linux), else empty.
+
+    Each row of the table has ``local_address`` as ``AABBCCDD:PPPP`` (the address as a
+    native-endian 32-bit hex number, the port big hex) and the state ``0A`` for LISTEN.
+    """
+    try:
+        rows = table.read_text(encoding="ascii").splitlines()[1:]
+    except OSError:
+        return set()
+    found = set()
+    for row in rows:
+        fields = row.split()
+        if len(fields) > 3 and fields[3] == "0A":
+            address, port = fields[1].split(":")
+            ip = socket.inet_ntoa(int(address, 16).to_bytes(4, sys.byteorder))
+            found.add((ip, int(port, 16)))
+    return found

@@ -8,11 +8,13 @@ import os
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from fresco_bridge.opensees_runtime import (
     BridgeNotListening,
+    _local_listeners,
     bundled_lib_dir,
     opensees_env,
     require_listening,
@@ -73,3 +75,23 @@ def test_require_listening_names_every_port_nobody_listens_on() -> None:
     assert all(f"127.0.0.1:{port}" in message for port in closed)
     assert f":{open_port}" not in message
     assert message.endswith("(start: fresco-bridge serve)")
+
+
+def test_a_local_listener_is_found_without_a_connection_to_it() -> None:
+    """The bridge would log a connection that never sent its size ID as a refused client."""
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        server.setblocking(False)
+        require_listening([server.getsockname()[1]])
+        with pytest.raises(BlockingIOError):
+            server.accept()  # nothing connected
+
+
+def test_the_socket_table_lists_a_listener_and_an_absent_table_nothing(tmp_path: Path) -> None:
+    assert _local_listeners(tmp_path / "absent") == set()
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        assert ("127.0.0.1", port) in _local_listeners()
