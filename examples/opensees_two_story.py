@@ -1,5 +1,6 @@
-"""Drive fresco-bridge from an unmodified OpenSeesPy model: a two-story shear frame whose two
-story elements are genericClient elements served by the bridge, under a real ground motion.
+"""Drive fresco-bridge from an unmodified OpenSeesPy model: a two-story shear frame (10 kN/mm
+per story, about 5 % damping) with one genericClient element per story served by the bridge,
+under a real ground motion.
 
     .venv/bin/fresco-bridge serve --config examples/lab.toml      # terminal 1
     .venv/bin/python examples/opensees_two_story.py               # terminal 2
@@ -29,6 +30,8 @@ from fresco_bridge.opensees_runtime import (
 )
 
 M = 0.0202228  # 20222.8 kg per story, in kN·s²/mm
+FRAME_K = 10.0  # kN/mm per story
+ALPHA_M = 2.0  # 1/s: mass-proportional damping, about 5 % at the first mode (T1 ≈ 0.3 s)
 RECORD = Path(__file__).resolve().parent / "data" / "RSN960_NORTHR_LOS270.AT2"
 
 
@@ -42,7 +45,12 @@ def run_frame(ops: Any, accel_mm_s2: Sequence[float], dt: float, steps: int, hos
     ops.fix(1, 1)
     ops.mass(2, M)
     ops.mass(3, M)
-    # the experimental elements: plain genericClients, one port (one bridge site) each
+    # each story's frame: 10 kN/mm (the demo's), beside the story's served element
+    ops.uniaxialMaterial("Elastic", 1, FRAME_K)
+    for story in (1, 2):
+        ops.element("zeroLength", 10 + story, story, story + 1, "-mat", 1, "-dir", 1)
+    ops.rayleigh(ALPHA_M, 0.0, 0.0, 0.0)
+    # the served elements: plain genericClients, one port (one bridge site) each
     ops.element("genericClient", 1, "-node", 1, 2, "-dof", 1, "-dof", 1,
                 "-server", ports[0], host)
     ops.element("genericClient", 2, "-node", 2, 3, "-dof", 1, "-dof", 1,
