@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import ctypes.util
+import importlib.util
 import os
 import socket
 import subprocess
@@ -14,8 +15,10 @@ import pytest
 
 from fresco_bridge.opensees_runtime import (
     BridgeNotListening,
+    OpenSeesUnavailable,
     _local_listeners,
     bundled_lib_dir,
+    import_opensees,
     opensees_env,
     require_listening,
 )
@@ -95,3 +98,15 @@ def test_the_socket_table_lists_a_listener_and_an_absent_table_nothing(tmp_path:
         server.listen()
         port = server.getsockname()[1]
         assert ("127.0.0.1", port) in _local_listeners()
+
+
+def test_without_openseespy_the_error_says_how_to_install_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name.startswith("openseespy") else real(name, *a))
+    with pytest.raises(OpenSeesUnavailable, match=r"not installed .*make demo installs it; or: "
+                                                  r"pip install 'fresco-bridge\[opensees\]'"):
+        import_opensees()
+    with pytest.raises(OpenSeesUnavailable, match="not installed"):
+        opensees_env({})
