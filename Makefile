@@ -18,8 +18,9 @@ $(BIN)/python:
 COMPILED := $(shell sed -n 's/^    "\(.*\.py\)",$$/\1/p' fresco_bridge/_compiled.py)
 BUILD_INPUTS := setup.py fresco_bridge/_compiled.py $(COMPILED)
 
+# The runtime and the `opensees` extra: the README's OpenSeesPy examples run after `make demo`.
 $(VENV)/.runtime: pyproject.toml | $(BIN)/python
-	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e .
+	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[opensees]'
 	touch $@
 
 $(VENV)/.test: pyproject.toml | $(BIN)/python

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
 import json
 import os
 import signal
@@ -44,6 +43,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from fresco_bridge.opensees_runtime import OpenSeesUnavailable
+from fresco_bridge.opensees_runtime import opensees_env as runtime_env
 
 REPO = Path(__file__).resolve().parents[1]
 PEERS = "benchmarks._step_peers"
@@ -102,13 +104,12 @@ PAIRS = ((BRIDGE, REFERENCE), (SCRIPTED_BRIDGE, SCRIPTED_REF), (BRIDGE_64, REF_6
 
 
 def opensees_env() -> dict[str, str]:
-    """OpenSeesPy's Linux wheel bundles BLAS/LAPACK the loader must find before start-up."""
-    spec = importlib.util.find_spec("openseespylinux")
-    if spec is None or not spec.submodule_search_locations:
-        raise BenchmarkError("openseespy is not installed in this interpreter")
-    lib = Path(next(iter(spec.submodule_search_locations))) / "lib"
-    env = dict(os.environ)
-    env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}".rstrip(":")
+    """The peers' environment: OpenSeesPy's bundled BLAS/LAPACK on the loader path
+    (``fresco_bridge.opensees_runtime``, the one home) and this repository importable."""
+    try:
+        env = runtime_env()
+    except OpenSeesUnavailable as exc:
+        raise BenchmarkError(str(exc)) from None
     env["PYTHONPATH"] = f"{REPO}:{env.get('PYTHONPATH', '')}".rstrip(":")
     return env
 

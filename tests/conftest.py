@@ -27,7 +27,7 @@ from fresco_bridge.daemon import BridgeThread
 from tests.support.bridge import RunningBridge
 from tests.support.broker import SYSTEM_PORT, OwnBroker, broker_up
 from tests.support.net import free_ports
-from tests.support.paths import OPENFRESCO_CAPTURES, SHARED
+from tests.support.paths import SHARED
 
 # No timed assertions in tests: hypothesis' per-example deadline (200 ms) failed a pure
 # encoder test when a loaded machine stalled one example for 936 ms. Every wait that matters
@@ -49,14 +49,6 @@ def shared_dir() -> Path:
     if not SHARED.is_dir():
         pytest.skip(f"../shared not found at {SHARED}")
     return SHARED
-
-
-@pytest.fixture(scope="session")
-def openfresco_captures(shared_dir: Path) -> Path:
-    """The real OpenSees / OpenFresco byte captures in ``../shared/fixtures/openfresco``."""
-    if not OPENFRESCO_CAPTURES.is_dir():
-        pytest.skip(f"OpenFresco captures not found at {OPENFRESCO_CAPTURES}")
-    return OPENFRESCO_CAPTURES
 
 
 @pytest.fixture

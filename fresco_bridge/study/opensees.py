@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -30,6 +29,7 @@ import numpy as np
 
 from fresco_bridge.integrator import DEMO_DT, DEMO_ZETA, GroundMotion, paper_two_story_frame
 from fresco_bridge.lawfit import law_forces
+from fresco_bridge.opensees_runtime import INSTALL_HINT
 from fresco_bridge.study.simulate import (
     CaseHistory,
     FloatArray,
@@ -38,7 +38,7 @@ from fresco_bridge.study.simulate import (
 )
 from fresco_bridge.updating.base import Updater
 
-__all__ = ["OpenSeesError", "TwinSite", "opensees_env", "simulate_case_opensees"]
+__all__ = ["OpenSeesError", "TwinSite", "simulate_case_opensees"]
 
 OPENSEES_TIMEOUT = 3600.0
 """Seconds one case's OpenSees process may take before it counts as hung."""
@@ -60,17 +60,11 @@ class TwinSite:
     """A pre-trained ANN, saved to a model file for the site."""
 
 
-def opensees_env() -> dict[str, str]:
-    """This environment plus OpenSeesPy's bundled BLAS/LAPACK on the loader path (its Linux
-    wheel needs them before start-up, so they cannot be added from inside the process)."""
-    spec = importlib.util.find_spec("openseespylinux")
-    env = dict(os.environ)
-    if spec is not None and spec.submodule_search_locations:
-        lib = Path(next(iter(spec.submodule_search_locations))) / "lib"
-        env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}".rstrip(":")
-    elif importlib.util.find_spec("openseespy") is None:
-        raise OpenSeesError("--integrator opensees needs OpenSeesPy (pip install openseespy)")
-    return env
+def _require_opensees() -> None:
+    """Fail before the bridge starts when OpenSeesPy is missing (the frame process imports it
+    through ``opensees_runtime``, which finds the wheel's bundled BLAS itself)."""
+    if importlib.util.find_spec("openseespy") is None:
+        raise OpenSeesError(f"--integrator opensees needs OpenSeesPy ({INSTALL_HINT})")
 
 
 def _toml(value: Any) -> str:
@@ -133,7 +127,7 @@ def _run_opensees(params: dict[str, Any]) -> tuple[FloatArray, float]:
     and the wall time of its step loop (s)."""
     try:
         proc = subprocess.run([sys.executable, "-m", "fresco_bridge.study.opensees_frame"],
-                              input=json.dumps(params), env=opensees_env(), capture_output=True,
+                              input=json.dumps(params), capture_output=True,
                               text=True, timeout=OPENSEES_TIMEOUT)  # fmt: skip
     except subprocess.TimeoutExpired:
         raise OpenSeesError(f"OpenSees did not finish within {OPENSEES_TIMEOUT:g} s") from None
@@ -169,6 +163,7 @@ def simulate_case_opensees(
 
     if layout not in ("paper", "generalisation"):
         raise ValueError(f"unknown layout {layout!r}; known: paper, generalisation")
+    _require_opensees()
     n = motion.npts - 1 if steps is None else min(steps, motion.npts - 1)
     with tempfile.TemporaryDirectory(prefix="fresco-study-") as tmp:
         folder = Path(tmp)

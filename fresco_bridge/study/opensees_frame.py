@@ -10,8 +10,8 @@ the ground), each story's frame stiffness a ``zeroLength`` with an ``Elastic`` m
 the dampers' initial stiffness, as the study's damping matrix), the mass-proportional term by
 ``rayleigh``, both dampers ``genericClient`` elements served by the bridge, explicit Newmark
 (gamma = 1/2) with the ``Linear`` algorithm: one trial per step, as the built-in integrator.
-It imports OpenSeesPy, whose Linux wheel needs its bundled BLAS on the loader path: the parent
-sets ``LD_LIBRARY_PATH`` (``study.opensees.opensees_env``) before starting this process.
+It imports OpenSeesPy through ``fresco_bridge.opensees_runtime`` (which loads the Linux wheel's
+bundled BLAS first: no ``LD_LIBRARY_PATH`` needed).
 """
 
 from __future__ import annotations
@@ -24,7 +24,9 @@ from typing import Any
 
 def run_frame(p: dict[str, Any]) -> dict[str, Any]:
     """Build the frame of ``p`` and integrate it to the end; floor displacements per step."""
-    import openseespy.opensees as ops  # type: ignore[import-untyped]
+    from fresco_bridge.opensees_runtime import import_opensees
+
+    ops = import_opensees()
 
     ops.wipe()
     ops.model("basic", "-ndm", 1, "-ndf", 1)

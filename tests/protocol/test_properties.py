@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import struct
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -35,6 +34,7 @@ from protocol import (
     site_data_size,
     unpack_blocks,
 )
+from tests.support.paths import OPENFRESCO_CAPTURES
 
 PROPS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -180,8 +180,8 @@ def test_element_segmentation_does_not_change_events(stream: bytes, sizes: list[
     assert isinstance(whole[0], SizeReceived)
 
 
-def test_one_byte_chunks_of_a_real_capture(openfresco_captures: Path) -> None:
-    data = json.loads((openfresco_captures / "gc_2story_transient_tcp.json").read_text())
+def test_one_byte_chunks_of_a_real_capture() -> None:
+    data = json.loads((OPENFRESCO_CAPTURES / "gc_2story_transient_tcp.json").read_text())
     messages = data["connections"][1]["messages"]
     stream = b"".join(bytes.fromhex(m["hex"]) for m in messages if m["dir"] == "client->server")
     whole = run_element_server(iter([stream]))

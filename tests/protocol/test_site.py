@@ -39,9 +39,6 @@ from protocol import (
 from tests.support.paths import OPENFRESCO_CAPTURES
 
 FIXTURES = OPENFRESCO_CAPTURES
-pytestmark = pytest.mark.skipif(
-    not FIXTURES.is_dir(), reason=f"OpenFresco captures not found at {FIXTURES}"
-)
 CAPTURES = ["site_shadow_actor_tcp.json", "site_shadow_actor_udp.json"]
 SHADOW_TAG, ACTOR_TAG = 7, 9
 SIZE_TRIAL = SignalSizes(2, 2, 2, 0, 1)

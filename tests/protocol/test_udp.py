@@ -25,9 +25,6 @@ from protocol import (
 from tests.support.paths import OPENFRESCO_CAPTURES
 
 FIXTURES = OPENFRESCO_CAPTURES
-pytestmark = pytest.mark.skipif(
-    not FIXTURES.is_dir(), reason=f"OpenFresco captures not found at {FIXTURES}"
-)
 UDP_CAPTURES = [
     "gc_1dof_static_udp.json",
     "gc_2story_transient_udp.json",

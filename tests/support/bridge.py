@@ -11,17 +11,18 @@ from typing import Any
 from fresco_bridge.config import parse_config
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.loops import LoopKind
-from fresco_bridge.study.opensees import opensees_env as opensees_env  # the one home
+from fresco_bridge.opensees_runtime import opensees_env as opensees_env  # the one home
 
 OPENSEES_SCRIPT = Path(__file__).resolve().parent / "opensees_client.py"
 """The OpenSeesPy client scenarios, run as a script in its own process."""
 
 
 def RunningBridge(config_toml: str, run_root: Path,
-                  event_loop: LoopKind = "asyncio") -> BridgeThread:
-    """``with RunningBridge(toml, tmp_path) as b: b.ports['site']`` — a real bridge in a thread."""
-    return BridgeThread(parse_config(config_toml, "<test config>"), config_toml, run_dir=run_root,
-                        event_loop=event_loop)
+                  event_loop: LoopKind = "asyncio", base: Path | None = None) -> BridgeThread:
+    """``with RunningBridge(toml, tmp_path) as b: b.ports['site']`` — a real bridge in a thread
+    (``base``: the folder relative data paths resolve against, as a config file's)."""
+    return BridgeThread(parse_config(config_toml, "<test config>", base=base), config_toml,
+                        run_dir=run_root, event_loop=event_loop)
 
 
 def run_opensees(scenario: str, timeout: float = 120.0, **params: Any) -> dict[str, Any]:

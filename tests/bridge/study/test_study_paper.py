@@ -10,6 +10,7 @@ import pytest
 from fresco_bridge.cli import main
 from fresco_bridge.study.constants import LAYOUTS
 from fresco_bridge.study.paper import RunSpec, available_cases, run_study
+from tests.support.paths import EXAMPLES
 
 CASE_KEYS = {
     "pv_es_pos", "pv_es_neg", "pv_ums_pos", "pv_ums_neg", "aepv_pos", "aepv_neg", "maeth",
@@ -151,8 +152,8 @@ def test_bad_ann_option_is_exit_2(option: str, tmp_path: Path,
     assert "--ann-option" in capsys.readouterr().err
 
 
-def test_a_northridge_record_runs(tmp_path: Path, shared_dir: Path) -> None:
-    record = shared_dir / "data" / "ground_motions" / "RSN960_NORTHR_LOS270.AT2"
+def test_a_northridge_record_runs(tmp_path: Path) -> None:
+    record = EXAMPLES / "data" / "RSN960_NORTHR_LOS270.AT2"  # shipped: runs on a fresh clone
     code = main(["study", "paper", "--record", str(record),
                  "--specimen", "menegotto-pinto", "--steps", "120", "--workers", "1",
                  "--cases", "conventional_calibrated", "--no-plots",
