@@ -435,16 +435,12 @@ def _updatable_sites(cfg: LabConfig, base: Path) -> tuple[LabConfig, list[str]]:
             problems.append(f"{key}.learner_deadline: {site.learner_deadline:g} s must be "
                             f"shorter than bridge.controller_timeout "
                             f"({cfg.bridge.controller_timeout:g} s)")
-        if site.causality == "same-step":
-            if source is not None and source.controller.kind != "sim":
-                problems.append(f"{key}.causality: same-step is served for in-process (sim) "
-                                f"sources so far; site {source.name!r} has a "
-                                f"{source.controller.kind} controller (use previous-step)")
-            if 2 * site.learner_deadline >= cfg.bridge.controller_timeout:
-                problems.append(f"{key}.learner_deadline: same-step waits up to it for the "
-                                "source's trial, then for the learner: twice it must be "
-                                "shorter than bridge.controller_timeout "
-                                f"({cfg.bridge.controller_timeout:g} s)")
+        if (site.causality == "same-step"
+                and 2 * site.learner_deadline >= cfg.bridge.controller_timeout):
+            problems.append(f"{key}.learner_deadline: same-step waits up to it for the "
+                            "source's trial, then for the learner: twice it must be "
+                            "shorter than bridge.controller_timeout "
+                            f"({cfg.bridge.controller_timeout:g} s)")
         name = site.updater or ""
         if name not in UPDATERS:
             problems.append(f"{key}.updater: unknown updater {name!r}; known: "

@@ -140,6 +140,9 @@ class ExperimentalSite(CommandGate):
         self._uncommitted = False
         self.daq = Daq((0.0,) * na, (0.0,) * na)
         self._daq_valid = False
+        self._acquiring: asyncio.Future[Daq] | None = None
+        """The controller read in flight (network controllers): one read per trial, whoever
+        asks (the site's own force request, or a same-step twin learning from it)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
@@ -504,7 +507,32 @@ class ExperimentalSite(CommandGate):
         return self._acquire_later()
 
     async def _acquire_later(self) -> Daq:
-        return self._measured(await self.guard.guarded("get_daq", self.controller.get_daq))
+        pending = self._acquiring
+        if pending is not None:
+            try:
+                return await asyncio.shield(pending)
+            except asyncio.CancelledError:
+                task = asyncio.current_task()
+                if not pending.cancelled() or (task is not None and task.cancelling()):
+                    raise  # this caller is cancelled, not the read it waited for
+            return await self._acquire_later()  # that read was abandoned: its own
+        fut: asyncio.Future[Daq] = asyncio.get_running_loop().create_future()
+        self._acquiring = fut
+        try:
+            daq = self._measured(await self.guard.guarded("get_daq", self.controller.get_daq))
+        except BaseException:
+            fut.cancel()  # a caller waiting on it reads again
+            raise
+        finally:
+            self._acquiring = None
+        fut.set_result(daq)
+        return daq
+
+    @property
+    def trial_forwarded(self) -> bool:
+        """The current trial's command has reached the controller (or needed no move): a
+        measurement taken now is the trial's."""
+        return self.guard.sent == self.ctrl
 
     def _measured(self, daq: Daq | None) -> Daq:
         """Check and record what the controller measured (None: it failed, the site HOLDs)."""

@@ -7,8 +7,9 @@ that cannot answer is a ``ControllerError``: the site HOLDs, the integrator stop
 experimental source is never touched.
 
 With ``causality = "same-step"`` the twin's trial of step k waits (up to the learner's
-deadline) for the source's trial of the same step and time, takes the source's measurement of
-it and has the learner learn it before answering: the paper's order. OpenSees sends every
+deadline) for the source's trial of the same step and time to reach its controller, takes the
+source's measurement of it (the one read of that trial, shared with the source's own force
+request) and has the learner learn it before answering: the paper's order. OpenSees sends every
 element's trial before any force request, so the source's trial arrives whatever the element
 order; a client that asks the twin's force before sending the source's trial would wait
 forever: past the deadline the twin answers ``previous-step`` for the rest of the session,
@@ -96,7 +97,8 @@ class TwinController(Controller):
             return False
         loop = asyncio.get_running_loop()
         end = loop.time() + self.learner.deadline
-        while not (source.step + 1 == step and source.time == t and source.pending is None):
+        while not (source.step + 1 == step and source.time == t and source.pending is None
+                   and source.trial_forwarded):
             if source.state in (SiteState.HOLD, SiteState.FAULT):
                 return False  # the integrator is being stopped: nothing to learn
             if loop.time() > end:

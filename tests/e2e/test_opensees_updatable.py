@@ -15,12 +15,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fresco_bridge.record.export import committed_steps
 from fresco_bridge.report.html import write_report
 from fresco_bridge.runs import load_run
 from fresco_bridge.updating.histories import read_history
 from fresco_bridge.updating.registry import make_updater
 from fresco_bridge.updating.replay import replay
 from tests.support.bridge import RunningBridge, run_opensees
+from tests.support.controller import sim_actuator
+from tests.support.net import free_ports
 from tests.support.opensees_frame import BILINEAR, frame_params, rel_diff
 
 pytest.importorskip("openseespy")
@@ -264,3 +267,41 @@ def test_same_step_in_either_opensees_element_order(tmp_path: Path, twin_first: 
     assert float(np.max(np.abs(twin.force - expected))) / scale < 1e-9
     assert float(np.max(np.abs(lagged - expected))) / scale > 1e-6  # the check can fail
     assert not [e for e in load_run(run_dir).events if e["event"] == "same-step-fallback"]
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "mts"])
+def test_same_step_from_a_network_controller_source(tmp_path: Path, protocol: str) -> None:
+    """The source behind a real `sim-actuator serve` process (Modbus TCP, MTS-like): the twin,
+    visited first, waits for the source's command to reach the controller and learns the one
+    measurement of that trial, the one the source's own force request then answers."""
+    pytest.importorskip("filterpy")
+    (port,) = free_ports(1)
+    with sim_actuator(protocol, port):
+        toml = frame_toml('updater = "online_ukf"\ncausality = "same-step"\n')
+        sim = f'[sites.controller]\nmodel = "bilinear"\nparams = {_params(BILINEAR)}\n'
+        toml = toml.replace(sim,
+                            f'[sites.controller]\nkind = "{protocol}"\nport = {port}\n'
+                            'stiffness = 68.0\n', 1)
+        assert f'kind = "{protocol}"' in toml
+        served, run_dir = run_frame(toml, tmp_path, story2_first=True, algorithm=["Linear"],
+                                    integrator=["NewmarkExplicit", 0.5],
+                                    factor=300.0)  # the stiff elastic rig stays in its limits
+    assert all(np.isfinite(served["u3"]))
+    source = read_history(run_dir, site="story1")
+    twin = read_history(run_dir, site="story2")
+    assert twin.force is not None and twin.disp.size == NSTEPS
+    # each learned measurement is its own trial's (read after the command reached the rig):
+    # the ideal elastic rig measures where it was sent, to float32 on the Modbus wire
+    steps = [s for s in committed_steps(run_dir) if s.site == "story1"]
+    assert len(steps) == NSTEPS and max(abs(s.meas_disp[0]) for s in steps) > 0.1
+    assert all(abs(s.meas_disp[0] - s.cmd_disp[0]) <= 1e-5 * max(1.0, abs(s.cmd_disp[0]))
+               for s in steps)
+    expected = replay(make_updater("online_ukf"), source.disp, source.force, twin.disp,
+                      lag=False).force_pred
+    lagged = replay(make_updater("online_ukf"), source.disp, source.force, twin.disp,
+                    lag=True).force_pred
+    scale = float(np.max(np.abs(expected)))
+    assert float(np.max(np.abs(twin.force - expected))) / scale < 1e-9
+    assert float(np.max(np.abs(lagged - expected))) / scale > 1e-6  # the check can fail
+    events = load_run(run_dir).events
+    assert not [e for e in events if e["event"] in ("same-step-fallback", "same-step-mismatch")]

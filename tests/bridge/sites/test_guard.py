@@ -132,3 +132,50 @@ def test_a_silent_controller_misses_the_deadline_and_holds() -> None:
 
     assert math.isnan(asyncio.run(step()).force[0])
     assert "did not answer get_daq within 0.2 s" in site.reason
+
+
+class Counting(Scripted):
+    def __init__(self) -> None:
+        super().__init__([], hang=0.02)
+        self.reads = 0
+
+    async def get_daq(self) -> Daq:
+        self.reads += 1
+        return await super().get_daq()
+
+
+def test_concurrent_reads_of_one_trial_share_one_controller_read() -> None:
+    """A same-step twin and the source's own force request ask at once: one read, one
+    measurement for both; a new trial reads again."""
+    async def main() -> None:
+        controller = Counting()
+        site, _ = _site(controller, recovery=0.0)
+        await site.set_trial(_trial(0.5))
+        assert site.trial_forwarded
+        first, second = await asyncio.wait_for(
+            asyncio.gather(site.acquire(), site.acquire()), 5.0)
+        assert first is second and first.disp == (0.5,) and controller.reads == 1
+        await site.set_trial(_trial(0.7))
+        assert (await asyncio.wait_for(site.acquire(), 5.0)).disp == (0.7,)
+        assert controller.reads == 2
+
+    asyncio.run(main())
+
+
+def test_a_waiting_reader_reads_again_when_the_shared_read_is_abandoned() -> None:
+    async def main() -> None:
+        controller = Counting()
+        controller.hang = 0.1  # within the site's 0.2 s controller deadline
+        site, _ = _site(controller, recovery=0.0)
+        await site.set_trial(_trial(0.5))
+        first = asyncio.ensure_future(site.acquire())
+        await asyncio.sleep(0.01)
+        second = asyncio.ensure_future(site.acquire())
+        await asyncio.sleep(0.01)
+        first.cancel()
+        daq = await asyncio.wait_for(second, 5.0)
+        assert daq.disp == (0.5,) and controller.reads == 2
+        with pytest.raises(asyncio.CancelledError):
+            await first
+
+    asyncio.run(main())

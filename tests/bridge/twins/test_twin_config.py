@@ -9,7 +9,6 @@ import pytest
 from fresco_bridge.config import ConfigError, load_config
 
 SOURCE = '[[sites]]\nname = "damper"\nport = 0\n'
-RIG = '[sites.controller]\nkind = "rig"\npreset = "servo-hydraulic"\n'
 TWO_ACTUATORS = '[[sites]]\nname = "damper"\nport = 0\ndofs = 2\n'
 
 
@@ -39,8 +38,6 @@ def error_of(tmp_path: Path, text: str) -> str:
      "needs offline"),
     (SOURCE + twin(updater='"online_ann"'), "sites[1].updater", "needs offline"),
     (SOURCE + twin(offline='"missing.csv"'), "sites[1].offline", "missing.csv"),
-    (SOURCE + RIG + twin(causality='"same-step"'), "sites[1].causality",
-     "in-process (sim) sources"),
     (SOURCE + twin(causality='"same-step"', learner_deadline="2.5"),
      "sites[1].learner_deadline", "twice it must be shorter"),
     (SOURCE + twin() + "[sites.updater_options]\nwobble = 1\n", "sites[1].updater_options",
