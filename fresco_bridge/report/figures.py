@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -21,6 +22,19 @@ from ..runs import SessionSignals
 
 MAX_POINTS = 20_000
 DPI = 100
+
+# One home for the look of the comparison figures (the study's and the diagnosis's), after the
+# study's hysteresis grid: the truth or the measurement in grey underneath, the model that is
+# being judged in red on top (grey shows only where it misses), a baseline model dashed blue.
+TRUTH: dict[str, Any] = {"color": "0.4", "lw": 0.7, "zorder": 2}
+PREDICTION: dict[str, Any] = {"color": "C3", "lw": 0.7, "zorder": 3}
+BASELINE: dict[str, Any] = {"color": "C0", "lw": 0.8, "ls": "--", "zorder": 2.5}
+GRID_ALPHA = 0.3
+TITLE_SIZE = 9
+LABEL_SIZE = 8
+SUPTITLE_SIZE = 10
+PANEL_SIZE = (3.6, 3.2)
+"""Inches per panel of a grid of small multiples."""
 
 
 def _png(fig: Figure) -> bytes:
@@ -58,6 +72,45 @@ def _min_span(ax: Axes, values: np.ndarray, span: float) -> None:
     if finite.size and float(finite.max() - finite.min()) < span:
         mid = 0.5 * float(finite.max() + finite.min())
         ax.set_ylim(mid - span / 2, mid + span / 2)
+
+
+def panel_grid(n: int, *, cols: int = 4, sharex: bool = False, sharey: bool = False,
+               size: tuple[float, float] = PANEL_SIZE) -> tuple[Figure, list[Axes]]:
+    """``n`` panels (small multiples) in rows of at most ``cols``; spare cells hidden. Shared
+    axes are what make panels comparable at a glance, so callers comparing one quantity pass
+    ``sharex``/``sharey``; tick labels then show on the outer panels only."""
+    if n < 1:
+        raise ValueError(f"panel_grid: need at least one panel (got {n})")
+    cols = min(cols, n)
+    rows = -(-n // cols)
+    fig = Figure(figsize=(size[0] * cols, size[1] * rows))
+    grid = fig.subplots(rows, cols, squeeze=False, sharex=sharex, sharey=sharey)
+    cells = list(grid.flat)
+    for ax in cells[n:]:
+        ax.set_visible(False)
+    if sharex:  # the last visible panel of each column carries the x ticks
+        for ax in cells[max(0, n - cols):n]:
+            ax.xaxis.set_tick_params(labelbottom=True)
+    return fig, cells[:n]
+
+
+def style_panel(ax: Axes, title: str, xlabel: str, ylabel: str) -> None:
+    """A small multiple's title, axis labels and grid, in the shared sizes."""
+    ax.set_title(title, fontsize=TITLE_SIZE)
+    ax.set_xlabel(xlabel, fontsize=LABEL_SIZE)
+    ax.set_ylabel(ylabel, fontsize=LABEL_SIZE)
+    ax.grid(alpha=GRID_ALPHA)
+
+
+def outer_labels(axes: Sequence[Axes], cols: int) -> None:
+    """Axis labels on the outer panels of a shared grid only (bottom row of each column, first
+    column), as :func:`panel_grid` laid them out."""
+    cols = min(cols, len(axes))
+    for i, ax in enumerate(axes):
+        if i + cols < len(axes):
+            ax.set_xlabel("")
+        if i % cols:
+            ax.set_ylabel("")
 
 
 def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
