@@ -34,6 +34,8 @@ __all__ = [
     "RunCheck",
     "bars_figure",
     "describe_target",
+    "force_error_figure",
+    "hysteresis_figure",
     "markdown_tables",
     "score_targets",
     "summary_table",
@@ -89,9 +91,9 @@ def write_figures(
     written: list[Path] = []
     for layout, cases in histories.items():
         truth_of = "tested_force" if layout == "paper" else "twin_true_force"
-        for name, fig in ((f"hysteresis_{layout}.png", _hysteresis_grid(layout, cases, truth_of)),
+        for name, fig in ((f"hysteresis_{layout}.png", hysteresis_figure(layout, cases, truth_of)),
                           (f"force_error_{layout}.png",
-                           _force_error_grid(layout, cases, truth_of, document))):
+                           force_error_figure(layout, cases, truth_of, document))):
             path = out / name
             fig.savefig(path, dpi=DPI)
             written.append(path)
@@ -101,7 +103,7 @@ def write_figures(
     return written
 
 
-def _hysteresis_grid(layout: str, cases: Mapping[str, CaseHistory], truth_of: str) -> Figure:
+def hysteresis_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: str) -> Figure:
     """Every case's twin hysteresis, predicted over true, one panel each (own scales: a case
     that diverges must not flatten the others)."""
     from fresco_bridge.report.figures import (
@@ -128,7 +130,7 @@ FORCE_ERROR_BENCHMARK = "conventional_calibrated"
 ``study.constants.TARGET_BASELINE``), so each panel reads as better or worse than it."""
 
 
-def _force_error_grid(layout: str, cases: Mapping[str, CaseHistory], truth_of: str,
+def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: str,
                       document: Mapping[str, Any]) -> Figure:
     """|true − twin force| in time, one panel per learning case on shared axes (log force), the
     benchmark case in grey behind, each panel's MAETH and RMSETH in its corner (Fig. 13a)."""
@@ -204,17 +206,19 @@ def bars_figure(document: Mapping[str, Any]) -> Figure:
             body = document["layouts"][layout]["cases"]
             v = np.array([float(body[n][key] if index is None else body[n][key][index])
                           for n in names])
-            pos = y - 0.4 + (i + 0.5) * height
-            ax.barh(pos, np.where(v > 0, v, np.nan), height, color=f"C{i}",
+            bars.append((y - 0.4 + (i + 0.5) * height, v, layout))
+        every = np.concatenate([v for _, v, _ in bars])
+        positive = every[np.isfinite(every) & (every > 0)]
+        low, high = (float(positive.min()), float(positive.max())) if positive.size else (1, 1)
+        base = low / 3.0  # bars start at the axis (a log axis has no zero)
+        for i, (pos, v, layout) in enumerate(bars):
+            ax.barh(pos, np.where(v > 0, v, np.nan) - base, height, left=base, color=f"C{i}",
                     label=f"{layout} layout")
-            bars += list(zip(pos, v, strict=True))
+            for p, value in zip(pos, v, strict=True):  # no bar for 0 or NaN: the label says so
+                ax.text(value if math.isfinite(value) and value > 0 else base, p,
+                        f" {_sig(value)}", va="center", fontsize=7)
         ax.set_xscale("log")
-        positive = [value for _, value in bars if math.isfinite(value) and value > 0]
-        low, high = (min(positive), max(positive)) if positive else (1.0, 1.0)
-        ax.set_xlim(low / 3.0, high * 12.0)  # room for the value labels right of the bars
-        for p, value in bars:  # a zero (or non-finite) value has no bar: its label at the axis
-            ax.text(value if math.isfinite(value) and value > 0 else low / 3.0, p,
-                    f" {_sig(value)}", va="center", fontsize=7)
+        ax.set_xlim(base, high * 12.0)  # room for the value labels right of the bars
         style_panel(ax, title, f"{unit} (log scale)", "")
         ax.grid(alpha=GRID_ALPHA, axis="x", which="both")
         ax.grid(False, axis="y")
