@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 __all__ = ["overlay_figure", "summary", "to_json", "write_json", "write_report"]
@@ -119,7 +120,6 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
         PREDICTION,
         SUPTITLE_SIZE,
         TRUTH,
-        _no_data,
         _stride,
         style_panel,
     )
@@ -151,8 +151,10 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
             ax.plot(disp[::k], model[::k], label=label, **{**style, "lw": 0.8, "ls": "-"})
             title = f"{label}: withheld gap {_pct(gap)}"
         else:
-            _no_data(ax, f"verdict {name}: no effect added to the sim")
-            title = f"verdict {name}"
+            ax.text(0.97, 0.04, f"verdict {name}:\nno effect added to the sim", ha="right",
+                    va="bottom", transform=ax.transAxes, fontsize=LABEL_SIZE, color="0.3",
+                    bbox={"boxstyle": "round,pad=0.3", "fc": "white", "ec": "0.8"})
+            title = f"verdict {name}: the sim alone is the model"
         style_panel(ax, title, "displacement (mm)", "force (kN)")
         ax.legend(fontsize=LABEL_SIZE, loc="upper left")
     ax = axes["residual"]
@@ -164,6 +166,7 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
         ax.plot(t[::k], (f - best)[::k], label=f"measured − (sim + {name}) (gap {_pct(gap_best)})",
                 **{**PREDICTION, "lw": 0.8})
     ax.axhline(0.0, color="0.3", lw=0.6)
+    _residual_span(ax, result, f - sim, f - best if added else f - sim)
     lo, hi = ax.get_ylim()
     ax.set_ylim(lo, hi + 0.3 * (hi - lo))  # headroom: the legend never hides a residual peak
     style_panel(ax, "force residual in time", "time (s)", "force residual (kN)")
@@ -173,6 +176,17 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
                  "effect", fontsize=SUPTITLE_SIZE)
     fig.tight_layout()
     return fig
+
+
+def _residual_span(ax: Axes, result: dict[str, Any], *residuals: np.ndarray) -> None:
+    """A residual axis spans at least ± the noise floor of the peak force: round-off residuals
+    (a record the sim matches exactly) must not fill the axis and look like a misfit."""
+    from ..report.figures import _min_span
+
+    f = result["_series"]["force"]
+    peak = float(np.nanmax(np.abs(f))) if np.isfinite(f).any() else 0.0
+    floor = result["noise_floor"]["floor_pct"] / 100.0
+    _min_span(ax, np.concatenate(residuals), 2.0 * floor * peak)
 
 
 def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
@@ -205,6 +219,7 @@ def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
                    label=f"measured − (sim + {name})")
     ax.set_xlabel("loop phase of the command (deg; 0 = positive peak, ±180 = negative peak)")
     ax.set_ylabel("force residual (kN)")
+    _residual_span(ax, result, f - sim, f - best if added else f - sim)
     ax.set_title("force residual against loop phase")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small", markerscale=4)
