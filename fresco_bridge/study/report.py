@@ -162,7 +162,7 @@ def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: 
         if name in metrics:
             m = metrics[name]
             ax.text(0.02, 0.96, f"MAETH {_sig(m['maeth'])} kN\nRMSETH {_sig(m['rmseth'])} kN",
-                    transform=ax.transAxes, va="top", fontsize=7,
+                    transform=ax.transAxes, va="top", fontsize=LABEL_SIZE,
                     bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.8", "alpha": 0.85})
     outer_labels(axes, 3)
     positive = np.concatenate([e[e > 0] for e in errors.values()] or [np.ones(1)])
@@ -197,7 +197,7 @@ def bars_figure(document: Mapping[str, Any]) -> Figure:
               ("MAESD story 1 (Fig. 14)", "mm", "maesd", 0),
               ("MAESD story 2 (Fig. 14)", "mm", "maesd", 1))
     fig, axes = panel_grid(len(panels), cols=3, sharey=True,
-                           size=(4.4, 0.55 * len(names) * len(layouts) / 2 + 1.4))
+                           size=(4.0, 0.55 * len(names) * len(layouts) / 2 + 1.4))
     y = np.arange(len(names))
     height = 0.8 / len(layouts)
     for ax, (title, unit, key, index) in zip(axes, panels, strict=True):
@@ -216,7 +216,7 @@ def bars_figure(document: Mapping[str, Any]) -> Figure:
                     label=f"{layout} layout")
             for p, value in zip(pos, v, strict=True):  # no bar for 0 or NaN: the label says so
                 ax.text(value if math.isfinite(value) and value > 0 else base, p,
-                        f" {_sig(value)}", va="center", fontsize=7)
+                        f" {_sig(value)}", va="center", fontsize=LABEL_SIZE)
         ax.set_xscale("log")
         ax.set_xlim(base, high * 12.0)  # room for the value labels right of the bars
         style_panel(ax, title, f"{unit} (log scale)", "")
