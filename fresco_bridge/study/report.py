@@ -125,15 +125,11 @@ def hysteresis_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: s
     return fig
 
 
-FORCE_ERROR_BENCHMARK = "conventional_calibrated"
-"""The case drawn faintly behind every other in the force-error panels (the targets' baseline:
-``study.constants.TARGET_BASELINE``), so each panel reads as better or worse than it."""
-
-
 def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: str,
                       document: Mapping[str, Any]) -> Figure:
     """|true − twin force| in time, one panel per learning case on shared axes (log force), the
-    benchmark case in grey behind, each panel's MAETH and RMSETH in its corner (Fig. 13a)."""
+    targets' baseline case (``TARGET_BASELINE``) in grey behind every other so each panel reads
+    as better or worse than it, each panel's MAETH and RMSETH in its corner (Fig. 13a)."""
     from matplotlib.lines import Line2D
 
     from fresco_bridge.report.figures import (
@@ -141,19 +137,24 @@ def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: 
         PREDICTION,
         SUPTITLE_SIZE,
         TRUTH,
+        _no_data,
         outer_labels,
         panel_grid,
         style_panel,
     )
 
     names = [n for n in cases if n != "reference"]
+    if not names:  # a study of the reference alone: its error is zero by construction
+        fig, axes = panel_grid(1)
+        _no_data(axes[0], "no learning case in this study (the reference's error is zero)")
+        return fig
     errors = {n: np.abs(getattr(cases[n], truth_of) - cases[n].twin_force) for n in names}
     metrics = document["layouts"].get(layout, {}).get("cases", {})
     fig, axes = panel_grid(len(names), cols=3, sharex=True, sharey=True, size=(4.0, 2.6))
     for ax, name in zip(axes, names, strict=True):
         time = np.arange(errors[name].size) * STEP_S
-        if FORCE_ERROR_BENCHMARK in errors and name != FORCE_ERROR_BENCHMARK:
-            bench = errors[FORCE_ERROR_BENCHMARK]
+        if TARGET_BASELINE in errors and name != TARGET_BASELINE:
+            bench = errors[TARGET_BASELINE]
             ax.plot(np.arange(bench.size) * STEP_S, bench,
                     **{**TRUTH, "lw": 0.5, "color": "0.65"})
         ax.plot(time, errors[name], **PREDICTION)
@@ -169,10 +170,12 @@ def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: 
     if positive.size:  # the floor: 6 decades below the worst, not a round-off dip at step 0
         top = float(positive.max())
         axes[0].set_ylim(max(float(positive.min()), top * 1e-6), top * 3.0)
-    case = Line2D([], [], **PREDICTION)
-    bench_line = Line2D([], [], **{**TRUTH, "color": "0.65"})
-    fig.legend([case, bench_line], ["the panel's case", f"{FORCE_ERROR_BENCHMARK} (for scale)"],
-               loc="lower center", ncol=2, fontsize=LABEL_SIZE, frameon=False)
+    handles = [(Line2D([], [], **PREDICTION), "the panel's case")]
+    if TARGET_BASELINE in errors and len(names) > 1:
+        handles.append((Line2D([], [], **{**TRUTH, "color": "0.65"}),
+                        f"{TARGET_BASELINE} (for scale)"))
+    fig.legend(*zip(*handles, strict=True), loc="lower center", ncol=2, fontsize=LABEL_SIZE,
+               frameon=False)
     fig.suptitle(f"{layout} layout: absolute force error of the twin (Fig. 13a), one panel "
                  "per case, shared axes", fontsize=SUPTITLE_SIZE)
     fig.tight_layout(rect=(0.0, 0.04, 1.0, 1.0))

@@ -129,3 +129,20 @@ def test_a_case_without_a_positive_value_gets_a_label_and_no_bar(value: float) -
     fig.canvas.draw()
     labels = [t.get_text().strip() for t in fig.axes[0].texts]
     assert ("0" if value == 0.0 else "—") in labels
+
+
+@pytest.mark.parametrize("kept", [("reference",), ("reference", "online_improved")])
+def test_a_study_of_few_cases_still_draws_every_figure(tmp_path: Path,
+                                                       kept: tuple[str, ...]) -> None:
+    document = _document()
+    for body in document["layouts"].values():
+        body["cases"] = {n: m for n, m in body["cases"].items() if n in kept}
+    histories = {layout: {n: h for n, h in cases.items() if n in kept}
+                 for layout, cases in _histories().items()}
+    assert len(write_figures(document, histories, tmp_path)) == 5
+    fig = force_error_figure("paper", histories["paper"], "tested_force", document)
+    (ax,) = [ax for ax in fig.axes if ax.get_visible()]
+    assert ax.get_title() == ("" if kept == ("reference",) else "online_improved")
+    assert len(fig.legends) == (0 if kept == ("reference",) else 1)
+    if kept != ("reference",):
+        assert [t.get_text() for t in fig.legends[0].get_texts()] == ["the panel's case"]
