@@ -116,7 +116,7 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     """Every plot of ``diagnose --report``: ``{file name: PNG bytes}``."""
     from matplotlib.figure import Figure
 
-    from ..report.figures import BASELINE, PREDICTION, _png, _stride
+    from ..report.figures import BASELINE, GRID_ALPHA, PREDICTION, _png, _stride
     from ..report.figures import synchronization as sync_figure
     from ..runs import SessionSignals
     from .localise import phase_angle
@@ -143,7 +143,7 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     ax.set_ylabel("force residual (kN)")
     _residual_span(ax, result, f - sim, f - best if added else f - sim)
     ax.set_title("force residual against loop phase")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     ax.legend(fontsize="small", markerscale=4)
     fig.tight_layout()
     files["residual_vs_phase.png"] = _png(fig)
@@ -167,7 +167,7 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("|FFT| of the residual (kN, Hann window)")
     ax.set_title(f"residual spectrum (withheld part starts at t = {t[stop]:.4g} s)")
-    ax.grid(alpha=0.3, which="both")
+    ax.grid(alpha=GRID_ALPHA, which="both")
     ax.legend(fontsize="small")
     fig.tight_layout()
     files["residual_spectrum.png"] = _png(fig)

@@ -128,7 +128,7 @@ def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_xlabel("measured displacement (mm)")
     ax.set_ylabel("measured force (kN)")
     ax.set_title(f"{site}: hysteresis")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -164,7 +164,7 @@ def command_vs_measured(
     ax.set_xlabel("time (s)")
     ax.set_ylabel("displacement (mm)")
     ax.set_title(f"{site}: command vs measured displacement")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -224,7 +224,7 @@ def error_monitors(
     ax_ti.set_ylabel("tracking indicator (mm²)")
     ax_fei.set_xlabel("time (s)")
     for ax in (ax_e, ax_ti, ax_fei):
-        ax.grid(alpha=0.3)
+        ax.grid(alpha=GRID_ALPHA)
     _legend(ax_e)
     _legend(ax_ti)
     fig.tight_layout()
@@ -253,7 +253,7 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_ylabel("measured displacement (mm)")
     ax.set_title(f"{site}: synchronization subspace")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -271,15 +271,16 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     axes = fig.subplots(3, 2)
     k = _stride(twin_d.size)
     ax = axes[0, 0]
-    ax.plot(twin_d[::k], twin_f[::k], lw=0.8, color="C3")
+    ax.plot(twin_d[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8})
     ax.set_xlabel("twin displacement (mm)")
     ax.set_ylabel("predicted force (kN)")
     ax.set_title("twin hysteresis (predicted)", fontsize=10)
     ax = axes[0, 1]
     ks = _stride(source_f.size)
-    ax.plot(source_time[::ks], source_f[::ks], lw=0.8, color="0.4",
+    ax.plot(source_time[::ks], source_f[::ks], **{**TRUTH, "lw": 0.8},
             label=f"source {source} (measured)")
-    ax.plot(twin_time[::k], twin_f[::k], lw=0.8, color="C3", label=f"twin {twin} (predicted)")
+    ax.plot(twin_time[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8},
+            label=f"twin {twin} (predicted)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (kN)")
     ax.set_title("predicted vs source force", fontsize=10)
@@ -319,7 +320,7 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     ax.set_ylabel("twin steps")
     ax.set_title("update time distribution (steps that learned)", fontsize=10)
     for n, ax in enumerate(axes.flat):
-        ax.grid(alpha=0.3)
+        ax.grid(alpha=GRID_ALPHA)
         if not twin_d.size:
             _no_data(ax, "no committed twin steps")
         elif n >= 2 and not steps.size:
