@@ -1,8 +1,11 @@
-"""The report's figures, rendered to PNG bytes with matplotlib's Agg backend.
+"""The report's figures, rendered to PNG bytes with matplotlib's Agg backend, and the one home
+of the figures' look (``TRUTH``, ``PREDICTION``, ``BASELINE``, sizes, :func:`panel_grid` for
+small multiples) that the study's and the diagnosis's figures share.
 
-Only the report imports this module, so matplotlib never loads in the daemon. Figures are
-built on ``matplotlib.figure.Figure`` (no pyplot global state). Long records are thinned to
-about ``MAX_POINTS`` points per line for drawing; the numbers in the report use every step.
+Only the after-the-run deliverables (the report, ``study paper``'s and ``diagnose``'s plots)
+import this module, so matplotlib never loads in the daemon. Figures are built on
+``matplotlib.figure.Figure`` (no pyplot global state). Long records are thinned to about
+``MAX_POINTS`` points per line for drawing; the numbers in the report use every step.
 """
 
 from __future__ import annotations
