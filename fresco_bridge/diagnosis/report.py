@@ -1,8 +1,8 @@
 """What a diagnosis shows a person: a ten-second summary, the JSON file, a directory of plots.
 
-Plots (PNG, matplotlib Agg through ``fresco_bridge.report.figures``): the hysteresis of the
-measurement against the sim with and without the winning effect, the force residual against the
-loop phase, measured against commanded displacement, and the residual spectrum.
+Plots (PNG, ``fresco_bridge.diagnosis.figures``): the hysteresis of the measurement against the
+sim without and with the winning effect and their force residuals in time, the force residual
+against the loop phase, measured against commanded displacement, and the residual spectrum.
 """
 
 from __future__ import annotations
@@ -100,75 +100,10 @@ def write_json(result: dict[str, Any], path: Path) -> None:
 
 def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
     """Write summary.txt, diagnosis.json and the plots into ``directory``; the files."""
-    from matplotlib.figure import Figure
-
-    from ..report.figures import _png, _stride
-    from ..report.figures import synchronization as sync_figure
-    from ..runs import SessionSignals
-    from .localise import phase_angle
+    from .figures import plots
 
     directory.mkdir(parents=True, exist_ok=True)
-    s = result["_series"]
-    t, c, m, f = s["time"], s["cmd"], s["meas_disp"], s["force"]
-    sim, best, stop = s["sim"], s["best"], s["stop"]
-    name = result["verdict"]["effect"]
-    k = _stride(t.size)
-    files: dict[str, bytes] = {}
-
-    fig = Figure(figsize=(7.2, 5.4))
-    ax = fig.add_subplot()
-    x = m if m is not None else c
-    ax.plot(x[::k], f[::k], lw=0.9, color="0.2", label="measured")
-    ax.plot(c[::k], sim[::k], lw=0.9, ls="--", color="tab:blue", label="sim (baseline)")
-    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
-        bd = s["best_disp"] if s["best_disp"] is not None else c
-        ax.plot(bd[::k], best[::k], lw=0.9, ls=":", color="tab:red", label=f"sim + {name}")
-    ax.set_xlabel("displacement (mm)")
-    ax.set_ylabel("force (kN)")
-    ax.set_title("hysteresis: measured vs sim, without and with the effect")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize="small")
-    fig.tight_layout()
-    files["hysteresis_overlay.png"] = _png(fig)
-
-    fig = Figure(figsize=(7.2, 4.8))
-    ax = fig.add_subplot()
-    phase = phase_angle(c)
-    ax.scatter(phase[::k], (f - sim)[::k], s=3, alpha=0.5, label="measured − sim (baseline)")
-    if best is not None and name not in ("none", "unexplained", "baseline_misfit"):
-        ax.scatter(phase[::k], (f - best)[::k], s=3, alpha=0.5, color="tab:red",
-                   label=f"measured − sim + {name}")
-    ax.set_xlabel("loop phase of the command (deg; 0 = positive peak, ±180 = negative peak)")
-    ax.set_ylabel("force residual (kN)")
-    ax.set_title("force residual against loop phase")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize="small", markerscale=4)
-    fig.tight_layout()
-    files["residual_vs_phase.png"] = _png(fig)
-
-    meas = (m if m is not None else np.full_like(c, math.nan))[:, None]
-    signals = SessionSignals("record", 1, t, np.arange(t.size), c[:, None], meas, f[:, None])
-    files["measured_vs_command.png"] = sync_figure("record", [signals])
-
-    fig = Figure(figsize=(7.2, 4.8))
-    ax = fig.add_subplot()
-    dt = float(np.median(np.diff(t)))
-    freqs = np.fft.rfftfreq(t.size, dt)[1:]
-    for label, r, color in (("force: measured − sim", f - sim, "tab:blue"),
-                            (f"force: measured − sim + {name}",
-                             None if best is None else f - best, "tab:red")):
-        if r is None or (name in ("none", "unexplained", "baseline_misfit") and color == "tab:red"):
-            continue
-        spectrum = np.abs(np.fft.rfft((r - r.mean()) * np.hanning(r.size)))[1:]
-        ax.semilogy(freqs, spectrum, lw=0.8, color=color, label=label)
-    ax.axvline(1.0 / (2.0 * dt), color="0.5", lw=0.6)
-    ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("|FFT| of the residual (kN, Hann window)")
-    ax.set_title(f"residual spectrum (withheld part starts at t = {t[stop]:.4g} s)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize="small")
-    fig.tight_layout()
-    files["residual_spectrum.png"] = _png(fig)
+    files = plots(result)
 
     written = []
     for filename, data in files.items():

@@ -1,8 +1,11 @@
-"""The report's figures, rendered to PNG bytes with matplotlib's Agg backend.
+"""The report's figures, rendered to PNG bytes with matplotlib's Agg backend, and the one home
+of the figures' look (``TRUTH``, ``PREDICTION``, ``BASELINE``, sizes, :func:`panel_grid` for
+small multiples) that the study's and the diagnosis's figures share.
 
-Only the report imports this module, so matplotlib never loads in the daemon. Figures are
-built on ``matplotlib.figure.Figure`` (no pyplot global state). Long records are thinned to
-about ``MAX_POINTS`` points per line for drawing; the numbers in the report use every step.
+Only the after-the-run deliverables (the report, ``study paper``'s and ``diagnose``'s plots)
+import this module, so matplotlib never loads in the daemon. Figures are built on
+``matplotlib.figure.Figure`` (no pyplot global state). Long records are thinned to about
+``MAX_POINTS`` points per line for drawing; the numbers in the report use every step.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -21,6 +25,19 @@ from ..runs import SessionSignals
 
 MAX_POINTS = 20_000
 DPI = 100
+
+# One home for the look of the comparison figures (the study's and the diagnosis's), after the
+# study's hysteresis grid: the truth or the measurement in grey underneath, the model that is
+# being judged in red on top (grey shows only where it misses), a baseline model dashed blue.
+TRUTH: dict[str, Any] = {"color": "0.4", "lw": 0.7, "zorder": 2}
+PREDICTION: dict[str, Any] = {"color": "C3", "lw": 0.7, "zorder": 3}
+BASELINE: dict[str, Any] = {"color": "C0", "lw": 0.8, "ls": "--", "zorder": 2.5}
+GRID_ALPHA = 0.3
+TITLE_SIZE = 9
+LABEL_SIZE = 8
+SUPTITLE_SIZE = 10
+PANEL_SIZE = (3.6, 3.2)
+"""Inches per panel of a grid of small multiples."""
 
 
 def _png(fig: Figure) -> bytes:
@@ -60,6 +77,45 @@ def _min_span(ax: Axes, values: np.ndarray, span: float) -> None:
         ax.set_ylim(mid - span / 2, mid + span / 2)
 
 
+def panel_grid(n: int, *, cols: int = 4, sharex: bool = False, sharey: bool = False,
+               size: tuple[float, float] = PANEL_SIZE) -> tuple[Figure, list[Axes]]:
+    """``n`` panels (small multiples) in rows of at most ``cols``; spare cells hidden. Shared
+    axes are what make panels comparable at a glance, so callers comparing one quantity pass
+    ``sharex``/``sharey``; tick labels then show on the outer panels only."""
+    if n < 1:
+        raise ValueError(f"panel_grid: need at least one panel (got {n})")
+    cols = min(cols, n)
+    rows = -(-n // cols)
+    fig = Figure(figsize=(size[0] * cols, size[1] * rows))
+    grid = fig.subplots(rows, cols, squeeze=False, sharex=sharex, sharey=sharey)
+    cells = list(grid.flat)
+    for ax in cells[n:]:
+        ax.set_visible(False)
+    if sharex:  # the last visible panel of each column carries the x ticks
+        for ax in cells[max(0, n - cols):n]:
+            ax.xaxis.set_tick_params(labelbottom=True)
+    return fig, cells[:n]
+
+
+def style_panel(ax: Axes, title: str, xlabel: str, ylabel: str) -> None:
+    """A small multiple's title, axis labels and grid, in the shared sizes."""
+    ax.set_title(title, fontsize=TITLE_SIZE)
+    ax.set_xlabel(xlabel, fontsize=LABEL_SIZE)
+    ax.set_ylabel(ylabel, fontsize=LABEL_SIZE)
+    ax.grid(alpha=GRID_ALPHA)
+
+
+def outer_labels(axes: Sequence[Axes], cols: int) -> None:
+    """Axis labels on the outer panels of a shared grid only (bottom row of each column, first
+    column), as :func:`panel_grid` laid them out."""
+    cols = min(cols, len(axes))
+    for i, ax in enumerate(axes):
+        if i + cols < len(axes):
+            ax.set_xlabel("")
+        if i % cols:
+            ax.set_ylabel("")
+
+
 def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
     """Measured force against measured displacement, per actuator and session."""
     fig = Figure(figsize=(6.4, 4.8))
@@ -75,7 +131,7 @@ def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_xlabel("measured displacement (mm)")
     ax.set_ylabel("measured force (kN)")
     ax.set_title(f"{site}: hysteresis")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -111,7 +167,7 @@ def command_vs_measured(
     ax.set_xlabel("time (s)")
     ax.set_ylabel("displacement (mm)")
     ax.set_title(f"{site}: command vs measured displacement")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -171,7 +227,7 @@ def error_monitors(
     ax_ti.set_ylabel("tracking indicator (mm²)")
     ax_fei.set_xlabel("time (s)")
     for ax in (ax_e, ax_ti, ax_fei):
-        ax.grid(alpha=0.3)
+        ax.grid(alpha=GRID_ALPHA)
     _legend(ax_e)
     _legend(ax_ti)
     fig.tight_layout()
@@ -200,7 +256,7 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.set_ylabel("measured displacement (mm)")
     ax.set_title(f"{site}: synchronization subspace")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(alpha=0.3)
+    ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
     return _png(fig)
@@ -218,15 +274,16 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     axes = fig.subplots(3, 2)
     k = _stride(twin_d.size)
     ax = axes[0, 0]
-    ax.plot(twin_d[::k], twin_f[::k], lw=0.8, color="C3")
+    ax.plot(twin_d[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8})
     ax.set_xlabel("twin displacement (mm)")
     ax.set_ylabel("predicted force (kN)")
     ax.set_title("twin hysteresis (predicted)", fontsize=10)
     ax = axes[0, 1]
     ks = _stride(source_f.size)
-    ax.plot(source_time[::ks], source_f[::ks], lw=0.8, color="0.4",
+    ax.plot(source_time[::ks], source_f[::ks], **{**TRUTH, "lw": 0.8},
             label=f"source {source} (measured)")
-    ax.plot(twin_time[::k], twin_f[::k], lw=0.8, color="C3", label=f"twin {twin} (predicted)")
+    ax.plot(twin_time[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8},
+            label=f"twin {twin} (predicted)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (kN)")
     ax.set_title("predicted vs source force", fontsize=10)
@@ -266,7 +323,7 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     ax.set_ylabel("twin steps")
     ax.set_title("update time distribution (steps that learned)", fontsize=10)
     for n, ax in enumerate(axes.flat):
-        ax.grid(alpha=0.3)
+        ax.grid(alpha=GRID_ALPHA)
         if not twin_d.size:
             _no_data(ax, "no committed twin steps")
         elif n >= 2 and not steps.size:

@@ -2,7 +2,8 @@
 verdicts on the restated updating targets (``study.constants.TARGETS``; BENCHMARKS.md, "Online
 updating"), scored per causality with the bad runs named.
 
-matplotlib (Agg) is imported inside :func:`write_figures` only.
+matplotlib loads only when a figure is drawn (``fresco_bridge.report.figures``, the shared
+styles; no pyplot state).
 """
 
 from __future__ import annotations
@@ -11,10 +12,11 @@ import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from fresco_bridge.integrator import DEMO_DT as STEP_S
 from fresco_bridge.study.constants import (
     BOUNDED_PEAK_RATIO,
     TARGET_BASELINE,
@@ -25,9 +27,15 @@ from fresco_bridge.study.constants import (
 )
 from fresco_bridge.study.simulate import CaseHistory
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 __all__ = [
     "RunCheck",
+    "bars_figure",
     "describe_target",
+    "force_error_figure",
+    "hysteresis_figure",
     "markdown_tables",
     "score_targets",
     "summary_table",
@@ -76,79 +84,162 @@ def markdown_tables(document: Mapping[str, Any]) -> str:
 def write_figures(
     document: Mapping[str, Any], histories: Mapping[str, Mapping[str, CaseHistory]], out: Path
 ) -> list[Path]:
-    """Hysteresis overlays, force-error histories and bar charts; returns the files written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """Per layout the hysteresis grid and the force-error small multiples, then the bar charts
+    of every layout; returns the files written (PNG)."""
+    from fresco_bridge.report.figures import DPI
 
     written: list[Path] = []
     for layout, cases in histories.items():
-        names = list(cases)
-        truth_of = ("tested_force" if layout == "paper" else "twin_true_force")
-        cols = min(4, len(names))
-        rows = -(-len(names) // cols)
-        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.2 * rows), squeeze=False)
-        for ax, name in zip(axes.flat, names, strict=False):
-            h = cases[name]
-            ax.plot(h.twin_drift, getattr(h, truth_of), lw=0.7, color="0.4", label="true")
-            ax.plot(h.twin_drift, h.twin_force, lw=0.7, color="C3", label="twin")
-            ax.set_title(name, fontsize=9)
-            ax.set_xlabel("drift (mm)", fontsize=8)
-            ax.set_ylabel("force (kN)", fontsize=8)
-            ax.grid(alpha=0.3)
-        for ax in list(axes.flat)[len(names):]:
-            ax.set_visible(False)
-        axes.flat[0].legend(fontsize=7)
-        fig.suptitle(f"{layout} layout: twin hysteresis, predicted vs true", fontsize=10)
-        fig.tight_layout()
-        path = out / f"hysteresis_{layout}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        written.append(path)
-
-        fig, ax = plt.subplots(figsize=(9, 3.6))
-        for name in names:
-            if name == "reference":
-                continue
-            h = cases[name]
-            time = np.arange(h.twin_force.size) * 0.01
-            ax.plot(time, np.abs(getattr(h, truth_of) - h.twin_force), lw=0.7, label=name)
-        ax.set_yscale("log")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("|force error| (kN)")
-        ax.set_title(f"{layout} layout: absolute force error of the twin (Fig. 13a)")
-        ax.legend(fontsize=7, ncol=3)
-        ax.grid(alpha=0.3)
-        fig.tight_layout()
-        path = out / f"force_error_{layout}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        written.append(path)
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4))
-    layouts = list(document["layouts"])
-    names = [n for n in document["layouts"][layouts[0]]["cases"] if n != "reference"]
-    x = np.arange(len(names))
-    width = 0.8 / len(layouts)
-    for i, layout in enumerate(layouts):
-        body = document["layouts"][layout]["cases"]
-        ax1.bar(x + i * width, [body[n]["maeth"] for n in names], width, label=layout)
-        for story in range(2):
-            ax2.bar(x + (2 * i + story) * width / 2, [body[n]["maesd"][story] for n in names],
-                    width / 2, label=f"{layout} story {story + 1}")  # fmt: skip
-    for ax, title, unit in ((ax1, "MAETH (Fig. 13c)", "kN"), (ax2, "MAESD (Fig. 14)", "mm")):
-        ax.set_xticks(x + 0.4 - width / 2, names, rotation=30, ha="right", fontsize=8)
-        ax.set_ylabel(unit)
-        ax.set_title(title)
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3, axis="y")
-    fig.tight_layout()
+        truth_of = "tested_force" if layout == "paper" else "twin_true_force"
+        for name, fig in ((f"hysteresis_{layout}.png", hysteresis_figure(layout, cases, truth_of)),
+                          (f"force_error_{layout}.png",
+                           force_error_figure(layout, cases, truth_of, document))):
+            path = out / name
+            fig.savefig(path, dpi=DPI)
+            written.append(path)
     path = out / "bars.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    bars_figure(document).savefig(path, dpi=DPI)
     written.append(path)
     return written
+
+
+def hysteresis_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: str) -> Figure:
+    """Every case's twin hysteresis, predicted over true, one panel each (own scales: a case
+    that diverges must not flatten the others)."""
+    from fresco_bridge.report.figures import (
+        PREDICTION,
+        SUPTITLE_SIZE,
+        TRUTH,
+        panel_grid,
+        style_panel,
+    )
+
+    fig, axes = panel_grid(len(cases))
+    for ax, (name, h) in zip(axes, cases.items(), strict=True):
+        ax.plot(h.twin_drift, getattr(h, truth_of), label="true", **TRUTH)
+        ax.plot(h.twin_drift, h.twin_force, label="twin", **PREDICTION)
+        style_panel(ax, name, "drift (mm)", "force (kN)")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{layout} layout: twin hysteresis, predicted vs true", fontsize=SUPTITLE_SIZE)
+    fig.tight_layout()
+    return fig
+
+
+def force_error_figure(layout: str, cases: Mapping[str, CaseHistory], truth_of: str,
+                      document: Mapping[str, Any]) -> Figure:
+    """|true − twin force| in time, one panel per learning case on shared axes (log force), the
+    targets' baseline case (``TARGET_BASELINE``) in grey behind every other so each panel reads
+    as better or worse than it, each panel's MAETH and RMSETH in its corner (Fig. 13a)."""
+    from matplotlib.lines import Line2D
+
+    from fresco_bridge.report.figures import (
+        LABEL_SIZE,
+        PREDICTION,
+        SUPTITLE_SIZE,
+        TRUTH,
+        _no_data,
+        outer_labels,
+        panel_grid,
+        style_panel,
+    )
+
+    names = [n for n in cases if n != "reference"]
+    if not names:  # a study of the reference alone: its error is zero by construction
+        fig, axes = panel_grid(1)
+        _no_data(axes[0], "no learning case in this study (the reference's error is zero)")
+        return fig
+    errors = {n: np.abs(getattr(cases[n], truth_of) - cases[n].twin_force) for n in names}
+    metrics = document["layouts"].get(layout, {}).get("cases", {})
+    fig, axes = panel_grid(len(names), cols=3, sharex=True, sharey=True, size=(4.0, 2.6))
+    for ax, name in zip(axes, names, strict=True):
+        time = np.arange(errors[name].size) * STEP_S
+        if TARGET_BASELINE in errors and name != TARGET_BASELINE:
+            bench = errors[TARGET_BASELINE]
+            ax.plot(np.arange(bench.size) * STEP_S, bench,
+                    **{**TRUTH, "lw": 0.5, "color": "0.65"})
+        ax.plot(time, errors[name], **PREDICTION)
+        ax.set_yscale("log")
+        style_panel(ax, name, "time (s)", "|force error| (kN)")
+        if name in metrics:
+            m = metrics[name]
+            ax.text(0.02, 0.96, f"MAETH {_sig(m['maeth'])} kN\nRMSETH {_sig(m['rmseth'])} kN",
+                    transform=ax.transAxes, va="top", fontsize=LABEL_SIZE,
+                    bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.8", "alpha": 0.85})
+    outer_labels(axes, 3)
+    positive = np.concatenate([e[e > 0] for e in errors.values()] or [np.ones(1)])
+    if positive.size:  # the floor: 6 decades below the worst, not a round-off dip at step 0
+        top = float(positive.max())
+        axes[0].set_ylim(max(float(positive.min()), top * 1e-6), top * 3.0)
+    handles = [(Line2D([], [], **PREDICTION), "the panel's case")]
+    if TARGET_BASELINE in errors and len(names) > 1:
+        handles.append((Line2D([], [], **{**TRUTH, "color": "0.65"}),
+                        f"{TARGET_BASELINE} (for scale)"))
+    fig.legend(*zip(*handles, strict=True), loc="lower center", ncol=2, fontsize=LABEL_SIZE,
+               frameon=False)
+    fig.suptitle(f"{layout} layout: absolute force error of the twin (Fig. 13a), one panel "
+                 "per case, shared axes", fontsize=SUPTITLE_SIZE)
+    fig.tight_layout(rect=(0.0, 0.04, 1.0, 1.0))
+    return fig
+
+
+def bars_figure(document: Mapping[str, Any]) -> Figure:
+    """MAETH and MAESD per case and layout (Figs. 13c, 14) as horizontal bars on log axes with
+    their values written at the bar ends: the cases span three decades (a diverged ANN at
+    hundreds of kN, ``online_improved`` below 1 kN), which a linear axis flattens to nothing."""
+    from fresco_bridge.report.figures import (
+        GRID_ALPHA,
+        LABEL_SIZE,
+        SUPTITLE_SIZE,
+        panel_grid,
+        style_panel,
+    )
+
+    layouts = list(document["layouts"])
+    names = [n for n in document["layouts"][layouts[0]]["cases"] if n != "reference"]
+    panels = (("MAETH (Fig. 13c)", "kN", "maeth", None),
+              ("MAESD story 1 (Fig. 14)", "mm", "maesd", 0),
+              ("MAESD story 2 (Fig. 14)", "mm", "maesd", 1))
+    fig, axes = panel_grid(len(panels), cols=3, sharey=True,
+                           size=(4.0, 0.55 * len(names) * len(layouts) / 2 + 1.4))
+    y = np.arange(len(names))
+    height = 0.8 / len(layouts)
+    for ax, (title, unit, key, index) in zip(axes, panels, strict=True):
+        bars = []
+        for i, layout in enumerate(layouts):
+            body = document["layouts"][layout]["cases"]
+            v = np.array([float(body[n][key] if index is None else body[n][key][index])
+                          for n in names])
+            bars.append((y - 0.4 + (i + 0.5) * height, v, layout))
+        every = np.concatenate([v for _, v, _ in bars])
+        positive = every[np.isfinite(every) & (every > 0)]
+        low, high = (float(positive.min()), float(positive.max())) if positive.size else (1, 1)
+        base = low / 3.0  # bars start at the axis (a log axis has no zero)
+        for i, (pos, v, layout) in enumerate(bars):
+            ax.barh(pos, np.where(v > 0, v, np.nan) - base, height, left=base, color=f"C{i}",
+                    label=f"{layout} layout")
+            for p, value in zip(pos, v, strict=True):  # no bar for 0 or NaN: the label says so
+                ax.text(value if math.isfinite(value) and value > 0 else base, p,
+                        f" {_sig(value)}", va="center", fontsize=LABEL_SIZE)
+        ax.set_xscale("log")
+        ax.set_xlim(base, high * 12.0)  # room for the value labels right of the bars
+        style_panel(ax, title, f"{unit} (log scale)", "")
+        ax.grid(alpha=GRID_ALPHA, axis="x", which="both")
+        ax.grid(False, axis="y")
+    axes[0].set_yticks(y, names, fontsize=LABEL_SIZE)
+    axes[0].invert_yaxis()  # the cases in the tables' order, top to bottom
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=len(layouts),
+               fontsize=LABEL_SIZE, frameon=False)
+    fig.suptitle("errors of the twin per case, smaller is better (log axes: every case legible)",
+                 fontsize=SUPTITLE_SIZE)
+    fig.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
+    return fig
+
+
+def _sig(value: float) -> str:
+    """Three significant digits, no float dust (``0.59``, ``37.3``, ``300``)."""
+    if not math.isfinite(value):
+        return "—"
+    return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.3e}"
 
 
 def summary_table(documents: Sequence[Mapping[str, Any]]) -> str:
