@@ -91,7 +91,12 @@ def main(argv: list[str] | None = None) -> int:
                               "the config's run_dir) instead of starting a new one")
     p_check = sub.add_parser("check", help="validate a lab config and exit")
     p_check.add_argument("--config", type=Path, required=True)
-    p_demo = sub.add_parser("demo", help="the source paper's two-story frame, end to end")
+    p_demo = sub.add_parser(
+        "demo", help="the source paper's story end to end: the two-story frame, the tested "
+                     "damper on the simulated rig, its twin learned online, the diagnosis")
+    p_demo.add_argument("--simple", action="store_true",
+                        help="the plumbing alone: an ideal bilinear damper, no rig, no twin")
+    p_demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     p_demo.add_argument("--record", type=Path, default=None,
                         help="PEER .AT2 ground motion (default: seeded Kanai-Tajimi record)")
     p_demo.add_argument("--pga", type=float, default=3.0, help="PGA in m/s² (default 3.0)")
@@ -136,10 +141,16 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     if args.command == "demo":
         from .demo import run_demo
+        from .demo_story import run_story
 
-        run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
-                 runs=args.runs, transport=args.transport, mqtt=args.mqtt,
-                 mqtt_prefix=args.mqtt_prefix, metrics_port=args.metrics_port)
+        common = {"record": args.record, "pga": args.pga, "duration": args.duration,
+                  "seed": args.seed, "runs": args.runs, "transport": args.transport,
+                  "mqtt": args.mqtt, "mqtt_prefix": args.mqtt_prefix,
+                  "metrics_port": args.metrics_port}
+        if args.simple:
+            run_demo(**common)
+        else:
+            run_story(**common, progress=not args.no_progress)
         return 0
     if args.command == "lab":
         return lab_command(args)

@@ -4,7 +4,9 @@ Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per s
 and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
 synchronization subspace), ``updating-<name>`` for an updatable site (its twin hysteresis,
 predicted vs source force, the source's one-step error, learning lag and update time, from
-its update lines), ``events`` and ``config`` (the snapshot). The same summary numbers are
+its update lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
+(``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events`` and ``config`` (the
+snapshot). The same summary numbers are
 embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
 pipeline can read them without scraping the tables.
 """
@@ -34,6 +36,7 @@ from ..runs import (
     summarise,
 )
 from . import figures
+from .diagnosis import diagnosis_sections
 
 REPORT_FILE = "report.html"
 MAX_EVENT_ROWS = 2000
@@ -272,6 +275,7 @@ def render_report(run: Run) -> str:
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
         *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
+        *diagnosis_sections(run.directory, _img),
         _events_section(run),
         _config_section(run),
         '<script type="application/json" id="summary-data">',
