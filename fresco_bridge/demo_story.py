@@ -87,7 +87,8 @@ def _site(name: str, transport: str) -> str:
 
 def _rig(transport: str) -> str:
     return (_site(SOURCE, transport) + '[sites.controller]\nkind = "rig"\n'
-            f'preset = "{RIG_PRESET}"\nstiffness = {DAMPER_K0!r}\n')
+            f'preset = "{RIG_PRESET}"\nstiffness = {DAMPER_K0!r}\n'
+            f"ramp_time = {DEMO_DT!r}   # each move in one time step, as in a fast test\n")
 
 
 def story_config_text(offline: Path | None, transport: str = "tcp", run_name: str = "demo", *,
