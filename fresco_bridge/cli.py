@@ -121,6 +121,26 @@ def main(argv: list[str] | None = None) -> int:
     return exit_code(lambda: _run(args), (ConfigError, LabError, RunDirError, ControlError))
 
 
+def _diagnose_into_run(run: str, runs: Path, sites: list[str]) -> None:
+    """``report RUN --diagnose SITE``: each site's diagnosis into ``RUN/diagnosis-SITE``."""
+    from .diagnosis.load import DiagnosisInputError
+    from .diagnosis.rundir import diagnose_into_run
+    from .progress import ProgressBar
+    from .runs import load_run
+
+    run_dir = resolve_run(run, runs)
+    known = load_run(run_dir).sites
+    for site in sites:
+        if site not in known:
+            raise RunDirError(f"{run_dir}: --diagnose {site}: no such site in this run "
+                              f"(sites: {', '.join(known) or 'none'})")
+        try:
+            h = diagnose_into_run(run_dir, site, ProgressBar(f"diagnose {site}", 1))
+        except DiagnosisInputError as exc:
+            raise RunDirError(f"{run_dir}: --diagnose {site}: {exc}") from None
+        print(f"{run_dir}/diagnosis-{site}: {h['effect']}")
+
+
 def _run(args: argparse.Namespace) -> int:
     """The command ``args`` names; its exit code (errors: ``exit_code``)."""
     if args.command == "serve":
@@ -160,6 +180,8 @@ def _run(args: argparse.Namespace) -> int:
         return study_command(args)
     if args.command == "updater":
         return updater_command(args)
+    if args.command == "report" and args.diagnose:
+        _diagnose_into_run(args.run, args.runs, args.diagnose)
     if args.command in REPORT_COMMANDS:
         return report_command(args)
     if args.command in DIAGNOSIS_COMMANDS:

@@ -225,11 +225,11 @@ def _diagnose(run_dir: Path, progress: bool) -> dict[str, Any]:
     """Act 4: ``fresco-bridge diagnose RUN --site damper --report RUN/diagnosis-damper``; a
     record the diagnosis refuses (too short: ``--duration``) gives ``{"skipped": reason}``."""
     from .diagnosis.load import DiagnosisInputError
-    from .report.diagnosis import diagnose_site
+    from .diagnosis.rundir import diagnose_into_run
 
     try:
-        return diagnose_site(run_dir, SOURCE,
-                             ProgressBar("3/3 diagnosis", 1, enabled=progress))
+        return diagnose_into_run(run_dir, SOURCE,
+                                 ProgressBar("3/3 diagnosis", 1, enabled=progress))
     except DiagnosisInputError as exc:
         return {"skipped": str(exc)}
 

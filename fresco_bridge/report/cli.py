@@ -39,7 +39,8 @@ def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                        help="diagnose SITE first (as `diagnose RUN --site SITE --report "
                             "RUN/diagnosis-SITE`) for the report's diagnosis section; "
                             "repeatable (without it, a diagnosis already in the run "
-                            "directory is shown)")
+                            "directory is shown). Run by fresco_bridge.cli: the diagnosis "
+                            "draws with this package's figures")
 
     p_runs = sub.add_parser("runs", help="list, show and export recorded runs")
     rs = p_runs.add_subparsers(dest="runs_command", required=True)
@@ -86,30 +87,12 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _diagnose(run_dir: Path, site: str) -> None:
-    from ..diagnosis.load import DiagnosisInputError
-    from ..progress import ProgressBar
-    from .diagnosis import DIAGNOSIS_PREFIX, diagnose_site
-
-    run = load_run(run_dir)
-    if site not in run.sites:
-        raise RunDirError(f"{run_dir}: --diagnose {site}: no such site in this run (sites: "
-                          f"{', '.join(run.sites) or 'none'})")
-    try:
-        h = diagnose_site(run_dir, site, ProgressBar(f"diagnose {site}", 1))
-    except DiagnosisInputError as exc:
-        raise RunDirError(f"{run_dir}: --diagnose {site}: {exc}") from None
-    print(f"{run_dir / (DIAGNOSIS_PREFIX + site)}: diagnosis of {site}: {h['effect']}")
-
-
 def report_command(args: argparse.Namespace) -> int:
     """Run the parsed ``report``/``runs``/``export`` command; returns the exit code."""
     if args.command == "report":
         from .html import write_report
 
         run_dir = resolve_run(args.run, args.runs)
-        for site in args.diagnose:
-            _diagnose(run_dir, site)
         path = write_report(run_dir, args.output)
         print(f"{path}: report of {run_dir}")
         return 0

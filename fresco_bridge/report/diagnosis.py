@@ -1,9 +1,10 @@
 """The report's diagnosis section: what ``diagnose RUN --site S --report RUN/diagnosis-S`` wrote.
 
 A run directory holds a site's diagnosis in ``diagnosis-<site>/`` (``diagnosis.json`` and the
-plots of ``fresco_bridge.diagnosis.report``): the demo writes it, ``report --diagnose SITE``
-computes it, and a user may write it with ``diagnose --report``. The report reads it rather
-than diagnosing again: a diagnosis costs seconds to minutes, the report should not.
+plots of ``fresco_bridge.diagnosis.report``), written by ``diagnosis.rundir`` (the demo,
+``report --diagnose SITE``) or by a user's ``diagnose --report``. The report reads it rather
+than diagnosing again (a diagnosis costs seconds to minutes), and imports nothing of the
+diagnosis, which draws with this package's figures.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
 
-__all__ = ["DIAGNOSIS_PREFIX", "diagnose_site", "diagnosis_sections", "headline"]
+__all__ = ["DIAGNOSIS_PREFIX", "diagnosis_sections", "headline"]
 
 DIAGNOSIS_PREFIX: Final = "diagnosis-"
 """``RUN/diagnosis-<site>/``: where a site's diagnosis lives in its run directory."""
@@ -45,19 +46,6 @@ def headline(result: dict[str, Any]) -> dict[str, Any]:
         "explanation": verdict["explanation"],
         "magnitude": magnitude,
     }
-
-
-def diagnose_site(run_dir: Path, site: str,
-                  progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """Diagnose ``site`` of ``run_dir`` (``diagnose``'s defaults) into
-    ``RUN/diagnosis-<site>/``; returns its :func:`headline`."""
-    from ..diagnosis.load import load_record
-    from ..diagnosis.report import write_report
-    from ..diagnosis.verdict import Options, diagnose
-
-    result = diagnose(load_record(run_dir, site=site), Options(), progress=progress)
-    write_report(result, run_dir / f"{DIAGNOSIS_PREFIX}{site}")
-    return headline(result)
 
 
 def _e(v: object) -> str:
