@@ -309,7 +309,8 @@ def format_story(s: dict[str, Any]) -> str:
         f"{_g(bil['rmseth_kN'], 2)} kN, max {_g(bil['maeth_kN'], 2)} kN -> updating cuts the "
         f"RMS error by {tw['rmseth_reduction_pct']:.0f} %",
         diagnosis,
-        "next           " + f"open {run}/report.html   (or: {cmd} report {run})",
+        f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)",
+        f"next           {cmd} report {run} --diagnose {SOURCE}   (again, from the record)",
         f"               {cmd} diagnose {run} --site {SOURCE}",
         f"               {cmd} updater replay --source {run} --site {SOURCE} --twin {run} "
         f"--twin-site {TWIN} --lag --updater online_ukf --offline {char} -o ukf.csv",

@@ -2,7 +2,8 @@
 
 Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
 and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
-synchronization subspace), ``updating-<name>`` for an updatable site (its twin hysteresis,
+synchronization subspace; an updatable site, without an actuator, its hysteresis only),
+``updating-<name>`` for an updatable site (its twin hysteresis,
 predicted vs source force, the source's one-step error, learning lag and update time, from
 its update lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
 (``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events`` and ``config`` (the
@@ -124,7 +125,27 @@ def _summary_section(summaries: list[SiteSummary]) -> str:
     return "".join(parts)
 
 
+def _twin_site_section(run: Run, site: str, source: str) -> str:
+    """An updatable site has no actuator: its "measurement" is its trial, so tracking error,
+    TI, FEI and synchronization would be flat zeros. Its served hysteresis and its learning
+    are in ``updating-<site>``."""
+    signals = [s for s in session_signals(run.steps) if s.site == site]
+    return "".join([
+        f'<section id="site-{_e(site)}"><h2>Site {_e(site)} (updatable)</h2>',
+        f'<p>The twin of <a href="#site-{_e(source)}">{_e(source)}</a>: no actuator, the '
+        "force it answered is its updater's prediction at the trial displacement, so there "
+        "is no tracking error to show. How it learned: "
+        f'<a href="#updating-{_e(site)}">Updating: {_e(site)}</a>.</p>',
+        _img(figures.hysteresis(site, signals), f"{site} hysteresis",
+             "The force the twin served against its trial displacement."),
+        "</section>",
+    ])
+
+
 def _site_section(run: Run, site: str, warn: float | None) -> str:
+    twin_of = run.sources().get(site)
+    if twin_of is not None:
+        return _twin_site_section(run, site, twin_of)
     signals = [s for s in session_signals(run.steps) if s.site == site]
     ti = []
     for sig in signals:
