@@ -67,6 +67,7 @@ SOURCE, TWIN = "damper", "twin"
 TWIN_STORY: Final = 1
 """0-based story of the twin: story 2 (the study's generalisation layout)."""
 UPDATER: Final = "online_improved"
+TWIN_FIGURE: Final = "twin_vs_bilinear.png"
 CHARACTERISATION_AMPLITUDES_MM: Final = (1.0, 2.0, 4.0, 6.0, 9.0, 12.0, 16.0)
 CHARACTERISATION_STEPS_PER_CYCLE: Final = 40
 
@@ -171,7 +172,7 @@ def run_story(
         wall = time.perf_counter() - t0
         run_dir = bridge.run_dir
     n_rows = export_csv(run_dir, run_dir / "steps.csv")
-    scores = twin_scores(run_dir, char_dir)
+    scores = twin_scores(run_dir, char_dir, run_dir / TWIN_FIGURE)
     diagnosis = _diagnose(run_dir, progress)
     summary = _summary(response, motion, wall, integ.n_steps, run_dir, char_dir, n_rows,
                        scores, diagnosis)
@@ -184,9 +185,10 @@ def run_story(
     return summary
 
 
-def twin_scores(run_dir: Path, char_dir: Path) -> dict[str, Any]:
+def twin_scores(run_dir: Path, char_dir: Path, figure: Path | None = None) -> dict[str, Any]:
     """The twin's served force and the calibrated Bilinear's, each against the damper's true
-    law driven along the twin's drift (known in simulation only): MAETH and RMSETH in kN."""
+    law driven along the twin's drift (known in simulation only): MAETH and RMSETH in kN;
+    with ``figure``, the three hysteresis loops and both error histories drawn there."""
     from sim_actuator.config import preset
     from sim_actuator.models import make_model
 
@@ -210,6 +212,8 @@ def twin_scores(run_dir: Path, char_dir: Path) -> dict[str, Any]:
         return {"maeth_kN": ind.maeth(truth, pred), "rmseth_kN": ind.rmseth(truth, pred)}
 
     served, fixed = score(twin.force), score(bilinear)
+    if figure is not None:
+        _plot_twin(figure, twin.disp, truth, twin.force, bilinear)
     return {
         "twin_steps": int(twin.disp.size),
         "twin_peak_drift_mm": float(np.max(np.abs(twin.disp))),
@@ -219,6 +223,31 @@ def twin_scores(run_dir: Path, char_dir: Path) -> dict[str, Any]:
         "rmseth_reduction_pct": 100.0 * (1.0 - served["rmseth_kN"] / fixed["rmseth_kN"]),
         "maeth_reduction_pct": 100.0 * (1.0 - served["maeth_kN"] / fixed["maeth_kN"]),
     }
+
+
+def _plot_twin(path: Path, disp: FloatArray, truth: FloatArray, served: FloatArray,
+               bilinear: FloatArray) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11.5, 4.4))
+    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": (1.0, 1.4)})
+    left.plot(disp, truth, color="0.15", lw=1.6, label="true law (the damper's BWBN)")
+    left.plot(disp, bilinear, color="tab:blue", lw=0.9, ls="--", label="calibrated Bilinear")
+    left.plot(disp, served, color="tab:red", lw=0.8, label=f"served twin ({UPDATER})")
+    left.set(xlabel="twin drift, story 2 (mm)", ylabel="force (kN)",
+             title="Twin hysteresis: served vs true vs calibrated")
+    left.legend(fontsize="small", loc="upper left")
+    t = np.arange(disp.size) * DEMO_DT
+    right.plot(t, bilinear - truth, color="tab:blue", lw=0.7, label="calibrated Bilinear")
+    right.plot(t, served - truth, color="tab:red", lw=0.8, label=f"served twin ({UPDATER})")
+    right.axhline(0.0, color="0.5", lw=0.6)
+    right.set(xlabel="time (s)", ylabel="force − true force (kN)",
+              title="Twin force error in time")
+    right.legend(fontsize="small", loc="upper right")
+    for ax in (left, right):
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def _diagnose(run_dir: Path, progress: bool) -> dict[str, Any]:
@@ -265,7 +294,7 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
         "diagnosis": diagnosis,
         "committed_steps_in_record": n_rows,
         "files": ["config.toml", "run.json", "record.jsonl", "steps.csv", "summary.json",
-                  "report.html", f"diagnosis-{SOURCE}/summary.txt"],
+                  "report.html", TWIN_FIGURE, f"diagnosis-{SOURCE}/summary.txt"],
     }
 
 
@@ -309,7 +338,8 @@ def format_story(s: dict[str, Any]) -> str:
         f"{_g(bil['rmseth_kN'], 2)} kN, max {_g(bil['maeth_kN'], 2)} kN -> updating cuts the "
         f"RMS error by {tw['rmseth_reduction_pct']:.0f} %",
         diagnosis,
-        f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)",
+        f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)"
+        f" and {TWIN_FIGURE}",
         f"next           {cmd} report {run} --diagnose {SOURCE}   (again, from the record)",
         f"               {cmd} diagnose {run} --site {SOURCE}",
         f"               {cmd} updater replay --source {run} --site {SOURCE} --twin {run} "

@@ -72,7 +72,8 @@ def test_the_report_shows_tracking_error_the_served_twin_and_the_diagnosis(
     (detail,) = rep.summary["sites"]["damper"]["detail"]
     assert detail["max_tracking_error"] > 0.01 and detail["nrms"] > 1e-4  # not flat zeros
     images = dict(rep.images)
-    assert {"twin updating", "damper diagnosis overlay"} <= set(images)
+    assert {"twin hysteresis", "twin updating", "damper diagnosis overlay"} <= set(images)
+    assert (run_dir / "twin_vs_bilinear.png").read_bytes().startswith(PNG_SIGNATURE)
     assert all(png.startswith(PNG_SIGNATURE) for png in images.values())
     # the twin's served force is a hysteresis of the damper's size, not a constant
     forces = [s.meas_force[0] for s in committed_steps(run_dir) if s.site == "twin"]
