@@ -90,7 +90,12 @@ def _meta_section(run: Run) -> str:
     return f'<section id="run"><h2>Run</h2><table>{body}</table>{notes}</section>'
 
 
-def _summary_section(summaries: list[SiteSummary]) -> str:
+_TRACKING_KEYS = frozenset({"max_tracking_error", "peak_amplitude_error", "nrms", "ti_final",
+                            "fei_amplitude", "fei_delay", "xcorr_delay"})
+"""Columns about an actuator's tracking: "–" for an updatable site, which has none."""
+
+
+def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = frozenset()) -> str:
     parts = ['<section id="summary"><h2>Summary</h2>']
     site_rows = "".join(
         f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>'
@@ -108,8 +113,10 @@ def _summary_section(summaries: list[SiteSummary]) -> str:
     rows = []
     for s in summaries:
         for d in s.sessions_detail:
+            na = s.site in twins
             cells = "".join(
-                f'<td class="n" data-key="{k}">{_e(fmt(getattr(d, k), digits=6))}</td>'
+                f'<td class="n" data-key="{k}">'
+                f'{"–" if na and k in _TRACKING_KEYS else _e(fmt(getattr(d, k), digits=6))}</td>'
                 for k, _, _ in _COLUMNS
             )
             rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
@@ -118,7 +125,7 @@ def _summary_section(summaries: list[SiteSummary]) -> str:
         parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
                      "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
                      "(positive delay: the measurement lags). TI decreasing means lag "
-                     "(energy added).</p>")
+                     "(energy added). An updatable site has no actuator: –.</p>")
     else:
         parts.append('<p class="note">No committed steps in this run.</p>')
     parts.append("</section>")
@@ -292,7 +299,7 @@ def render_report(run: Run) -> str:
         f"Report generated {_e(generated)} by fresco-bridge {_e(__version__)}. "
         "Units: mm, kN, s.</p>",
         _meta_section(run),
-        _summary_section(summaries),
+        _summary_section(summaries, frozenset(run.sources())),
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
         *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
