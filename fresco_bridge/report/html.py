@@ -50,7 +50,7 @@ td,th{border:1px solid #ddd;padding:.25em .5em;text-align:left;vertical-align:to
 th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
 pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:.85em}
 img{max-width:100%;display:block;margin:.5em 0}.note{background:#fff4d6;padding:.5em 1em}
-figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+figure{margin:1em 0}figcaption{color:#555;font-size:.9em}.wide{overflow-x:auto}
 """
 
 # (key, header, unit) of the summary table; keys are SessionSummary fields.
@@ -121,7 +121,8 @@ def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = froze
             )
             rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
     if rows:
-        parts.append(f"<table><tr><th>site</th>{head}</tr>{''.join(rows)}</table>")
+        parts.append(f'<div class="wide"><table><tr><th>site</th>{head}</tr>{"".join(rows)}'
+                     "</table></div>")
         parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
                      "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
                      "(positive delay: the measurement lags). TI decreasing means lag "
