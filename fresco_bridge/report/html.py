@@ -126,7 +126,8 @@ def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = froze
         parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
                      "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
                      "(positive delay: the measurement lags). TI decreasing means lag "
-                     "(energy added). An updatable site has no actuator: –.</p>")
+                     "(energy added)."
+                     + (" An updatable site has no actuator: –." if twins else "") + "</p>")
     else:
         parts.append('<p class="note">No committed steps in this run.</p>')
     parts.append("</section>")
