@@ -116,7 +116,7 @@ def _characterise(runs: Path, transport: str, progress: bool) -> Path:
         link = GenericClientLink("127.0.0.1", bridge.ports[SOURCE], 2, transport=transport,
                                  timeout=10.0)
         element = SiteElement(link, DAMPER_K0)
-        bar = ProgressBar("1/3 characterisation", path.size, enabled=progress,
+        bar = ProgressBar("act 1, characterisation", path.size, enabled=progress,
                           rate_unit="steps")
         with link:
             for i, d in enumerate(path, start=1):
@@ -164,7 +164,7 @@ def run_story(
             TWIN: Placement(TWIN_STORY, SiteElement(links[TWIN], DAMPER_K0)),
         })  # fmt: skip
         integ = demo_frame_integrator(coupling, motion)
-        bar = ProgressBar("2/3 hybrid test", integ.n_steps, enabled=progress,
+        bar = ProgressBar("act 2, hybrid test", integ.n_steps, enabled=progress,
                           rate_unit="steps")
         t0 = time.perf_counter()
         with links[SOURCE], links[TWIN]:
@@ -258,7 +258,7 @@ def _diagnose(run_dir: Path, progress: bool) -> dict[str, Any]:
 
     try:
         return diagnose_into_run(run_dir, SOURCE,
-                                 ProgressBar("3/3 diagnosis", 1, enabled=progress))
+                                 ProgressBar("act 4, diagnosis", 1, enabled=progress))
     except DiagnosisInputError as exc:
         return {"skipped": str(exc)}
 
