@@ -91,7 +91,12 @@ def main(argv: list[str] | None = None) -> int:
                               "the config's run_dir) instead of starting a new one")
     p_check = sub.add_parser("check", help="validate a lab config and exit")
     p_check.add_argument("--config", type=Path, required=True)
-    p_demo = sub.add_parser("demo", help="the source paper's two-story frame, end to end")
+    p_demo = sub.add_parser(
+        "demo", help="the source paper's story end to end: the two-story frame, the tested "
+                     "damper on the simulated rig, its twin learned online, the diagnosis")
+    p_demo.add_argument("--simple", action="store_true",
+                        help="the plumbing alone: an ideal bilinear damper, no rig, no twin")
+    p_demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     p_demo.add_argument("--record", type=Path, default=None,
                         help="PEER .AT2 ground motion (default: seeded Kanai-Tajimi record)")
     p_demo.add_argument("--pga", type=float, default=3.0, help="PGA in m/s² (default 3.0)")
@@ -116,6 +121,26 @@ def main(argv: list[str] | None = None) -> int:
     return exit_code(lambda: _run(args), (ConfigError, LabError, RunDirError, ControlError))
 
 
+def _diagnose_into_run(run: str, runs: Path, sites: list[str]) -> None:
+    """``report RUN --diagnose SITE``: each site's diagnosis into ``RUN/diagnosis-SITE``."""
+    from .diagnosis.load import DiagnosisInputError
+    from .diagnosis.rundir import diagnose_into_run
+    from .progress import ProgressBar
+    from .runs import load_run
+
+    run_dir = resolve_run(run, runs)
+    known = load_run(run_dir).sites
+    for site in sites:
+        if site not in known:
+            raise RunDirError(f"{run_dir}: --diagnose {site}: no such site in this run "
+                              f"(sites: {', '.join(known) or 'none'})")
+        try:
+            h = diagnose_into_run(run_dir, site, ProgressBar(f"diagnose {site}", 1))
+        except DiagnosisInputError as exc:
+            raise RunDirError(f"{run_dir}: --diagnose {site}: {exc}") from None
+        print(f"{run_dir}/diagnosis-{site}: {h['effect']}")
+
+
 def _run(args: argparse.Namespace) -> int:
     """The command ``args`` names; its exit code (errors: ``exit_code``)."""
     if args.command == "serve":
@@ -136,10 +161,16 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     if args.command == "demo":
         from .demo import run_demo
+        from .demo_story import run_story
 
-        run_demo(record=args.record, pga=args.pga, duration=args.duration, seed=args.seed,
-                 runs=args.runs, transport=args.transport, mqtt=args.mqtt,
-                 mqtt_prefix=args.mqtt_prefix, metrics_port=args.metrics_port)
+        common = {"record": args.record, "pga": args.pga, "duration": args.duration,
+                  "seed": args.seed, "runs": args.runs, "transport": args.transport,
+                  "mqtt": args.mqtt, "mqtt_prefix": args.mqtt_prefix,
+                  "metrics_port": args.metrics_port}
+        if args.simple:
+            run_demo(**common)
+        else:
+            run_story(**common, progress=not args.no_progress)
         return 0
     if args.command == "lab":
         return lab_command(args)
@@ -149,6 +180,8 @@ def _run(args: argparse.Namespace) -> int:
         return study_command(args)
     if args.command == "updater":
         return updater_command(args)
+    if args.command == "report" and args.diagnose:
+        _diagnose_into_run(args.run, args.runs, args.diagnose)
     if args.command in REPORT_COMMANDS:
         return report_command(args)
     if args.command in DIAGNOSIS_COMMANDS:

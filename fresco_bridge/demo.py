@@ -1,9 +1,10 @@
-"""``fresco-bridge demo``: the source paper's two-story frame, end to end, in one process.
+"""``fresco-bridge demo --simple``: the source paper's two-story frame, end to end, in one process.
 
 The bridge runs on its own event loop thread with an in-process simulated bending damper; our
 explicit-Newmark integrator plays OpenSees and drives it over the genericClient protocol on
 loopback, exactly as a separate FE process would. Embedded defaults only: no broker, no
-hardware, no files from outside the package.
+hardware, no files from outside the package. An ideal specimen and no twin: the plumbing alone
+(the default demo, the paper's whole story, is ``demo_story``).
 """
 
 from __future__ import annotations
@@ -35,14 +36,10 @@ from .progress import ProgressBar
 from .record import export_csv
 
 
-def demo_config_text(transport: str = "tcp", run_name: str = "demo", *,
-                     mqtt: str | None = None, mqtt_prefix: str = "fresco",
-                     metrics_port: int | None = None) -> str:
-    """The demo's lab config as TOML (it is also the run's config snapshot).
-
-    Telemetry is off unless ``mqtt`` (``HOST`` or ``HOST:PORT``) or ``metrics_port`` is given:
-    the embedded default needs no broker.
-    """
+def telemetry_text(mqtt: str | None = None, mqtt_prefix: str = "fresco",
+                   metrics_port: int | None = None) -> str:
+    """The ``[telemetry]`` table of a demo config: empty unless ``mqtt`` (``HOST`` or
+    ``HOST:PORT``) or ``metrics_port`` is given, as the embedded default needs no broker."""
     telemetry = ""
     if mqtt is not None:
         host, _, port = mqtt.partition(":")
@@ -53,8 +50,18 @@ def demo_config_text(transport: str = "tcp", run_name: str = "demo", *,
             telemetry += f"mqtt_port = {int(port)}\n"
     if metrics_port is not None:
         telemetry += f"metrics_port = {int(metrics_port)}\n"
-    if telemetry:
-        telemetry = "\n[telemetry]\n" + telemetry
+    return "\n[telemetry]\n" + telemetry if telemetry else ""
+
+
+def demo_config_text(transport: str = "tcp", run_name: str = "demo", *,
+                     mqtt: str | None = None, mqtt_prefix: str = "fresco",
+                     metrics_port: int | None = None) -> str:
+    """The ``--simple`` demo's lab config as TOML (it is also the run's config snapshot).
+
+    Telemetry is off unless ``mqtt`` (``HOST`` or ``HOST:PORT``) or ``metrics_port`` is given:
+    the embedded default needs no broker.
+    """
+    telemetry = telemetry_text(mqtt, mqtt_prefix, metrics_port)
     return f"""# fresco-bridge demo: source paper's two-story frame, damper in story 1 (mm, kN, s)
 [bridge]
 run_name = "{run_name}"

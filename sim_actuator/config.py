@@ -301,6 +301,13 @@ _PAPER_BILINEAR: dict[str, Any] = {
     "kind": "bilinear", "params": {"k0": 68.0, "fy": 35.0, "alpha": 0.008},
 }
 
+# The bending damper sized like the demo's, as a degrading, pinching BWBN (illustrative).
+_DAMPER_BWBN: dict[str, Any] = {"kind": "bwbn", "params": {
+    "k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 1.0, "beta": 0.5, "gamma": 0.5,
+    "A0": 1.0, "delta_a": 0.0, "delta_nu": 0.002, "delta_eta": 0.002,
+    "zeta_s": 0.3, "p": 0.05, "q": 0.1, "psi0": 0.2, "delta_psi": 0.005,
+    "lam": 0.5}}
+
 PRESETS: dict[str, RigConfig] = {
     cfg.name: cfg
     for cfg in (
@@ -344,12 +351,23 @@ PRESETS: dict[str, RigConfig] = {
                            "alpha 0.05) as BWBN with energy-driven stiffness/strength "
                            "degradation and pinching (illustrative values, not calibrated), "
                            "on the servo-hydraulic actuator",
-            "specimen": {"kind": "bwbn", "params": {
-                "k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 1.0, "beta": 0.5, "gamma": 0.5,
-                "A0": 1.0, "delta_a": 0.0, "delta_nu": 0.002, "delta_eta": 0.002,
-                "zeta_s": 0.3, "p": 0.05, "q": 0.1, "psi0": 0.2, "delta_psi": 0.005,
-                "lam": 0.5}},
+            "specimen": _DAMPER_BWBN,
             "actuator": {"delay": 0.02, "servo": {"kind": "first_order", "tau": 0.015}},
+        }),
+        parse_rig_config({
+            "name": "damper-lab",
+            "description": "the damper-bwbn specimen as a lab sees it: the servo-hydraulic "
+                           "actuator (20 ms delay, 15 ms lag), a little pin backlash "
+                           "(0.05 mm each side) and sensor noise (LVDT 0.002 mm, load cell "
+                           "0.02 kN); the demo's tested damper (illustrative values)",
+            "seed": 1,
+            "specimen": _DAMPER_BWBN,
+            "actuator": {"delay": 0.02, "servo": {"kind": "first_order", "tau": 0.015}},
+            "effects": {"backlash": {"gap": 0.05}},
+            "sensors": {
+                "lvdt": {"noise_std": 0.002},
+                "load_cell": {"noise_std": 0.02},
+            },
         }),
     )
 }

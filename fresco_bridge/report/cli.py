@@ -35,6 +35,12 @@ def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p_rep.add_argument("run", help="run directory (or a run name/prefix under --runs)")
     p_rep.add_argument("-o", "--output", type=Path, default=None,
                        help="output file (default: RUN_DIR/report.html)")
+    p_rep.add_argument("--diagnose", metavar="SITE", action="append", default=[],
+                       help="diagnose SITE first (as `diagnose RUN --site SITE --report "
+                            "RUN/diagnosis-SITE`) for the report's diagnosis section; "
+                            "repeatable (without it, a diagnosis already in the run "
+                            "directory is shown). Run by fresco_bridge.cli: the diagnosis "
+                            "draws with this package's figures")
 
     p_runs = sub.add_parser("runs", help="list, show and export recorded runs")
     rs = p_runs.add_subparsers(dest="runs_command", required=True)

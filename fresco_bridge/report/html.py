@@ -2,9 +2,12 @@
 
 Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
 and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
-synchronization subspace), ``updating-<name>`` for an updatable site (its twin hysteresis,
+synchronization subspace; an updatable site, without an actuator, its hysteresis only),
+``updating-<name>`` for an updatable site (its twin hysteresis,
 predicted vs source force, the source's one-step error, learning lag and update time, from
-its update lines), ``events`` and ``config`` (the snapshot). The same summary numbers are
+its update lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
+(``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events`` and ``config`` (the
+snapshot). The same summary numbers are
 embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
 pipeline can read them without scraping the tables.
 """
@@ -34,6 +37,7 @@ from ..runs import (
     summarise,
 )
 from . import figures
+from .diagnosis import diagnosis_sections
 
 REPORT_FILE = "report.html"
 MAX_EVENT_ROWS = 2000
@@ -46,7 +50,7 @@ td,th{border:1px solid #ddd;padding:.25em .5em;text-align:left;vertical-align:to
 th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
 pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:.85em}
 img{max-width:100%;display:block;margin:.5em 0}.note{background:#fff4d6;padding:.5em 1em}
-figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+figure{margin:1em 0}figcaption{color:#555;font-size:.9em}.wide{overflow-x:auto}
 """
 
 # (key, header, unit) of the summary table; keys are SessionSummary fields.
@@ -86,7 +90,12 @@ def _meta_section(run: Run) -> str:
     return f'<section id="run"><h2>Run</h2><table>{body}</table>{notes}</section>'
 
 
-def _summary_section(summaries: list[SiteSummary]) -> str:
+_TRACKING_KEYS = frozenset({"max_tracking_error", "peak_amplitude_error", "nrms", "ti_final",
+                            "fei_amplitude", "fei_delay", "xcorr_delay"})
+"""Columns about an actuator's tracking: "–" for an updatable site, which has none."""
+
+
+def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = frozenset()) -> str:
     parts = ['<section id="summary"><h2>Summary</h2>']
     site_rows = "".join(
         f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>'
@@ -104,24 +113,48 @@ def _summary_section(summaries: list[SiteSummary]) -> str:
     rows = []
     for s in summaries:
         for d in s.sessions_detail:
+            na = s.site in twins
             cells = "".join(
-                f'<td class="n" data-key="{k}">{_e(fmt(getattr(d, k), digits=6))}</td>'
+                f'<td class="n" data-key="{k}">'
+                f'{"–" if na and k in _TRACKING_KEYS else _e(fmt(getattr(d, k), digits=6))}</td>'
                 for k, _, _ in _COLUMNS
             )
             rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
     if rows:
-        parts.append(f"<table><tr><th>site</th>{head}</tr>{''.join(rows)}</table>")
+        parts.append(f'<div class="wide"><table><tr><th>site</th>{head}</tr>{"".join(rows)}'
+                     "</table></div>")
         parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
                      "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
                      "(positive delay: the measurement lags). TI decreasing means lag "
-                     "(energy added).</p>")
+                     "(energy added)."
+                     + (" An updatable site has no actuator: –." if twins else "") + "</p>")
     else:
         parts.append('<p class="note">No committed steps in this run.</p>')
     parts.append("</section>")
     return "".join(parts)
 
 
+def _twin_site_section(run: Run, site: str, source: str) -> str:
+    """An updatable site has no actuator: its "measurement" is its trial, so tracking error,
+    TI, FEI and synchronization would be flat zeros. Its served hysteresis and its learning
+    are in ``updating-<site>``."""
+    signals = [s for s in session_signals(run.steps) if s.site == site]
+    return "".join([
+        f'<section id="site-{_e(site)}"><h2>Site {_e(site)} (updatable)</h2>',
+        f'<p>The twin of <a href="#site-{_e(source)}">{_e(source)}</a>: no actuator, the '
+        "force it answered is its updater's prediction at the trial displacement, so there "
+        "is no tracking error to show. How it learned: "
+        f'<a href="#updating-{_e(site)}">Updating: {_e(site)}</a>.</p>',
+        _img(figures.hysteresis(site, signals), f"{site} hysteresis",
+             "The force the twin served against its trial displacement."),
+        "</section>",
+    ])
+
+
 def _site_section(run: Run, site: str, warn: float | None) -> str:
+    twin_of = run.sources().get(site)
+    if twin_of is not None:
+        return _twin_site_section(run, site, twin_of)
     signals = [s for s in session_signals(run.steps) if s.site == site]
     ti = []
     for sig in signals:
@@ -268,10 +301,11 @@ def render_report(run: Run) -> str:
         f"Report generated {_e(generated)} by fresco-bridge {_e(__version__)}. "
         "Units: mm, kN, s.</p>",
         _meta_section(run),
-        _summary_section(summaries),
+        _summary_section(summaries, frozenset(run.sources())),
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
         *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
+        *diagnosis_sections(run.directory, _img),
         _events_section(run),
         _config_section(run),
         '<script type="application/json" id="summary-data">',

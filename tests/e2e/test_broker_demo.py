@@ -41,7 +41,7 @@ def test_demo_with_mqtt_publishes_every_committed_step_in_order(tmp_path: Path) 
         stdout=subprocess.PIPE, text=True)
     try:
         time.sleep(0.3)  # let the subscription register before the run starts
-        rc = cli_main(["demo", "--duration", "1.0", "--runs", str(tmp_path / "runs"),
+        rc = cli_main(["demo", "--simple", "--duration", "1.0", "--runs", str(tmp_path / "runs"),
                        "--mqtt", "127.0.0.1:1883", "--mqtt-prefix", prefix])
         out, _ = sub.communicate(timeout=60)
     finally:
