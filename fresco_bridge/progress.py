@@ -1,7 +1,8 @@
 """One progress display for long commands (pretraining, studies, diagnosis, the demo), on stderr.
 
 On a terminal it is a ``rich`` progress bar (label, bar, done/total, elapsed, time left, and the
-rate when asked), redrawn at most every ``min_interval`` s and left on screen when finished.
+rate when asked), redrawn every ``min_interval`` s by rich's thread (the clock runs while a long
+first step is computed) and left on screen when finished.
 Elsewhere (CI logs, pipes, tests) it stays quiet: no bar, only a plain line at most every
 ``log_every`` s (default 30) and one when finished, so a log shows a long command is alive
 without growing. Silent when ``enabled`` is false. ``rich`` is imported on the first draw on a
@@ -16,10 +17,19 @@ import time
 from types import TracebackType
 from typing import Any, TextIO
 
-__all__ = ["ProgressBar", "close_all"]
+__all__ = ["ProgressBar", "close_all", "status"]
 
 _LIVE: set[ProgressBar] = set()
 """Bars drawing on a terminal now (``close_all`` ends them before an error line)."""
+
+
+def status(text: str, stream: TextIO | None = None) -> None:
+    """A status line before a long silent phase (imports, fits), at once, on a terminal only:
+    a person sees what the command is doing; logs and pipes keep the command's own output."""
+    out = stream if stream is not None else sys.stderr
+    if getattr(out, "isatty", lambda: False)():
+        out.write(text + "\n")
+        out.flush()
 
 
 def close_all() -> None:
@@ -31,8 +41,8 @@ def close_all() -> None:
 class ProgressBar:
     """``bar = ProgressBar("fit", total); bar(done, total)`` (usable as a sweep's progress).
 
-    ``with ProgressBar(...) as bar:`` ends the display even when the work raises; a bar that
-    reaches its total ends itself.
+    ``with ProgressBar(...) as bar:`` shows the bar at once (on a terminal) and ends it even when
+    the work raises; a bar that reaches its total ends itself.
     """
 
     def __init__(
@@ -56,7 +66,6 @@ class ProgressBar:
         self.log_every = log_every
         self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self._start = time.monotonic()
-        self._last_draw = -1.0
         self._last_log = self._start
         self._done = 0
         self._finished = False
@@ -103,8 +112,7 @@ class ProgressBar:
             fields["rate"] = f"{rate:,.0f} {self.rate_unit}/s"
         self._progress.update(self._task, completed=min(self._done, self.total),
                               total=self.total, **fields)
-        if finished or now - self._last_draw >= self.min_interval:
-            self._last_draw = now
+        if finished:
             self._progress.refresh()
 
     def _start_rich(self) -> tuple[Any, Any]:
@@ -124,7 +132,8 @@ class ProgressBar:
             TimeElapsedColumn(), TextColumn("elapsed"), TimeRemainingColumn(), TextColumn("left")]
         if self.rate_unit is not None:
             columns.append(TextColumn("{task.fields[rate]}"))
-        progress = Progress(*columns, console=Console(file=self.stream), auto_refresh=False,
+        progress = Progress(*columns, console=Console(file=self.stream),
+                            refresh_per_second=1.0 / max(self.min_interval, 0.05),
                             redirect_stdout=False, redirect_stderr=False)
         task = progress.add_task(self.label, total=self.total, rate="")
         # elapsed time counts from the bar's creation, not from its first draw
@@ -145,6 +154,8 @@ class ProgressBar:
         progress.stop()
 
     def __enter__(self) -> ProgressBar:
+        if self.enabled and self._tty and self.total > 0 and not self._finished:
+            self._draw(time.monotonic(), finished=False)
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

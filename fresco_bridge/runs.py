@@ -21,6 +21,7 @@ import numpy as np
 
 from .indicators import IndicatorError, fei, nrms_error, peak_errors, tracking_indicator
 from .indicators import xcorr_delay as _xcorr_delay
+from .numbers import fmt  # also report/html.py's, through here
 from .record.export import (
     CommittedStep,
     MonitorLine,
@@ -418,13 +419,6 @@ def summarise(run: Run) -> list[SiteSummary]:
             events=counts, sessions_detail=detail,
         ))
     return out
-
-
-def fmt(v: float | None, unit: str = "", digits: int = 4) -> str:
-    """A number for people: 4 significant digits, '—' for missing."""
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "—"
-    return f"{v:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
