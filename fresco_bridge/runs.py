@@ -21,7 +21,7 @@ import numpy as np
 
 from .indicators import IndicatorError, fei, nrms_error, peak_errors, tracking_indicator
 from .indicators import xcorr_delay as _xcorr_delay
-from .numbers import fmt  # also report/html.py's, through here
+from .numbers import fmt
 from .record.export import (
     CommittedStep,
     MonitorLine,
