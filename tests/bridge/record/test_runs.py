@@ -148,3 +148,14 @@ def test_resolve_run_names_and_errors(runs_root: Path) -> None:
         resolve_run(first.name[:4], runs_root)
     with pytest.raises(RunDirError, match="no such run"):
         resolve_run("zzz", runs_root)
+
+
+def test_default_outputs_are_named_where_they_were_written(
+        runs_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run_dir = shutil.copytree(_run(runs_root, "second"), tmp_path / _run(runs_root, "second").name)
+    assert cli_main(["export", str(run_dir)]) == 0
+    assert cli_main(["report", str(run_dir)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == [f"wrote {run_dir / 'steps.csv'}: 80 committed step(s)",
+                   f"wrote {run_dir / 'report.html'} (report of {run_dir})"]
+    assert (run_dir / "steps.csv").exists() and (run_dir / "report.html").exists()
