@@ -31,3 +31,14 @@ def test_pct_never_prints_minus_zero() -> None:
 def test_rounded_keeps_significant_digits_for_json() -> None:
     assert rounded(5.887515649000079) == 5.888 and rounded(16.357297897338867) == 16.36
     assert rounded(-3e-17) == 0.0 and math.isnan(rounded(math.nan))
+
+
+def test_ctl_status_prints_live_values_without_dust() -> None:
+    from fresco_bridge.ctl import format_answer
+
+    site = {"site": "damper", "state": "RUNNING", "reason": "", "session": 1, "peer": None,
+            "step": 3, "time": 0.03, "ctrl": [0.0, -2.434e-19], "target": [0.0, 1.23456],
+            "daq_disp": [-0.0], "daq_force": [math.nan], "holds": 0, "limit_events": {},
+            "limits": [], "pending": None}
+    text = format_answer({"sites": [site]})
+    assert "ctrl [0, 0] mm (target [0, 1.235])  daq disp [0] mm force [–] kN" in text, text
