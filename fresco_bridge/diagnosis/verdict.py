@@ -224,6 +224,8 @@ def diagnose(record: Record, options: Options | None = None,
     effects = [e for e in opts.effects]
     total_fits = 1 + len(effects) + (TOP_FOR_PAIRS * 2 if opts.pairs else 0)
     done = 0
+    if progress is not None:
+        progress(0, total_fits)  # the total before the baseline's fits (seconds)
 
     def tick() -> None:
         nonlocal done
