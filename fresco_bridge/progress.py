@@ -38,6 +38,20 @@ def close_all() -> None:
         bar.close()
 
 
+def _log_handlers_to(console: Any, stream: TextIO) -> list[tuple[Any, Any]]:
+    """Log handlers writing to the bar's stream write through the bar's console while it is
+    drawn (a log line above the bar, not glued to its end); their old streams, to restore."""
+    import logging  # here: the light entry does not load logging
+
+    from rich.file_proxy import FileProxy
+
+    loggers = [logging.getLogger(), *(logger for logger in logging.Logger.manager.loggerDict
+                                      .values() if isinstance(logger, logging.Logger))]
+    return [(h, h.setStream(FileProxy(console, stream))) for logger in loggers
+            for h in logger.handlers
+            if type(h) is logging.StreamHandler and h.stream is stream]
+
+
 class ProgressBar:
     """``bar = ProgressBar("fit", total); bar(done, total)`` (usable as a sweep's progress).
 
@@ -70,6 +84,7 @@ class ProgressBar:
         self._done = 0
         self._finished = False
         self._progress: Any = None  # rich.progress.Progress, on a terminal once drawn
+        self._logs: list[tuple[Any, Any]] = []  # (log handler, its own stream) while drawn
         self._task: Any = None
 
     def __call__(self, done: int, total: int | None = None) -> None:
@@ -135,6 +150,7 @@ class ProgressBar:
         progress = Progress(*columns, console=Console(file=self.stream),
                             refresh_per_second=1.0 / max(self.min_interval, 0.05),
                             redirect_stdout=False, redirect_stderr=False)
+        self._logs = _log_handlers_to(progress.console, self.stream)
         task = progress.add_task(self.label, total=self.total, rate="")
         # elapsed time counts from the bar's creation, not from its first draw
         progress.tasks[0].start_time = progress.get_time() - (time.monotonic() - self._start)
@@ -152,6 +168,9 @@ class ProgressBar:
         _LIVE.discard(self)
         atexit.unregister(self.close)
         progress.stop()
+        for handler, stream in self._logs:
+            handler.setStream(stream)  # flushes what the proxy holds
+        self._logs = []
 
     def __enter__(self) -> ProgressBar:
         if self.enabled and self._tty and self.total > 0 and not self._finished:

@@ -67,3 +67,27 @@ def test_off_a_terminal_it_prints_sparse_plain_lines() -> None:
     silent = io.StringIO()
     ProgressBar("x", 3, stream=silent, enabled=False)(3)
     assert silent.getvalue() == ""
+
+
+_LOGGING = """
+import logging, sys, time
+from fresco_bridge.progress import ProgressBar
+
+logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
+bar = ProgressBar("demo", 30, min_interval=0.05)
+for i in range(1, 31):
+    time.sleep(0.01)
+    bar(i)
+    if i == 15:
+        logging.getLogger("bridge").warning("a log line in the middle")
+logging.getLogger("bridge").warning("a log line after")
+"""
+
+
+def test_a_log_line_during_the_bar_gets_its_own_line() -> None:
+    rc, out = run_on_terminal([sys.executable, "-c", _LOGGING])
+    plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out.decode())
+    assert rc == 0, plain
+    # above the bar, never glued to the end of its line ("... leftWARNING ...")
+    assert re.search(r"(^|[\r\n])WARNING a log line in the middle\r?\n", plain), repr(plain)
+    assert re.search(r"30/30[^\n]*\r?\nWARNING a log line after", plain), repr(plain)
