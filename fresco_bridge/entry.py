@@ -29,8 +29,9 @@ LONG_COMMANDS = {"demo": 1, "study": 2, "updater": 2, "lab": 2}
 def _starting(args: list[str]) -> None:
     """``fresco-bridge study paper: starting...`` on stderr, when it is a terminal."""
     words = LONG_COMMANDS.get(args[0]) if args else None
-    if words is None or args[:2] == ["lab", "up"] or "-h" in args or "--help" in args:
-        return
+    if (words is None or len(args) < words or args[words - 1].startswith("-")
+            or args[:2] == ["lab", "up"] or "-h" in args or "--help" in args):
+        return  # not a long command, or a usage error / help: argparse answers at once
     status(f"fresco-bridge {' '.join(args[:words])}: starting...")
 
 
