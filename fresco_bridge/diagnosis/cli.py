@@ -144,7 +144,7 @@ def _diagnose(args: argparse.Namespace) -> int:
 
     options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
                       noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
-    with ProgressBar("diagnose", 1, enabled=not args.no_progress) as bar:
+    with ProgressBar("diagnose", 0, enabled=not args.no_progress) as bar:  # total: diagnose
         result = diagnose(record, options, progress=bar)
     print(summary(result))
     if args.json is not None:
