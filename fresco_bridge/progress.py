@@ -56,7 +56,8 @@ class ProgressBar:
     """``bar = ProgressBar("fit", total); bar(done, total)`` (usable as a sweep's progress).
 
     ``with ProgressBar(...) as bar:`` shows the bar at once (on a terminal) and ends it even when
-    the work raises; a bar that reaches its total ends itself.
+    the work raises; a bar that reaches its total ends itself. ``total`` 0: not known yet, the
+    first ``bar(done, total)`` gives it (nothing is drawn before).
     """
 
     def __init__(
