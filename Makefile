@@ -6,6 +6,7 @@ BIN := $(VENV)/bin
 .PHONY: demo test build lint bench clean apt-test-deps
 
 $(BIN)/python:
+	@echo "make: creating the virtual environment $(VENV)/"
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip==25.3
 
@@ -20,14 +21,17 @@ BUILD_INPUTS := setup.py fresco_bridge/_compiled.py $(COMPILED)
 
 # The runtime and the `opensees` extra: the README's OpenSeesPy examples run after `make demo`.
 $(VENV)/.runtime: pyproject.toml | $(BIN)/python
+	@echo "make: installing dependencies into $(VENV)/ (first run: ~3 min)..."
 	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[opensees]'
 	touch $@
 
 $(VENV)/.test: pyproject.toml | $(BIN)/python
+	@echo "make: installing the test dependencies into $(VENV)/ (torch, OpenSeesPy; first run: several minutes)..."
 	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[test]'
 	touch $@ $(VENV)/.runtime
 
 $(VENV)/.build: $(BUILD_INPUTS) $(VENV)/.runtime
+	@echo "make: compiling the step path with mypyc (first run, or after a change to it: ~1 min)..."
 	$(BIN)/pip install -q --no-deps -e .
 	touch $@
 

@@ -27,6 +27,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .numbers import fmt
 from .record.recovery import socket_answers
 from .safety import TransitionRefused
 from .sites import Site
@@ -329,7 +330,7 @@ def _limits_line(lim: dict[str, Any]) -> str:
 
 
 def _vec(values: list[float]) -> str:
-    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
+    return "[" + ", ".join(fmt(v) for v in values) + "]"
 
 
 # -- the CLI -------------------------------------------------------------------------------------

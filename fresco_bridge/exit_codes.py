@@ -3,7 +3,8 @@ an exit code, never a traceback.
 
 Below both ways into the ``fresco-bridge`` commands, the light console entry (``entry.py``:
 ``diagnose``, ``diagnose-bench``) and the full parser (``cli.py``), so each command line ends
-the same way whichever parsed it. Standard library only: the light entry stays light.
+the same way whichever parsed it. Standard library only (and ``progress``, which imports
+``rich`` only when it draws): the light entry stays light.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ import contextlib
 import os
 import sys
 from collections.abc import Callable
+
+from .progress import close_all
 
 __all__ = ["BAD_INPUT_EXIT", "BROKEN_PIPE_EXIT", "FAILURE_EXIT", "INTERRUPTED_EXIT",
            "exit_code", "reader_gone"]
@@ -40,7 +43,10 @@ def exit_code(command: Callable[[], int],
     caller's errors that mean the user gave something wrong) 2, Ctrl-C 130, a gone reader 141,
     anything else 1 (the traceback at debug level, for ``-v``)."""
     try:
-        return command()
+        try:
+            return command()
+        finally:
+            close_all()  # a progress bar still drawing ends its line before any error line
     except bad_input as exc:
         print(f"error: {exc}", file=sys.stderr)
         return BAD_INPUT_EXIT

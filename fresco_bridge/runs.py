@@ -21,6 +21,7 @@ import numpy as np
 
 from .indicators import IndicatorError, fei, nrms_error, peak_errors, tracking_indicator
 from .indicators import xcorr_delay as _xcorr_delay
+from .numbers import fmt
 from .record.export import (
     CommittedStep,
     MonitorLine,
@@ -222,6 +223,9 @@ class RunListing:
     size_bytes: int
     error: str | None = None
     state: str = "unknown"
+    site_sessions: dict[str, int] = field(default_factory=dict)
+    """Integrator sessions per site; ``sessions`` is their sum (two sites served to one
+    integrator are two sessions, one each)."""
 
 
 def scan_run(path: Path) -> RunListing:
@@ -229,7 +233,9 @@ def scan_run(path: Path) -> RunListing:
     counted)."""
     try:
         meta = _read_meta(check_run_dir(path))
-        steps = sessions = holds = 0
+        steps = holds = 0
+        sites = [str(s) for s in meta.get("sites", [])]
+        site_sessions = dict.fromkeys(sites, 0)
         with (path / RECORD_FILE).open("rb") as fh:
             for line in fh:
                 if not line.endswith(b"\n"):
@@ -237,12 +243,14 @@ def scan_run(path: Path) -> RunListing:
                 if b'"kind":"step"' in line or b'"kind":"commit"' in line:  # format 3, 1/2
                     steps += 1
                 elif b'"kind":"event"' in line:
-                    ev = json.loads(line).get("event")
-                    sessions += ev == "session-open"
-                    holds += ev == "hold"
-        return RunListing(path.name, path, str(meta.get("started_utc", "?")),
-                          [str(s) for s in meta.get("sites", [])], steps, sessions, holds,
-                          _dir_size(path), state=run_state(path, meta))
+                    ev = json.loads(line)
+                    if ev.get("event") == "session-open":
+                        site = str(ev.get("site", "?"))
+                        site_sessions[site] = site_sessions.get(site, 0) + 1
+                    holds += ev.get("event") == "hold"
+        return RunListing(path.name, path, str(meta.get("started_utc", "?")), sites, steps,
+                          sum(site_sessions.values()), holds, _dir_size(path),
+                          state=run_state(path, meta), site_sessions=site_sessions)
     except (RunDirError, OSError, ValueError) as exc:
         return RunListing(path.name, path, "?", [], 0, 0, 0, 0, error=str(exc))
 
@@ -265,7 +273,19 @@ def human_size(n: int) -> str:
     return f"{size:.1f} GiB"
 
 
+def _per_site(counts: dict[str, int]) -> str:
+    """Sessions of several sites: ``1 each``, or one count per site in the sites' order
+    (``2,1``), never their sum (two sites of one integrator are not two test sessions)."""
+    values = list(counts.values())
+    if len(values) < 2:
+        return str(sum(values)) if values else ""
+    if len(set(values)) == 1:
+        return f"{values[0]} each"
+    return ",".join(map(str, values))
+
+
 def format_listing(runs: list[RunListing]) -> str:
+    """``runs list``: one line per run (the sessions column counts per site)."""
     header = ("run", "started (UTC)", "state", "sites", "steps", "sessions", "holds", "size")
     rows = [header]
     for r in runs:
@@ -273,7 +293,8 @@ def format_listing(runs: list[RunListing]) -> str:
             rows.append((r.name, "unreadable", "", r.error, "", "", "", ""))
             continue
         rows.append((r.name, r.started_utc[:19], r.state, ",".join(r.sites), str(r.steps),
-                     str(r.sessions), str(r.holds), human_size(r.size_bytes)))
+                     _per_site(r.site_sessions) or str(r.sessions), str(r.holds),
+                     human_size(r.size_bytes)))
     widths = [max(len(row[i]) for row in rows) for i in range(len(header) - 1)]
     return "\n".join(
         "  ".join(c.ljust(w) for c, w in zip(row[:-1], widths, strict=True)) + "  " + row[-1]
@@ -418,13 +439,6 @@ def summarise(run: Run) -> list[SiteSummary]:
             events=counts, sessions_detail=detail,
         ))
     return out
-
-
-def fmt(v: float | None, unit: str = "", digits: int = 4) -> str:
-    """A number for people: 4 significant digits, '—' for missing."""
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "—"
-    return f"{v:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..numbers import pct
 from .model import EFFECT_NAMES
 from .synth import SyntheticRecord, synthetic_record
 from .verdict import diagnose
@@ -194,10 +195,10 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
     lines = [
         f"diagnose-bench{' --realism' if realism else ''}: {summary['records']} records, "
         f"seed {seed}, {wall:.1f} s wall",
-        f"top-1 {summary['top1_pct']:.1f} % (effects {summary['effects_top1_pct']:.1f} %); "
-        f"none false alarms {summary['none_false_alarm_pct']:.1f} %; effects missed as none "
-        f"{summary['missed_as_none_pct']:.1f} %",
-        f"magnitude within 20 %: {summary['magnitude_within_20pct']:.1f} % of correctly "
+        f"top-1 {pct(summary['top1_pct'], 1)} (effects {pct(summary['effects_top1_pct'], 1)}); "
+        f"none false alarms {pct(summary['none_false_alarm_pct'], 1)}; effects missed as none "
+        f"{pct(summary['missed_as_none_pct'], 1)}",
+        f"magnitude within 20 %: {pct(summary['magnitude_within_20pct'], 1)} of correctly "
         "named records",
         "confusion (rows: true effect, columns: verdict):",
         " " * width + " ".join(f"{short[c]:>10}" for c in columns),
@@ -207,7 +208,7 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
         lines.append(f"{t:<{width}}" + " ".join(f"{row.get(c, 0):>10}" for c in columns))
     if len(summary["by_law"]) > 1:
         lines.append("top-1 by specimen law: " + ", ".join(
-            f"{law} {v['top1_pct']:.1f} % of {v['records']}"
+            f"{law} {pct(v['top1_pct'], 1)} of {v['records']}"
             for law, v in summary["by_law"].items()))
     lines.append("magnitude error (median / max, % of the true value):")
     for effect, median in summary["magnitude_error_median_pct"].items():
@@ -215,8 +216,8 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
                      f"{summary['magnitude_error_max_pct'][effect]:7.2f}")
     if summary["shrink_pct"]:
         s = summary["shrink_pct"]
-        lines.append(f"gap shrink of the true effect (correct records): mean {s['mean']:.1f} %, "
-                     f"median {s['median']:.1f} %, min {s['min']:.1f} %")
+        lines.append(f"gap shrink of the true effect (correct records): mean "
+                     f"{pct(s['mean'], 1)}, median {pct(s['median'], 1)}, min {pct(s['min'], 1)}")
     if summary["diagnose_seconds"]:
         d = summary["diagnose_seconds"]
         lines.append(f"diagnosis time per record: median {d['median']:.1f} s, max {d['max']:.1f} s")
@@ -224,5 +225,5 @@ def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
         lines.append(f"  failure: record {f['index']} (seed {f['seed']}, {f['law']}, baseline "
                      f"{f.get('baseline')}) "
                      f"{f['effect']} -> {f['predicted']} (confidence {f['confidence']:.2f}, "
-                     f"gap {f['gap_before_pct']:.2f} %)")
+                     f"gap {pct(f['gap_before_pct'])})")
     return "\n".join(lines)

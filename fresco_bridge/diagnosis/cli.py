@@ -13,6 +13,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from ..progress import status
 from .load import UNITS, DiagnosisInputError, load_record
 from .names import AUTO, AUTO_FAMILIES, BASELINES
 
@@ -129,43 +130,52 @@ def read_baseline(text: str) -> tuple[str, dict[str, float], bool]:
 
 
 def _diagnose(args: argparse.Namespace) -> int:
+    kind, params, fit = read_baseline(args.baseline)
+    if args.noise_floor is not None and not args.noise_floor > 0.0:
+        raise DiagnosisInputError(f"--noise-floor: must be > 0 (got {args.noise_floor})")
+    status(f"diagnose: reading {args.record}" + (f" (site {args.site})" if args.site else ""))
+    record = load_record(args.record, site=args.site, units=args.units)
+    baseline = ("choosing the baseline law by BIC, then fitting each candidate effect"
+                if kind == AUTO else f"fitting the {kind} baseline, then each candidate effect")
+    status(f"diagnose: {record.size} samples; {baseline}")
     from ..progress import ProgressBar
     from .report import summary, write_json, write_report
     from .verdict import NOISE_FLOOR_PCT, Options, diagnose
 
-    kind, params, fit = read_baseline(args.baseline)
-    if args.noise_floor is not None and not args.noise_floor > 0.0:
-        raise DiagnosisInputError(f"--noise-floor: must be > 0 (got {args.noise_floor})")
-    record = load_record(args.record, site=args.site, units=args.units)
     options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
                       noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
-    bar = ProgressBar("diagnose", 1, enabled=not args.no_progress)
-    result = diagnose(record, options, progress=bar)
+    with ProgressBar("diagnose", 0, enabled=not args.no_progress) as bar:  # total: diagnose
+        result = diagnose(record, options, progress=bar)
     print(summary(result))
     if args.json is not None:
         write_json(result, args.json)
-        print(f"json      {args.json}")
+        print(f"wrote     {args.json}")
     if args.report is not None:
         files = write_report(result, args.report)
-        print(f"report    {args.report}/ ({len(files)} files)")
+        print(f"wrote     {args.report}/ ({len(files)} files: "
+              f"{', '.join(sorted(p.name for p in files))})")
     return 0
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from ..progress import ProgressBar
-    from ..sweeps import run_sweep
-    from .bench import bench_items, diagnose_one, format_bench, summarise_bench
-
     if args.n < 1:
         raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
     if args.steps < 200:
         raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
+    status(f"diagnose-bench: {args.n} record(s) of {args.steps} samples, seed {args.seed}"
+            f"{', realism' if args.realism else ''}: each generated on the simulated rig"
+            + ("" if args.records is None else f" (or reused from {args.records})")
+            + " and diagnosed blind")
+    from ..progress import ProgressBar
+    from ..sweeps import run_sweep
+    from .bench import bench_items, diagnose_one, format_bench, summarise_bench
+
     items = bench_items(args.n, args.seed, args.steps, args.realism,
                         None if args.records is None else str(args.records))
-    bar = ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress)
     started = time.perf_counter()
-    rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
-                     progress=bar)
+    with ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress) as bar:
+        rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
+                         progress=bar)
     wall = time.perf_counter() - started
     result = summarise_bench(rows)
     print(format_bench(result, args.seed, wall, realism=args.realism))
@@ -174,7 +184,7 @@ def _bench(args: argparse.Namespace) -> int:
                                "realism": args.realism,
                                "wall_seconds": wall, "summary": result, "records": rows}
         args.json.write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
-        print(f"json {args.json}")
+        print(f"wrote {args.json}")
     return 0
 
 

@@ -14,17 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from ..numbers import fmt, pct
+
 __all__ = ["summary", "to_json", "write_json", "write_report"]
-
-
-def _f(x: Any, digits: int = 4, unit: str = "") -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "—"
-    return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
-
-
-def _pct(x: Any) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x:.2f} %"
 
 
 def summary(result: dict[str, Any]) -> str:
@@ -37,40 +29,41 @@ def summary(result: dict[str, Any]) -> str:
         f"record    {rec['source']}: {rec['samples']} samples over {rec['duration_s']:.4g} s; "
         f"calibration {cal[0]}-{cal[1]}, withheld {wh[0]}-{wh[1]}",
         f"baseline  {base['kind']}: " + ", ".join(
-            f"{k} {_f(v)}" for k, v in base["params"].items()),
+            f"{k} {fmt(v)}" for k, v in base["params"].items()),
         *([] if base.get("selection") is None else
           [f"          chosen by {base['requested']} (BIC, calibration part): "
            f"{base['selection']['reason']}"]),
-        f"gap       withheld: force {_pct(gap['force_pct'])}, displacement "
-        f"{_pct(gap['disp_pct'])}, total {_pct(gap['total_pct'])} (floor "
-        f"{noise['floor_pct']:g} %, white noise alone {_pct(noise['noise_only_gap_pct'])})",
+        f"gap       withheld: force {pct(gap['force_pct'])}, displacement "
+        f"{pct(gap['disp_pct'])}, total {pct(gap['total_pct'])} (floor "
+        f"{noise['floor_pct']:g} %, white noise alone {pct(noise['noise_only_gap_pct'])})",
     ]
     layers = loc["layers"]
     interface = layers["interface"]
     where = (f"where     force gap: interface {interface['share_pct']:.0f} %, specimen "
              f"{layers['specimen']['share_pct']:.0f} %, sensor {layers['sensor']['share_pct']:.0f}"
              f" %; worst phase {loc['worst_phase']} "
-             f"(NRMS {_pct(loc['phase'][loc['worst_phase']]['nrms_pct'])})")
+             f"(NRMS {pct(loc['phase'][loc['worst_phase']]['nrms_pct'])})")
     lines.append(where)
     if interface["measured"]:
         fei_ms, xcorr_ms = (None if interface[k] is None else 1e3 * interface[k]
                             for k in ("fei_delay_s", "xcorr_delay_s"))
         lines.append(
-            f"interface NRMS {_pct(interface['nrms_pct'])}, FEI amplitude "
-            f"{_f(interface['fei_amplitude'])}, FEI delay {_f(fei_ms)} ms, xcorr delay "
-            f"{_f(xcorr_ms)} ms, energy error {_pct(loc['force']['energy_error_pct'])}")
+            f"interface NRMS {pct(interface['nrms_pct'])}, FEI amplitude "
+            f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
+            f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
     lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
                  f"{verdict['explanation']}")
     winner = next((e for e in [*result["effects"], *result["pairs"]]
                    if e["name"] == verdict["effect"]), None)
     if winner is not None:
         for name, p in winner["params"].items():
-            lines.append(f"          {name} = {_f(p['value'])} ± {_f(p['std'], 2)} {p['unit']}"
+            lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], digits=2)} "
+                         f"{p['unit']}"
                          f"  ({p['meaning']})")
     lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
     for e in [*result["effects"], *result["pairs"][:3]]:
-        lines.append(f"  {e['name']:<34} {_pct(e['gap_after']['total_pct']):>9}  "
-                     f"{_pct(e['shrink_pct']):>9}  {_f(e['score'], 3):>6}")
+        lines.append(f"  {e['name']:<34} {pct(e['gap_after']['total_pct']):>9}  "
+                     f"{pct(e['shrink_pct']):>9}  {fmt(e['score'], digits=3):>6}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
     return "\n".join(lines)

@@ -70,6 +70,8 @@ CALIBRATION_FRACTION = 0.6
 NOISE_FLOOR_PCT = 1.0
 PARSIMONY_PCT = 2.0
 MIN_SHRINK_PCT = 20.0
+GAP_ZERO_PCT = 1e-6
+"""A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
 PAIR_MARGIN_PCT = 5.0
 TOP_FOR_PAIRS = 3
 MAX_FIT_SAMPLES = 6000
@@ -123,8 +125,8 @@ class _Scored:
     @property
     def shrink(self) -> float:
         b, a = self.before["total_pct"], self.after["total_pct"]
-        if b is None or a is None or not math.isfinite(a) or b <= 0.0:
-            return -math.inf
+        if b is None or a is None or not math.isfinite(a) or b < GAP_ZERO_PCT:
+            return -math.inf  # undefined (JSON null, "–"): there was no gap to shrink
         return 100.0 * (1.0 - a / b)
 
     @property
@@ -222,6 +224,8 @@ def diagnose(record: Record, options: Options | None = None,
     effects = [e for e in opts.effects]
     total_fits = 1 + len(effects) + (TOP_FOR_PAIRS * 2 if opts.pairs else 0)
     done = 0
+    if progress is not None:
+        progress(0, total_fits)  # the total before the baseline's fits (seconds)
 
     def tick() -> None:
         nonlocal done

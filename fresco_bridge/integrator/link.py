@@ -12,6 +12,7 @@ import socket
 from protocol import (
     NEED_DATA,
     Action,
+    ClientState,
     ElementClientSession,
     ReplyReceived,
     Signals,
@@ -25,6 +26,14 @@ UDP_HANDSHAKE_REPLY = b"b"
 
 class LinkError(ConnectionError):
     """The bridge did not answer in time or closed the connection."""
+
+
+class SessionRefused(LinkError):
+    """The bridge ended the connection before its first answer: it refused the session.
+
+    A bridge closes the connection of a client whose size ID does not fit the site (another
+    number of DOFs), of an address it does not allow, or while the site is busy; it sends no
+    reason (the protocol has no message for one), so the reason is in the bridge's log."""
 
 
 class GenericClientLink:
@@ -45,6 +54,7 @@ class GenericClientLink:
         self.transport = transport
         self.timeout = timeout
         self.sock: socket.socket | None = None
+        self._answered = False  # any reply received: a close before one is a refusal
 
     # -- connection --------------------------------------------------------------------------
     def connect(self) -> GenericClientLink:
@@ -65,8 +75,11 @@ class GenericClientLink:
     def close(self) -> None:
         if self.sock is None:
             return
-        with contextlib.suppress(OSError):  # the bridge may already be gone
-            self._send(self.session.send_die())
+        # DIE only where the protocol allows it: not while a reply is outstanding (the bridge
+        # went away mid-request), not after an error
+        if self.session.state is ClientState.READY:
+            with contextlib.suppress(OSError):  # the bridge may already be gone
+                self._send(self.session.send_die())
         self.sock.close()
         self.sock = None
 
@@ -79,11 +92,14 @@ class GenericClientLink:
     # -- messages ----------------------------------------------------------------------------
     def _send(self, data: bytes) -> None:
         assert self.sock is not None, "link not connected"
-        if self.transport == "tcp":
-            self.sock.sendall(data)
-        else:
-            for chunk in chunk_datagrams(data):
-                self.sock.send(chunk)
+        try:
+            if self.transport == "tcp":
+                self.sock.sendall(data)
+            else:
+                for chunk in chunk_datagrams(data):
+                    self.sock.send(chunk)
+        except (BrokenPipeError, ConnectionResetError):
+            raise self._closed() from None
 
     def _reply(self) -> ReplyReceived:
         assert self.sock is not None
@@ -97,9 +113,25 @@ class GenericClientLink:
             except TimeoutError:
                 raise LinkError(f"no reply from the bridge at {self.address} "
                                 f"within {self.timeout:g} s") from None
+            except ConnectionResetError:  # closed with our next message unread: a reset
+                data = b""
             if not data:
-                raise LinkError(f"the bridge at {self.address} closed the connection")
+                raise self._closed()
             self.session.receive_data(data)
+            self._answered = True
+
+    def _closed(self) -> LinkError:
+        """The bridge closed the connection: a refusal before its first answer."""
+        host, port = self.address
+        if self._answered:
+            return LinkError(f"the bridge at {host}:{port} closed the connection")
+        sid = self.size_id
+        return SessionRefused(
+            f"the bridge at {host}:{port} refused the session: it closed the connection "
+            f"before answering this client ({self.n}-DOF genericClient, sizes "
+            f"ctrl={sid.ctrl.as_tuple()} daq={sid.daq.as_tuple()} dataSize={sid.data_size}); "
+            "its log says why (a site serving another number of DOFs, an address not in "
+            "allowed_clients, a site busy with another client)")
 
     def set_trial(
         self, disp: tuple[float, ...], vel: tuple[float, ...] | None = None,

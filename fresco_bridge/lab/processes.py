@@ -135,21 +135,25 @@ class _Running:
         tail = "\n  ".join(list(self.tail)[-10:]) or "(no output)"
         return f"service {self.svc.name} exited with {how}; last output:\n  {tail}"
 
-    def stop(self, grace: float) -> int | None:
-        """SIGTERM the service's process group; SIGKILL after ``grace`` seconds."""
+    def stop(self, grace: float) -> str:
+        """SIGTERM the service's process group; SIGKILL after ``grace`` seconds. How it ended,
+        in words: a service ended by our SIGTERM was stopped on purpose, not a failure."""
+        how = None
         if self.proc.poll() is None:
+            how = "SIGTERM"
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.proc.pid, signal.SIGTERM)
             try:
                 self.proc.wait(grace)
             except subprocess.TimeoutExpired:
+                how = "SIGKILL"
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(5.0)
         with contextlib.suppress(ProcessLookupError):  # stray grandchildren of the group
             os.killpg(self.proc.pid, signal.SIGKILL)
         self._thread.join(2.0)
-        return self.proc.returncode
+        return _ended(self.svc.name, self.proc.returncode, how, grace)
 
 
 @dataclass
@@ -178,6 +182,7 @@ def run_lab(opts: LabOptions, out: TextIO | None = None,
     width = max(len(s.name) for s in topo.services)
     running: list[_Running] = []
     pids: dict[str, int] = {}
+    runs_before = _run_dirs(opts.runs)
     with tempfile.TemporaryDirectory(prefix="fresco-lab-") as tmp:
         try:
             for svc in topo.services:
@@ -206,13 +211,61 @@ def run_lab(opts: LabOptions, out: TextIO | None = None,
                     _wait_ready(child, opts.ready_timeout, stop)
                 _say(out, f"{svc.name}: started (pid {child.proc.pid})")
             _say(out, "ready: " + " ".join(f"{n}={p}" for n, p in pids.items()))
+            if not any(c.svc.oneshot for c in running):
+                _say(out, _while_up(running, opts.bridge_service))
             if on_ready is not None:
                 on_ready(pids)
             return _supervise(running, stop, out)
         finally:
             for child in reversed(running):
-                rc = child.stop(opts.stop_grace)
-                _say(out, f"{child.svc.name}: stopped (status {rc})")
+                _say(out, child.stop(opts.stop_grace))
+            _next_steps(out, _run_dirs(opts.runs) - runs_before)
+
+
+def _while_up(running: list[_Running], bridge: str) -> str:
+    """What to do with a lab that waits for an integrator: drive the bridge's first site."""
+    ports = ""
+    for child in running:
+        if child.svc.name == bridge and child.svc.ready_line is not None:
+            ports = next((ln[len(child.svc.ready_line):].lstrip(": ") for ln in child.tail
+                          if ln.startswith(child.svc.ready_line)), "")
+    first = ports.split(",")[0].strip()
+    site, _, port = first.partition("=")
+    drive = (f"`fresco-bridge lab integrate --port {port}` drives site {site}"
+             if port.isdigit() else "`fresco-bridge lab integrate --port PORT` drives a site")
+    return f"next: in another terminal, {drive}; Ctrl-C here stops the lab"
+
+
+def _ended(name: str, rc: int | None, how: str | None, grace: float) -> str:
+    """``bridge: stopped by lab up (SIGTERM), exit status 0`` and the like."""
+    if how is None:  # it had ended by itself (a one-shot, or a service that died)
+        return (f"{name}: had finished (status 0)" if rc == 0 else
+                f"{name}: had exited ({_status(rc)})")
+    if how == "SIGKILL":
+        return f"{name}: killed (SIGKILL: still running {grace:g} s after our SIGTERM)"
+    if rc in (0, -signal.SIGTERM, 128 + signal.SIGTERM):
+        return f"{name}: stopped by lab up (SIGTERM), as intended"
+    return f"{name}: stopped by lab up (SIGTERM); it exited with {_status(rc)}"
+
+
+def _status(rc: int | None) -> str:
+    return f"signal {-rc}" if rc is not None and rc < 0 else f"status {rc}"
+
+
+def _run_dirs(runs: Path) -> set[Path]:
+    """The run directories under ``runs`` (none if it does not exist yet)."""
+    with contextlib.suppress(OSError):
+        return {p for p in runs.iterdir() if p.is_dir()}
+    return set()
+
+
+def _next_steps(out: TextIO, new_runs: set[Path]) -> None:
+    """Where the lab's run record is and what to do with it."""
+    for run in sorted(new_runs):
+        _say(out, f"run record: {run}")
+    if new_runs:
+        run = max(new_runs)
+        _say(out, f"next: fresco-bridge runs show {run}  (then: fresco-bridge report {run})")
 
 
 def _say(out: TextIO, text: str) -> None:

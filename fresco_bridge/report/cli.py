@@ -83,7 +83,7 @@ def _export(args: argparse.Namespace) -> int:
     else:
         out = args.output or run.directory / "steps.csv"
         n = write_csv(run.steps, out, site=args.site)
-    print(f"{out}: {n} committed step(s)")
+    print(f"wrote {out}: {n} committed step(s)")
     return 0
 
 
@@ -94,7 +94,7 @@ def report_command(args: argparse.Namespace) -> int:
 
         run_dir = resolve_run(args.run, args.runs)
         path = write_report(run_dir, args.output)
-        print(f"{path}: report of {run_dir}")
+        print(f"wrote {path} (report of {run_dir})")
         return 0
     if args.command == "export" or args.runs_command == "export":
         return _export(args)

@@ -26,11 +26,11 @@ import numpy as np
 
 from .. import __version__
 from ..indicators import IndicatorError, tracking_indicator
+from ..numbers import fmt
 from ..runs import (
     Run,
     SessionSignals,
     SiteSummary,
-    fmt,
     human_size,
     load_run,
     session_signals,

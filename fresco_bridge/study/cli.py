@@ -198,9 +198,11 @@ def _run(args: argparse.Namespace) -> int:
         raise StudyError(f"--out {args.out}: cannot create the directory: {exc}") from None
     n_tasks = len(runs) * 2 * len({"reference", *cases})
     print(f"fresco-bridge study paper: {len(runs)} run(s) x 2 layouts x "
-          f"{len({'reference', *cases})} cases = {n_tasks} simulations", file=sys.stderr)
-    results = run_study(runs, cases, workers=args.workers, scheduler=args.scheduler,
-                        progress=ProgressBar("cases", n_tasks))  # fmt: skip
+          f"{len({'reference', *cases})} cases = {n_tasks} simulations, written to "
+          f"{args.out}/", file=sys.stderr, flush=True)
+    with ProgressBar("cases", n_tasks) as bar:
+        results = run_study(runs, cases, workers=args.workers, scheduler=args.scheduler,
+                            progress=bar)
     documents = []
     for (document, histories), run in zip(results, runs, strict=True):
         run_dir = args.out / run.label

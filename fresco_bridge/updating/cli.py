@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from ..numbers import fmt
+from ..progress import status
 from .base import UpdaterError
 from .histories import History, HistoryError, Units, read_history
 from .registry import UPDATERS, make_updater, updater_options
@@ -173,9 +175,10 @@ def _pretrain(args: argparse.Namespace) -> int:
     from .ann import PRETRAIN_LM, pretrain, recurrence_warning
     from .modelfile import import_torch, save_model
 
-    import_torch("writing a model file")  # fail before a long training, not after it
     if args.iterations < 1:
         raise UpdaterError(f"--iterations must be >= 1, got {args.iterations}")
+    status(f"pretrain: loading torch, reading {args.data}")
+    import_torch("writing a model file")  # fail before a long training, not after it
     disp, force, source = _load_training_data(args)
     if args.samples is not None:
         if args.samples < 2:
@@ -184,13 +187,13 @@ def _pretrain(args: argparse.Namespace) -> int:
     print(f"pretrain: {len(disp)} samples from {source}; network "
           f"6-{'-'.join(map(str, args.hidden))}-1, LM up to {args.iterations} iterations",
           flush=True)
-    bar = ProgressBar("pretrain", args.iterations)
     start = time.perf_counter()
-    model = pretrain(disp, force, layers=(6, *args.hidden, 1), seed=args.seed,
-                     options=replace(PRETRAIN_LM, max_iterations=args.iterations),
-                     progress=bar, source=source)
+    with ProgressBar("pretrain", args.iterations) as bar:
+        model = pretrain(disp, force, layers=(6, *args.hidden, 1), seed=args.seed,
+                         options=replace(PRETRAIN_LM, max_iterations=args.iterations),
+                         progress=bar, source=source)
+        bar(args.iterations, args.iterations)
     seconds = time.perf_counter() - start
-    bar(args.iterations, args.iterations)
     model.training["seconds"] = seconds
     one_step = model.predict_one_step(disp, force)
     free_run = model.simulate(disp)
@@ -199,9 +202,10 @@ def _pretrain(args: argparse.Namespace) -> int:
     save_model(model, args.out)
     t = model.training
     print(f"wrote {args.out}: {model.net.n_params} parameters, {t['iterations']} iterations "
-          f"({t['stop']}), {seconds:.1f} s; normalised MSE {t['mse_normalised']:.3g}; "
-          f"one-step RMSE {t['one_step_rmse_kN']:.4g} kN, free-run MAETH "
-          f"{t['free_run_maeth_kN']:.4g} kN (the twin's own recurrence on the training data)")
+          f"({t['stop']}), {seconds:.1f} s; normalised MSE "
+          f"{fmt(t['mse_normalised'], digits=3)}; "
+          f"one-step RMSE {fmt(t['one_step_rmse_kN'])} kN, free-run MAETH "
+          f"{fmt(t['free_run_maeth_kN'])} kN (the twin's own recurrence on the training data)")
     warning = recurrence_warning(t["free_run_maeth_kN"], float(np.max(np.abs(force))))
     if warning is not None:
         print(warning, file=sys.stderr)
@@ -248,6 +252,7 @@ def _replay(args: argparse.Namespace) -> int:
     given = dict(args.option)
     _check_options(args.updater, given, model=args.model is not None,
                    offline=args.offline is not None)
+    status(f"replay {args.updater}: reading {args.source} (source) and {args.twin} (twin)")
     src = read_history(args.source, site=args.site, session=args.session,
                        actuator=args.actuator, units=args.units)
     twin = read_history(args.twin, need_force=False, site=args.twin_site or args.site,
@@ -268,9 +273,9 @@ def _replay(args: argparse.Namespace) -> int:
         _print_notes("offline", database)
         options["offline"] = (database.disp, database.force)
     updater = _build_updater(args.updater, options, given)
-    bar = ProgressBar(f"replay {args.updater}", n_twin, enabled=not args.quiet)
     start = time.perf_counter()
-    result = replay(updater, src.disp, src.force, twin.disp, lag=args.lag, progress=bar)
+    with ProgressBar(f"replay {args.updater}", n_twin, enabled=not args.quiet) as bar:
+        result = replay(updater, src.disp, src.force, twin.disp, lag=args.lag, progress=bar)
     wall = time.perf_counter() - start
     _write_predictions(args.out, result.twin_disp, result.force_pred, twin.force, args.units)
     summary: dict[str, Any] = {
@@ -284,8 +289,9 @@ def _replay(args: argparse.Namespace) -> int:
                       "max": float(np.max(result.update_seconds) * 1e3)},
     }
     lines = [f"replay {args.updater}{' --lag' if args.lag else ''}: {n_twin} steps in "
-             f"{wall:.2f} s; update median {summary['update_ms']['median']:.2f} ms, "
-             f"p99 {summary['update_ms']['p99']:.2f} ms"]
+             f"{fmt(wall, 's', 3)}; update median "
+             f"{fmt(summary['update_ms']['median'], 'ms', 3)}, p99 "
+             f"{fmt(summary['update_ms']['p99'], 'ms', 3)}"]
     if twin.force is not None:
         true = twin.force
         peaks = indicators.peak_values(true, result.force_pred)
@@ -300,10 +306,10 @@ def _replay(args: argparse.Namespace) -> int:
         f = 1.0 / args.units.to_kn
         unit = args.units.force
         lines.append(
-            f"MAETH {metrics['maeth'] * f:.4g} {unit}, RMS error {metrics['rms'] * f:.4g} {unit}; "
-            f"peaks true +{peaks.pv_es_pos * f:.4g}/-{peaks.pv_es_neg * f:.4g}, predicted "
-            f"+{peaks.pv_ums_pos * f:.4g}/-{peaks.pv_ums_neg * f:.4g} {unit} (AEPV "
-            f"{peaks.aepv_pos * f:.4g}/{peaks.aepv_neg * f:.4g} {unit})")
+            f"MAETH {fmt(metrics['maeth'] * f, unit)}, RMS error {fmt(metrics['rms'] * f, unit)}; "
+            f"peaks true +{fmt(peaks.pv_es_pos * f)}/-{fmt(peaks.pv_es_neg * f)}, predicted "
+            f"+{fmt(peaks.pv_ums_pos * f)}/-{fmt(peaks.pv_ums_neg * f)} {unit} (AEPV "
+            f"{fmt(peaks.aepv_pos * f)}/{fmt(peaks.aepv_neg * f)} {unit})")
         offline = _offline_database(options)
         baseline = None
         if offline is not None and args.updater != "none":
@@ -319,8 +325,9 @@ def _replay(args: argparse.Namespace) -> int:
                                    "metrics_kN": base_metrics}
             lines.append(
                 f"the Bilinear calibrated to the same offline database: MAETH "
-                f"{base_metrics['maeth'] * f:.4g} {unit}, RMS error {base_metrics['rms'] * f:.4g} "
-                f"{unit}; {args.updater} is {_relative(metrics['maeth'], base_metrics['maeth'])} "
+                f"{fmt(base_metrics['maeth'] * f, unit)}, RMS error "
+                f"{fmt(base_metrics['rms'] * f, unit)}; {args.updater} is "
+                f"{_relative(metrics['maeth'], base_metrics['maeth'])} "
                 f"in MAETH, {_relative(metrics['rms'], base_metrics['rms'])} in RMS error")
     else:
         lines.append(f"{twin.source} has no force column: nothing to score against")

@@ -4,6 +4,7 @@ one-shot, stop in reverse order, failures named, and no orphans even when it is 
 from __future__ import annotations
 
 import json
+import re
 import signal
 import socket
 import time
@@ -20,9 +21,11 @@ def _started_order(output: str) -> list[str]:
             if ln.startswith("lab: ") and ln.endswith(")") and "started (pid" in ln]
 
 
+_STOPPED = re.compile(r"lab: ([\w-]+): (had finished|had exited|stopped by lab up|killed) ")
+
+
 def _stopped_order(output: str) -> list[str]:
-    return [ln.split(":")[1].strip() for ln in output.splitlines()
-            if ln.startswith("lab: ") and "stopped (status" in ln]
+    return [m.group(1) for m in map(_STOPPED.match, output.splitlines()) if m]
 
 
 def test_with_integrator_runs_to_the_end_and_stops_in_reverse_order(tmp_path: Path) -> None:
@@ -36,6 +39,10 @@ def test_with_integrator_runs_to_the_end_and_stops_in_reverse_order(tmp_path: Pa
     assert set(started[:2]) == {"mosquitto", "sim-actuator"}, out
     assert _stopped_order(out) == started[::-1], out
     assert "one-shot services finished" in out
+    # stopped on purpose is said so, never as a bare signal status that reads as a failure
+    assert "lab: integrator: had finished (status 0)" in out
+    assert "lab: bridge: stopped by lab up (SIGTERM), as intended" in out
+    assert "status -15" not in out and "in another terminal" not in out, out
     summary = json.loads(next(ln for ln in out.splitlines()
                               if "integrator: {" in ln).split("integrator: ", 2)[-1])
     assert summary["steps"] == 150  # time steps; step 0 (the initial state) is committed too
@@ -45,6 +52,10 @@ def test_with_integrator_runs_to_the_end_and_stops_in_reverse_order(tmp_path: Pa
     damper = [s for s in committed_steps(run_dir) if s.site == "damper"]
     assert len(damper) == 151
     assert not any(pid_alive(p) for p in lab.pids.values())
+    lines = out.splitlines()
+    assert lines[-2:] == [f"lab: run record: {run_dir}",
+                          f"lab: next: fresco-bridge runs show {run_dir}  (then: fresco-bridge "
+                          f"report {run_dir})"], out
 
 
 def test_sigterm_stops_everything(tmp_path: Path) -> None:
@@ -53,7 +64,12 @@ def test_sigterm_stops_everything(tmp_path: Path) -> None:
         pids = dict(lab.pids)
         assert all(pid_alive(p) for p in pids.values())
         assert lab.stop(signal.SIGTERM) == 0, lab.output()
-    assert _stopped_order(lab.output()) == _started_order(lab.output())[::-1]
+    out = lab.output()
+    assert _stopped_order(out) == _started_order(out)[::-1]
+    assert ("lab: next: in another terminal, `fresco-bridge lab integrate --port "
+            f"{lab.port('LAB_BRIDGE_PORT')}` drives site damper; Ctrl-C here stops the lab") in out
+    assert "lab: bridge: stopped by lab up (SIGTERM), as intended" in out, out
+    assert "lab: run record: " in out and "status -15" not in out, out
     assert not any(pid_alive(p) for p in pids.values())
 
 

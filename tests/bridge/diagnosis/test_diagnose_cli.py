@@ -128,3 +128,29 @@ def test_a_given_baseline_held_fixed_is_the_sim(tmp_path: Path,
     assert doc["baseline"]["fitted"] is False
     assert np.isclose(doc["baseline"]["params"]["k0"], s["k0"])
     assert doc["verdict"]["effect"] == "none"
+
+
+def test_a_record_its_sim_explains_exactly_shows_no_shrink_and_no_float_dust(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An ideal rig and a bilinear specimen (the simple demo's record): the gap is rounding
+    noise, so no shrink is defined against it (``–``, JSON null), and no ``e-19`` is printed."""
+    from fresco_bridge.lawfit import law_forces
+    from sim_actuator.models.bilinear import Bilinear
+
+    time = np.arange(600) * 0.01
+    cmd = 0.5 * time * np.sin(2.0 * np.pi * time / 1.5)
+    force = law_forces(Bilinear(k0=8.0, fy=12.0, alpha=0.05), cmd)
+    csv_path = _write_csv(tmp_path / "ideal.csv", [list(r) for r in zip(time, cmd, cmd, force,
+                                                                        strict=True)])
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(csv_path), "--json", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["verdict"]["effect"] == "none", text
+    assert doc["baseline"]["gap_withheld"]["total_pct"] < 1e-6
+    assert all(e["shrink_pct"] is None and e["score"] is None for e in doc["effects"]), text
+    table = text.split("candidates")[1].split("\ntime")[0].splitlines()[1:]
+    assert len(table) == len(doc["effects"]) and all(
+        line.split()[-2:] == ["–", "–"] for line in table), text
+    assert "e-1" not in text and "e+" not in text and "-0.00" not in text, text
+    assert f"wrote     {out}" in text

@@ -14,7 +14,7 @@ from fresco_bridge.cli import main as cli_main
 from fresco_bridge.record import export_csv
 from fresco_bridge.record.export import committed_steps
 from fresco_bridge.runs import RunDirError, list_runs, resolve_run
-from tests.support.recorded_run import raw_lines, record_run
+from tests.support.recorded_run import LAB_TOML, raw_lines, record_run, record_sessions
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +46,33 @@ def test_list_shows_every_run_with_its_counts(runs_root: Path,
     row = out[1].split()
     assert row[0] == first.name and row[2] == "closed" and row[4:7] == ["120", "1", "1"]
     assert len(out) == 3
+
+
+OTHER_SITE = """
+[[sites]]
+name = "other"
+port = 0
+[sites.controller]
+model = "elastic"
+params = { k = 5.0 }
+"""
+
+
+def test_list_counts_sessions_per_site(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                       ) -> None:
+    """Two sites with one session each are "1 each", not "2" sessions."""
+    toml = LAB_TOML.format(name="two-sites", telemetry="") + OTHER_SITE
+    one_each = record_sessions(tmp_path / "runs", toml, [("spring", 5), ("other", 5)])
+    uneven = record_sessions(tmp_path / "runs", toml.replace("two-sites", "uneven"),
+                             [("spring", 5), ("other", 5), ("spring", 5)])
+    by_name = {r.name: r for r in list_runs(tmp_path / "runs")}
+    assert by_name[one_each.name].site_sessions == {"spring": 1, "other": 1}
+    assert by_name[uneven.name].site_sessions == {"spring": 2, "other": 1}
+    assert cli_main(["runs", "list", "--runs", str(tmp_path / "runs")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    sessions_at = out[0].index("sessions")
+    rows = {line.split()[0]: line[sessions_at:].split("  ")[0].strip() for line in out[1:]}
+    assert rows == {one_each.name: "1 each", uneven.name: "2,1"}, out
 
 
 def test_list_reports_a_broken_run_instead_of_failing(runs_root: Path, tmp_path: Path,
@@ -121,3 +148,14 @@ def test_resolve_run_names_and_errors(runs_root: Path) -> None:
         resolve_run(first.name[:4], runs_root)
     with pytest.raises(RunDirError, match="no such run"):
         resolve_run("zzz", runs_root)
+
+
+def test_default_outputs_are_named_where_they_were_written(
+        runs_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run_dir = shutil.copytree(_run(runs_root, "second"), tmp_path / _run(runs_root, "second").name)
+    assert cli_main(["export", str(run_dir)]) == 0
+    assert cli_main(["report", str(run_dir)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == [f"wrote {run_dir / 'steps.csv'}: 80 committed step(s)",
+                   f"wrote {run_dir / 'report.html'} (report of {run_dir})"]
+    assert (run_dir / "steps.csv").exists() and (run_dir / "report.html").exists()
