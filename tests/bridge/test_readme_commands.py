@@ -74,22 +74,22 @@ class Block:
         return "\n".join(c.text for c in self.commands)
 
 
-def _marker(before: str, line: int) -> str | None:
+def _marker(before: str, where: str) -> str | None:
     """The ``readme-test`` directive of the HTML comment right before a fence: a skip reason."""
     found = re.search(r"<!--\s*readme-test:(.*?)-->\s*\Z", before, re.S)
     if found is None:
         return None
     directive = " ".join(found.group(1).split())
     if not directive.startswith("skip:"):
-        raise ValueError(f"README.md:{line}: unknown readme-test directive {directive!r} "
+        raise ValueError(f"{where}: unknown readme-test directive {directive!r} "
                          "(expected 'skip: REASON')")
     reason = directive.removeprefix("skip:").strip()
     if not reason:
-        raise ValueError(f"README.md:{line}: a skipped block must say why ('skip: REASON')")
+        raise ValueError(f"{where}: a skipped block must say why ('skip: REASON')")
     return reason
 
 
-def _commands(body: list[str], first_line: int) -> list[Command]:
+def _commands(body: list[str], first_line: int, name: str) -> list[Command]:
     """The block's logical lines: a trailing backslash continues a line onto the next."""
     out: list[Command] = []
     pending: list[str] = []
@@ -106,25 +106,26 @@ def _commands(body: list[str], first_line: int) -> list[Command]:
         if argv:
             out.append(Command(start, text, argv))
     if pending:
-        raise ValueError(f"README.md:{start}: a block ends inside a continued line")
+        raise ValueError(f"{name}:{start}: a block ends inside a continued line")
     return out
 
 
-def readme_blocks(text: str) -> list[Block]:
-    """Every ```sh block of ``text``; a fence of another shell dialect is an error."""
+def readme_blocks(text: str, name: str = "README.md") -> list[Block]:
+    """Every ```sh block of ``text`` (the file ``name``); another shell dialect's fence is an
+    error."""
     lines = text.splitlines()
     blocks: list[Block] = []
     i = 0
     while i < len(lines):
         fence = lines[i].strip()
         if fence in ("```bash", "```shell", "```console", "```zsh", "```sh-session"):
-            raise ValueError(f"README.md:{i + 1}: write command blocks as ```sh (got {fence})")
+            raise ValueError(f"{name}:{i + 1}: write command blocks as ```sh (got {fence})")
         if fence != "```sh":
             i += 1
             continue
         end = next(j for j in range(i + 1, len(lines)) if lines[j].strip() == "```")
-        skip = _marker("\n".join(lines[:i]), i + 1)
-        blocks.append(Block(i + 1, skip, _commands(lines[i + 1:end], i + 2)))
+        skip = _marker("\n".join(lines[:i]), f"{name}:{i + 1}")
+        blocks.append(Block(i + 1, skip, _commands(lines[i + 1:end], i + 2, name)))
         i = end + 1
     return blocks
 
@@ -185,9 +186,12 @@ def test_project_programs_come_from_the_venv(block: Block, command: Command) -> 
             f"{_where(block, command)}: call {command.argv[0]} as {VENV_BIN}{program}")
 
 
-def _placeholders(word: str) -> str:
-    """A shell variable stands for a run directory when the line is parsed (nothing runs)."""
-    return re.sub(r"\$\{?\w+\}?", "runs/20260101T000000-demo", word)
+def _placeholders(word: str, script: str = "") -> str:
+    """A shell variable, when a line is parsed (nothing runs): a ``for`` loop's first word, else
+    a run directory (``run=$(ls -d runs/*-demo | tail -n 1)``)."""
+    loops = dict(re.findall(r"\bfor (\w+) in (\S+)", script))
+    return re.sub(r"\$\{?(\w+)\}?", lambda m: loops.get(m.group(1), "runs/20260101T000000-demo"),
+                  word)
 
 
 def parse_fresco_bridge(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> argparse.Namespace:
@@ -232,7 +236,7 @@ def test_each_command_is_runnable_as_written(
         assert (REPO / name).exists(), f"{where}: {name} is not in the repository"
     program = _program(argv)
     if program == "fresco-bridge":
-        parse_fresco_bridge([_placeholders(w) for w in argv[1:]], monkeypatch)
+        parse_fresco_bridge([_placeholders(w, block.script) for w in argv[1:]], monkeypatch)
         assert "does not parse" not in capsys.readouterr().err
     elif program == "make":
         for target in argv[1:]:
@@ -268,6 +272,54 @@ def test_the_make_targets_are_the_readmes() -> None:
                              text=True, timeout=120)
         assert out.returncode == 0, out.stderr
         assert expect in out.stdout, f"make -n {target} does not run {expect!r}"
+
+
+DOC_PAGES = sorted((REPO / "docs").glob("*.md"))
+INCLUDED = {"benchmarks.md": "BENCHMARKS.md", "security.md": "SECURITY.md",
+            "telemetry.md": "fresco_bridge/telemetry/README.md",
+            "sim-actuator.md": "sim_actuator/README.md"}
+
+
+def _doc_commands() -> list[tuple[str, Block, Command]]:
+    """The ``fresco-bridge`` lines of the documentation's ```sh blocks (its included files too)."""
+    files = [*(p.relative_to(REPO).as_posix() for p in DOC_PAGES), *INCLUDED.values()]
+    return [(name, block, command) for name in files
+            for block in readme_blocks((REPO / name).read_text(encoding="utf-8"), name)
+            for command in block.commands if _program(command.argv) == "fresco-bridge"]
+
+
+DOC_COMMANDS = _doc_commands()
+
+
+def test_the_documentation_pages_are_the_sites() -> None:
+    """Every page is in the site's navigation; an included page names the file it includes."""
+    mkdocs = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
+    for page in DOC_PAGES:
+        assert f": {page.name}" in mkdocs, f"docs/{page.name} is not in mkdocs.yml's nav"
+    for name, included in INCLUDED.items():
+        assert f'--8<-- "{included}"' in (REPO / "docs" / name).read_text(encoding="utf-8")
+    assert len(DOC_COMMANDS) >= 20
+
+
+@pytest.mark.parametrize(("name", "block", "command"), DOC_COMMANDS,
+                         ids=[f"{n}:{c.line}" for n, _, c in DOC_COMMANDS])
+def test_each_documented_command_parses(
+        name: str, block: Block, command: Command, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The documentation's commands keep up with the parser (the README's also run)."""
+    argv = [_placeholders(w, block.script) for w in command.argv[1:]]
+    try:
+        parse_fresco_bridge(argv, monkeypatch)
+    except AssertionError as error:
+        raise AssertionError(f"{name}:{command.line}: {error}") from None
+
+
+def test_the_written_pages_need_nothing_beside_the_clone() -> None:
+    for page in DOC_PAGES:
+        if page.name in INCLUDED:
+            continue  # BENCHMARKS.md's measurements may use ../shared; the pages never do
+        text = page.read_text(encoding="utf-8")
+        for mention in SHARED_MENTIONS:
+            assert mention not in text, f"docs/{page.name} mentions {mention}"
 
 
 # -- for real -----------------------------------------------------------------------------------
