@@ -155,8 +155,10 @@ def test_the_readme_has_command_blocks_and_its_skips_say_why() -> None:
 
 
 def test_nothing_points_at_shared() -> None:
-    """The README and the examples work on a clone with nothing beside it."""
-    files = [README, *(p for p in EXAMPLES.rglob("*") if p.is_file())]
+    """The README and the examples work on a clone with nothing beside it. (A script under
+    ``examples/data/`` that rebuilds the shipped data may name where the originals live.)"""
+    files = [README, *(p for p in EXAMPLES.rglob("*") if p.is_file()
+                       and not (p.parent.name == "data" and p.suffix == ".py"))]
     for path in files:
         try:
             text = path.read_text(encoding="utf-8")
