@@ -154,6 +154,16 @@ def test_the_readme_has_command_blocks_and_its_skips_say_why() -> None:
         readme_blocks("```bash\nls\n```\n")
 
 
+def test_the_readme_is_short_and_maps_every_page() -> None:
+    """The README is the newcomer's path (issue 27: at most ~200 lines); the rest is linked."""
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 200
+    for page in sorted((REPO / "docs").glob("*.md")):
+        if page.name not in ("index.md", "benchmarks.md"):  # the site's home; BENCHMARKS.md
+            assert f"](docs/{page.name})" in text, f"the README does not link docs/{page.name}"
+    assert "](BENCHMARKS.md)" in text
+
+
 def test_nothing_points_at_shared() -> None:
     """The README and the examples work on a clone with nothing beside it. (A script under
     ``examples/data/`` that rebuilds the shipped data may name where the originals live.)"""
