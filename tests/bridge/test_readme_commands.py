@@ -162,6 +162,9 @@ def test_the_readme_is_short_and_maps_every_page() -> None:
         if page.name not in ("index.md", "benchmarks.md"):  # the site's home; BENCHMARKS.md
             assert f"](docs/{page.name})" in text, f"the README does not link docs/{page.name}"
     assert "](BENCHMARKS.md)" in text
+    for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text):
+        if "://" not in target:
+            assert (REPO / target).exists(), f"the README links {target}, which does not exist"
 
 
 def test_nothing_points_at_shared() -> None:
