@@ -54,6 +54,7 @@ apt-test-deps:
 	  || { echo "make: cannot install Debian package $$p (needed by the tests)" >&2; exit 1; }; \
 	done
 
+# The documentation site is built strictly (a broken link, anchor or included file fails).
 # The whole suite runs on the compiled step path (what is installed); the protocol, record and
 # server tests run once more on the pure sources (tests/conftest.py: FRESCO_BRIDGE_PURE=1), so
 # both stay equal.
@@ -62,6 +63,7 @@ PURE_TESTS := tests/protocol tests/bridge/record tests/bridge/server tests/bridg
 test: $(VENV)/.test $(VENV)/.build apt-test-deps
 	$(BIN)/ruff check protocol fresco_bridge sim_actuator tests benchmarks setup.py
 	$(BIN)/mypy
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet  # docs/ -> build/site (mkdocs.yml)
 	$(BIN)/python -m pytest -q
 	FRESCO_BRIDGE_PURE=1 $(BIN)/python -m pytest -q -p no:cacheprovider $(PURE_TESTS)
 

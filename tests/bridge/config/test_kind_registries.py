@@ -1,5 +1,5 @@
 """The controller-kind and model-kind registries: config validation, error texts and the
-README's configuration table all come from them."""
+configuration reference's table (docs/configuration.md) all come from them."""
 
 from __future__ import annotations
 
@@ -18,8 +18,8 @@ from tests.support.paths import REPO
 SITE = '[[sites]]\nname = "a"\nport = 1\n'
 
 
-def test_the_readme_table_is_the_registries() -> None:
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
+def test_the_configuration_table_is_the_registries() -> None:
+    readme = (REPO / "docs" / "configuration.md").read_text(encoding="utf-8")
     assert f"| `[sites.controller] kind` | `\"sim\"` | {controller_kinds_markdown()} |" in readme
     assert f"| `controller.model` | `\"bilinear\"` | {model_kinds_markdown()}" in readme
     for name in (*CONTROLLER_KINDS, *MODEL_KINDS):
