@@ -26,7 +26,8 @@ after a clean close; a run left ``running`` with no lock holder was interrupted
 A failed write is a fault of the record, not of the bridge: the bytes of the failed write are
 cut off again (no torn line stays behind), ``failure`` says why (path and errno) and the commit
 raises ``RecordError``, so the site HOLDs and does not count the step. Free space is checked
-about once a second on the commit path (``os.statvfs``); below ``min_free_mb`` the record
+on the commit path (``os.statvfs``) about once a second and after each quarter of the headroom
+written; below ``min_free_mb`` the record
 refuses commits the same way, before the disk is full. ``check_writable`` clears the failure
 once the filesystem has its headroom again (a new session asks it first).
 """
@@ -64,6 +65,10 @@ RECOVERY_FREE_MB = 1.0
 ``min_free_mb = 0`` a full disk would otherwise look writable to ``check_writable``)."""
 SPACE_CHECK_INTERVAL = 1.0
 """Seconds between two free-space checks on the commit path (one ``statvfs``)."""
+SPACE_CHECK_SHARE = 4
+"""A check also runs after writing a ``1/SPACE_CHECK_SHARE`` of ``min_free_mb`` (at least
+``SPACE_CHECK_MIN_BYTES``): a fast step loop cannot write the headroom away within a second."""
+SPACE_CHECK_MIN_BYTES = 64 * 1024
 _MIB = 1 << 20
 
 DEFAULT_SYNC_INTERVAL = 0.05
@@ -96,6 +101,9 @@ class RunRecord:
         self.failure: RecordError | None = None
         """Why the record cannot take commits now (None: it can); see ``check_writable``."""
         self._space_due = 0.0  # record time of the next free-space check
+        self._unchecked = 0  # bytes written since the last free-space check
+        self._space_budget = max(SPACE_CHECK_MIN_BYTES,
+                                 int(min_free_mb * _MIB) // SPACE_CHECK_SHARE)
         self._cut_to: int | None = None  # the file's size before a failed write not yet cut
         self._fsync = fsync
         self._seq = seq
@@ -227,7 +235,7 @@ class RunRecord:
         the buffer) runs as one straight path — fold, encode, one ``write``, a sync request.
         """
         t = _monotonic() - self._t0
-        if t >= self._space_due:
+        if t >= self._space_due or self._unchecked >= self._space_budget:
             self._check_space(t)
         line = (self._enc.fold(t, site, session, step, time_, items)
                 if items and not self._buf and not self.closed and self.failure is None
@@ -352,6 +360,7 @@ class RunRecord:
                     done += _os_write(self._fd, view[done:])
         except OSError as exc:
             raise self._write_failed(exc, done) from exc
+        self._unchecked += done
 
     def _write_failed(self, exc: OSError, done: int) -> RecordError:
         """The failure of a write that got ``done`` bytes of its data into the file: they are
@@ -380,8 +389,10 @@ class RunRecord:
         return error
 
     def _check_space(self, t: float) -> None:
-        """Raise ``failure`` when the filesystem is below ``min_free_mb`` (once a second)."""
+        """Raise ``failure`` when the filesystem is below ``min_free_mb`` (once a second, and
+        once per ``_space_budget`` bytes written)."""
         self._space_due = t + SPACE_CHECK_INTERVAL
+        self._unchecked = 0
         error = self.check_writable()
         if error is not None:
             raise error

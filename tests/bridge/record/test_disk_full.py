@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import itertools
 import json
 import math
 import os
@@ -302,3 +303,34 @@ def test_a_torn_write_that_cannot_be_cut_at_once_blocks_every_line_until_it_is(
     assert_readable(record.directory)
     lines = list(read_record(record.directory))
     assert [ln["step"] for ln in lines if ln["kind"] == "commit"] == [1, 3]
+
+
+def test_free_space_is_checked_per_quarter_headroom_written_within_a_second(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A step loop fast enough to write the whole headroom within the 1 s check interval
+    (the compiled path: ~10,000 steps a second) still meets a check before the disk is full:
+    one every quarter of ``min_free_mb`` written."""
+    import fresco_bridge.record.writer as writer
+
+    checks: list[int] = []
+    real_statvfs = os.statvfs
+
+    def counting(path: Any) -> Any:
+        checks.append(record.path.stat().st_size)  # bytes written at this check
+        return real_statvfs(path)
+
+    monkeypatch.setattr(writer, "_monotonic", lambda: 100.0)  # the clock stands still
+    record = writer.RunRecord.create(tmp_path, "t", "", {}, fsync="off", min_free_mb=1)
+    monkeypatch.setattr(writer, "_statvfs", counting)
+    try:
+        n = 0
+        while record.path.stat().st_size < 1 << 20:  # 1 MiB: four quarters of the headroom
+            n += 1
+            record.trial("s", 1, n, 0.01 * n, (0.1 * n,), (0.1 * n,))
+            record.measurement("s", 1, n, (0.1 * n,), (K * 0.1 * n,))
+            record.commit("s", 1, n, 0.01 * n)
+    finally:
+        record.close()
+    quarter = (1 << 20) // 4
+    gaps = [b - a for a, b in itertools.pairwise(checks)]
+    assert len(gaps) >= 2 and all(quarter <= g < quarter + 4096 for g in gaps), checks
