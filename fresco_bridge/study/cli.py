@@ -80,8 +80,8 @@ def add_study_parser(sub: Any) -> None:
                    help="builtin (the in-process explicit Newmark, default) or opensees "
                         "(OpenSeesPy integrates the same frame; both dampers are genericClient "
                         "elements served by a bridge started for each case: the tested one by "
-                        "a sim site with the true law, the twin by an updatable site; noise-"
-                        "free only); recorded in study.json")
+                        "a sim site with the true law and the run's load-cell noise, the twin "
+                        "by an updatable site); recorded in study.json")
     p.add_argument("--cases", default=None,
                    help=f"comma-separated subset of {','.join(CASES)} (default: all available)")
     p.add_argument("--steps", type=_positive_int, default=None,

@@ -8,9 +8,11 @@ updatable site with the case's updater learning from it in the bridge's worker p
 the study exercises the product path a lab uses: the protocol, the sites, the learner beside
 the event loop, either causality.
 
-Load-cell noise is not served: the ``sim`` controller reads the law exactly, and a rig's
-sensor streams are not the study's (``Sensor`` seeded per run, one draw per step), so a noisy
-study could not be reproduced; ``--integrator opensees`` refuses ``--noise`` above 0.
+Load-cell noise (``--noise``) is the ``sim`` controller's ``load_cell_noise``: the same
+``Sensor`` with the run's seed and standard deviation, one draw per trial, as the in-process
+study's ``MeasuredElement``. The two paths' noise samples are not aligned (the in-process
+element also reads at-rest step 0, and an OpenSees Newton step may try more than once), so a
+noisy case agrees with the in-process one statistically, not sample for sample.
 """
 
 from __future__ import annotations
@@ -74,13 +76,16 @@ def _toml(value: Any) -> str:
     return json.dumps(value)
 
 
-def _lab_toml(specimen: str, twin: TwinSite, causality: str, folder: Path) -> str:
-    """Two sites: ``tested`` (sim, the true law) and ``twin`` (updatable, learning from it)."""
+def _lab_toml(specimen: str, twin: TwinSite, causality: str, folder: Path, *,
+              noise_std: float = 0.0, noise_seed: int = 0) -> str:
+    """Two sites: ``tested`` (sim, the true law read through the load cell) and ``twin``
+    (updatable, learning from it)."""
     kind, params = specimen_params(specimen)
     lines = [
         '[bridge]\nrun_name = "study"\n',
         '[[sites]]\nname = "tested"\nport = 0\ndofs = 2\nsetup = "OneActuator"\n',
-        f'[sites.controller]\nkind = "sim"\nmodel = "{kind}"\nparams = {_toml(params)}\n',
+        f'[sites.controller]\nkind = "sim"\nmodel = "{kind}"\nparams = {_toml(params)}\n'
+        f'load_cell_noise = {float(noise_std)!r}\nnoise_seed = {int(noise_seed)}\n',
         '[[sites]]\nname = "twin"\nport = 0\ndofs = 2\nsetup = "OneActuator"\n'
         f'kind = "updatable"\nlearns_from = "tested"\nupdater = "{twin.updater}"\n'
         f'causality = "{causality}"\n',
@@ -148,6 +153,8 @@ def simulate_case_opensees(
     steps: int | None = None,
     causality: str = "same-step",
     ahead_updater: Updater | None = None,
+    noise_std: float = 0.0,
+    noise_seed: int = 0,
 ) -> CaseHistory:
     """One case, OpenSees-driven, to the end of the record (or ``steps`` steps after step 0).
 
@@ -167,7 +174,8 @@ def simulate_case_opensees(
     n = motion.npts - 1 if steps is None else min(steps, motion.npts - 1)
     with tempfile.TemporaryDirectory(prefix="fresco-study-") as tmp:
         folder = Path(tmp)
-        text = _lab_toml(specimen, twin, causality, folder)
+        text = _lab_toml(specimen, twin, causality, folder, noise_std=noise_std,
+                         noise_seed=noise_seed)
         with BridgeThread(parse_config(text, "<study>"), text, run_dir=folder) as bridge:
             ports = (bridge.ports["tested"], bridge.ports["twin"])
             floors, loop_seconds = _run_opensees(_frame_params(layout, specimen, motion, n, ports))

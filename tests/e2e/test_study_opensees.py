@@ -12,6 +12,7 @@ import pytest
 from fresco_bridge import indicators
 from fresco_bridge.cli import main
 from fresco_bridge.integrator import DEMO_DT, Causality, kanai_tajimi
+from fresco_bridge.lawfit import law_forces
 from fresco_bridge.study.opensees import simulate_case_opensees
 from fresco_bridge.study.paper import (
     Prepared,
@@ -20,7 +21,7 @@ from fresco_bridge.study.paper import (
     make_case_twin_site,
     make_case_updater,
 )
-from fresco_bridge.study.simulate import CaseHistory, simulate_case
+from fresco_bridge.study.simulate import CaseHistory, simulate_case, specimen_model
 
 pytest.importorskip("openseespy")
 
@@ -76,13 +77,27 @@ def test_online_improved_served_agrees_with_the_in_process_study(
     assert rel(served.twin_ahead_force, builtin.twin_ahead_force) < 0.02
 
 
-def test_cli_records_the_integrator_and_refuses_noise(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_noise_is_the_tested_sites_seeded_load_cell(prepared: Prepared) -> None:
+    """``--noise``: the sim site reads the true law through a seeded load cell (std as asked,
+    zero mean, the same readings for the same seed), the twin's fixed law unaffected."""
+    def run(seed: int) -> CaseHistory:
+        return simulate_case_opensees("generalisation", "bwbn",
+                                      make_case_twin_site("reference", prepared), MOTION,
+                                      steps=STEPS, causality="previous-step", noise_std=0.05,
+                                      noise_seed=seed)
+
+    served = run(3)
+    true = law_forces(specimen_model("bwbn"), served.tested_drift)
+    residual = served.tested_force[1:] - true[1:]
+    assert 0.04 < float(np.std(residual)) < 0.06 and abs(float(np.mean(residual))) < 0.015
+    assert np.array_equal(run(3).tested_force, served.tested_force)
+    assert rel(served.twin_force, law_forces(specimen_model("bwbn"), served.twin_drift)) < 1e-9
+
+
+def test_cli_records_the_integrator_and_the_noise(tmp_path: Path) -> None:
     assert main(["study", "paper", "--integrator", "opensees", "--cases", "reference",
-                 "--steps", "40", "--workers", "1", "--no-plots", "-o", str(tmp_path)]) == 0
+                 "--steps", "40", "--workers", "1", "--noise", "1", "--no-plots",
+                 "-o", str(tmp_path)]) == 0
     document = json.loads(next(tmp_path.glob("*_opensees/study.json")).read_text())
     assert document["integrator"] == "opensees" and document["steps"] == 41
-    capsys.readouterr()
-    assert main(["study", "paper", "--integrator", "opensees", "--noise", "1",
-                 "-o", str(tmp_path)]) == 2
-    assert "--noise 0" in capsys.readouterr().err
+    assert document["noise_pct"] == 1.0 and document["noise_std_kN"] > 0.0
