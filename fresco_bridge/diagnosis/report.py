@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from .verdict import LOW_CONFIDENCE
+
 __all__ = ["summary", "to_json", "write_json", "write_report"]
 
 
@@ -61,16 +63,25 @@ def summary(result: dict[str, Any]) -> str:
             f"{_f(xcorr_ms)} ms, energy error {_pct(loc['force']['energy_error_pct'])}")
     lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
                  f"{verdict['explanation']}")
+    if verdict.get("not_separated_from"):
+        lines.append(f"UNSURE    confidence below {LOW_CONFIDENCE:g}: not separated from "
+                     f"{verdict['not_separated_from']}")
+    if verdict.get("better_family"):
+        lines.append(f"          try --baseline {verdict['better_family']}")
     winner = next((e for e in [*result["effects"], *result["pairs"]]
                    if e["name"] == verdict["effect"]), None)
     if winner is not None:
         for name, p in winner["params"].items():
+            flag = p.get("flag")
             lines.append(f"          {name} = {_f(p['value'])} ± {_f(p['std'], 2)} {p['unit']}"
-                         f"  ({p['meaning']})")
+                         f"  ({p['meaning']})" + ("" if not flag else f"  [UNSURE: {flag}]"))
     lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
-    for e in [*result["effects"], *result["pairs"][:3]]:
+    families = [{**e, "name": f"law family {e['name']}"}
+                for e in result.get("families", []) if e.get("compared_with") is None]
+    for e in [*result["effects"], *result["pairs"][:3], *families]:
+        mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
         lines.append(f"  {e['name']:<34} {_pct(e['gap_after']['total_pct']):>9}  "
-                     f"{_pct(e['shrink_pct']):>9}  {_f(e['score'], 3):>6}")
+                     f"{_pct(e['shrink_pct']):>9}  {_f(e['score'], 3):>6}{mark}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
     return "\n".join(lines)
