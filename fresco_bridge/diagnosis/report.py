@@ -76,8 +76,7 @@ def summary(result: dict[str, Any]) -> str:
             lines.append(f"          {name} = {_f(p['value'])} ± {_f(p['std'], 2)} {p['unit']}"
                          f"  ({p['meaning']})" + ("" if not flag else f"  [UNSURE: {flag}]"))
     lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
-    families = [{**e, "name": f"law family {e['name']}"}
-                for e in result.get("families", []) if e.get("compared_with") is None]
+    families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]
     for e in [*result["effects"], *result["pairs"][:3], *families]:
         mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
         lines.append(f"  {e['name']:<34} {_pct(e['gap_after']['total_pct']):>9}  "

@@ -157,6 +157,8 @@ class _Scored:
     on another law family is compared with the best baseline of that family)."""
     extra_law_params: int = 0
     """Law parameters a family alternative has beyond the baseline's (counted in its score)."""
+    role: str = "candidate"
+    """``candidate``; for another law family's baseline ``alternative`` or ``reference``."""
 
     @property
     def shrink(self) -> float:
@@ -377,8 +379,8 @@ def diagnose(record: Record, options: Options | None = None,
     systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_only**2, 0.0)) if (
         gap_cal["total_pct"] is not None and math.isfinite(gap_cal["total_pct"])) else math.inf
     noise_gap["systematic_calibration_gap_pct"] = systematic_cal
-    verdict = _verdict(before, singles, pairs, [f for f in families if f.compared_with is None],
-                       opts.noise_floor_pct, systematic_cal, spec0.baseline)
+    verdict = _verdict(before, singles, pairs, families, opts.noise_floor_pct, systematic_cal,
+                       spec0.baseline)
     if progress is not None:
         progress(total_fits, total_fits)
     sim_meas = None
@@ -414,8 +416,8 @@ def diagnose(record: Record, options: Options | None = None,
         "localization": localise(record, f0, sim_meas, stop),
         "effects": [s.as_dict() for s in singles],
         "pairs": [s.as_dict() for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
-        "families": [s.as_dict() for s in sorted(families, key=lambda s: s.score,
-                                                 reverse=True)],
+        "families": [{**s.as_dict(), "role": s.role}
+                     for s in sorted(families, key=lambda s: s.score, reverse=True)],
         "verdict": verdict,
         "seconds": time.perf_counter() - started,
         "_series": {
@@ -445,14 +447,15 @@ def _families(record: Record, cal: Context, full: Context, opts: Options, reques
               withheld: slice) -> list[_Scored]:
     """Baselines of other law families, fitted on the calibration part, scored like effects.
 
-    ``compared_with`` is None for an alternative to the baseline (a named baseline: every other
+    ``role`` is "alternative" for an alternative to the baseline (a named baseline: every other
     family of ``AUTO_FAMILIES``, when the baseline is fitted), and "reference" for the best
     baseline of a family an effect candidate drives (Bouc-Wen for pinching or degradation under
-    a bilinear or Menegotto-Pinto baseline), against which that candidate is measured."""
+    a bilinear or Menegotto-Pinto baseline), against which that candidate is measured. Both
+    kinds are scored against the baseline: either can be the family that closes the gap."""
     n_base = len(make_spec(cal, opts.baseline, [], fixed).params)
-    kinds: dict[str, str | None] = {}
+    kinds: dict[str, str] = {}
     if requested != AUTO and opts.fit_baseline:
-        kinds.update({k: None for k in AUTO_FAMILIES if k != opts.baseline})
+        kinds.update({k: "alternative" for k in AUTO_FAMILIES if k != opts.baseline})
     for effect in effects:
         if effect == "sensor_noise":
             continue
@@ -470,8 +473,7 @@ def _families(record: Record, cal: Context, full: Context, opts: Options, reques
                                  held)
         force, disp = predict(spec, full, fit.values)
         out.append(_Scored(kind, (), [], fit, {}, {}, before, _gap(record, force, disp, withheld),
-                           force, disp, role,
-                           extra_law_params=len(spec.params) - n_base))
+                           force, disp, extra_law_params=len(spec.params) - n_base, role=role))
     return out
 
 
@@ -599,8 +601,7 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
                 "explanation": f"the baseline fits its calibration part to the noise, but the "
                                f"withheld gap {gap:.2f} % is above the floor and "
                                + none_of_mine}
-    others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)
-              and s.compared_with is None]
+    others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)]
     runner = others[0] if others else None
     after = best.after["total_pct"] or 0.0
     if runner is None or runner.after["total_pct"] is None:
