@@ -62,13 +62,17 @@ from .model import (
     BASELINES,
     EFFECT_NAMES,
     Context,
-    Param,
     _held_sign,
     baseline_report,
     effect_parameters,
     make_spec,
 )
 from .names import AUTO_FAMILIES
+from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT
+from .scored import Scored as _Scored
+from .scored import finite as _finite
+from .scored import gap as _gap
+from .scored import rms as _rms
 
 __all__ = [
     "CALIBRATION_FRACTION",
@@ -91,20 +95,13 @@ Progress = Callable[[int, int], None]
 SCHEMA = "fresco-bridge/diagnosis/1"
 CALIBRATION_FRACTION = 0.6
 NOISE_FLOOR_PCT = 1.0
-PARSIMONY_PCT = 2.0
-MIN_SHRINK_PCT = 20.0
-PAIR_MARGIN_PCT = 5.0
-TOP_FOR_PAIRS = 3
-MAX_RELATIVE_STD = 0.5
-"""A fitted effect parameter whose std exceeds this share of its value (of 5 % of its range
-for a value nearer zero than that) is not measured by the record: flagged."""
-BOUND_TOLERANCE = 1e-3
-"""A parameter within this share of its range from a bound is at the bound: flagged (except a
-zero lower bound, which says the part of the effect it measures is absent)."""
 FLAG_CONFIDENCE_FACTOR = 0.5
 """The confidence is multiplied by this for each flagged parameter of the winning effect."""
 LOW_CONFIDENCE = 0.5
 """Below this confidence the verdict names the runner-up it could not separate."""
+MIN_SHRINK_PCT = 20.0
+PAIR_MARGIN_PCT = 5.0
+TOP_FOR_PAIRS = 3
 MAX_FIT_SAMPLES = 6000
 """Longer calibration parts are thinned for the fits (every k-th sample and every reversal of
 the command: the same path for a rate-independent law); scoring uses every sample."""
@@ -138,107 +135,6 @@ class Options:
     effects: Sequence[str] = EFFECT_NAMES
     pairs: bool = True
     max_fit_samples: int = MAX_FIT_SAMPLES
-
-
-@dataclass
-class _Scored:
-    name: str
-    effects: tuple[str, ...]
-    params: list[Param]
-    fit: Fit | None
-    values: dict[str, float]
-    std: dict[str, float]
-    before: dict[str, float | None]
-    after: dict[str, float | None]
-    force: FloatArray | None = None
-    disp: FloatArray | None = None
-    compared_with: str | None = None
-    """The baseline the shrink is measured from when it is not the diagnosis' own (a candidate
-    on another law family is compared with the best baseline of that family)."""
-    extra_law_params: int = 0
-    """Law parameters a family alternative has beyond the baseline's (counted in its score)."""
-    role: str = "candidate"
-    """``candidate``; for another law family's baseline ``alternative`` or ``reference``."""
-
-    @property
-    def shrink(self) -> float:
-        b, a = self.before["total_pct"], self.after["total_pct"]
-        if b is None or a is None or not math.isfinite(a) or b <= 0.0:
-            return -math.inf
-        return 100.0 * (1.0 - a / b)
-
-    @property
-    def score(self) -> float:
-        return self.shrink - PARSIMONY_PCT * (len(self.params) + self.extra_law_params)
-
-    @property
-    def flags(self) -> dict[str, str]:
-        """Parameters the record does not measure: at a bound, or too uncertain (module doc)."""
-        out: dict[str, str] = {}
-        for p in self.params:
-            value, std = self.values.get(p.name), self.std.get(p.name)
-            if p.role == "noise" or value is None:
-                continue
-            span = p.hi - p.lo if math.isfinite(p.hi) else abs(value) or 1.0
-            tol = BOUND_TOLERANCE * span
-            if p.lo != 0.0 and value <= p.lo + tol:
-                out[p.name] = f"at its lower bound {p.lo:.4g}"
-            elif math.isfinite(p.hi) and value >= p.hi - tol:
-                out[p.name] = f"at its upper bound {p.hi:.4g}"
-            elif p.lo == 0.0 and value <= p.lo + tol:
-                continue  # absent, not unsure
-            elif std is None or not math.isfinite(std):
-                out[p.name] = "no uncertainty estimate"
-            else:
-                relative = std / max(abs(value), 0.05 * span)
-                if relative > MAX_RELATIVE_STD:
-                    out[p.name] = (f"relative std {relative:.3g} above {MAX_RELATIVE_STD:g}")
-        return out
-
-    def as_dict(self) -> dict[str, Any]:
-        flags = self.flags
-        return {
-            "name": self.name,
-            "params": {p.name: {"value": self.values.get(p.name), "std": self.std.get(p.name),
-                                "unit": p.unit, "meaning": p.meaning,
-                                "flag": flags.get(p.name)} for p in self.params},
-            "n_params": len(self.params),
-            "law_family": None if self.fit is None else self.fit.spec.law_kind,
-            "compared_with": self.compared_with,
-            "law": None if self.fit is None else baseline_report(self.fit.spec.law_kind,
-                                                                 self.fit.values),
-            "gap_before": self.before, "gap_after": self.after,
-            "shrink_pct": _finite(self.shrink), "score": _finite(self.score),
-            "fit": None if self.fit is None else {
-                "converged": self.fit.ok, "evaluations": self.fit.evaluations,
-                "calibration_cost": self.fit.cost},
-        }
-
-
-def _finite(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def _rms(x: FloatArray) -> float:
-    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
-
-
-def _gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
-         noise: tuple[float, float] = (0.0, 0.0)) -> dict[str, float | None]:
-    """NRMS gap in % per channel on ``part``, over the whole record's RMS force and command
-    (a quiet part cannot inflate it); ``noise`` (std) is removed from the variance."""
-    rf = (record.force - force)[part]
-    var_f = max(float(np.mean(rf * rf)) - noise[0] ** 2, 0.0)
-    g_f = 100.0 * math.sqrt(var_f) / (_rms(record.force) or 1.0)
-    g_d: float | None = None
-    if record.meas_disp is not None and disp is not None:
-        rd = (record.meas_disp - disp)[part]
-        var_d = max(float(np.mean(rd * rd)) - noise[1] ** 2, 0.0)
-        g_d = 100.0 * math.sqrt(var_d) / (_rms(record.cmd) or 1.0)
-    total = math.hypot(g_f, g_d or 0.0)
-    if not math.isfinite(total):
-        total = math.inf
-    return {"force_pct": _finite(g_f), "disp_pct": _finite(g_d), "total_pct": total}
 
 
 def _effect_start(effect: str, cal: Context) -> dict[str, float]:
