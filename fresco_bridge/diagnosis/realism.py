@@ -15,10 +15,13 @@ the candidates do *not* have, the specimen's law and shape vary wider, and so do
   (5-30 ms) or a second-order servo (4-12 Hz, damping 0.6-1.0), plus 0-5 ms transport delay.
   The truth is the low-frequency equivalent delay (delay + tau, or delay + 2 zeta / omega_n);
 * ``actuator_amplitude``: the gain error ±(3-10) % plus OpenFresco's end-point undershoot of
-  0-1 % of the peak in the same sense (truth: the gain error);
+  0-1 % of the peak in the same sense (truth: the gain error). The undershoot is a candidate of
+  its own now (``actuator_undershoot``), so a record whose undershoot matters carries two
+  effects, and a verdict naming both counts as a miss here (BENCHMARKS.md lists them);
 * ``actuator_undershoot``: OpenFresco's end-point undershoot (1-4 % of the peak) on a servo
   that has not quite settled when the step is measured, a first-order lag of 1-3 ms (the
-  candidate has the undershoot alone; truth: the undershoot);
+  candidate has the undershoot alone; truth: the undershoot; the lag is a small delay, which
+  a verdict may name beside it);
 * ``backlash``, ``friction``, ``rate_dependence``: the effect behind a compliant reaction frame
   (stiffness 5-20 k0): the fixture sticks and slips on the frame's spring instead of following
   the piston (truth: gap, Coulomb force, viscous coefficient);

@@ -79,7 +79,7 @@ def summary(result: dict[str, Any]) -> str:
     families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]
     for e in [*result["effects"], *result["pairs"][:3], *families]:
         mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
-        lines.append(f"  {e['name']:<34} {_pct(e['gap_after']['total_pct']):>9}  "
+        lines.append(f"  {e['name']:<40} {_pct(e['gap_after']['total_pct']):>9}  "
                      f"{_pct(e['shrink_pct']):>9}  {_f(e['score'], 3):>6}{mark}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
