@@ -83,6 +83,10 @@ def test_a_parameter_at_its_bound_is_flagged_and_lowers_the_confidence() -> None
     assert "UNSURE: at its upper bound" in text and "not separated from sensor_noise" in text
 
 
+def rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x * x)))
+
+
 def test_a_quiet_tail_neither_fills_the_withheld_part_nor_inflates_the_gap() -> None:
     n = 2500
     steps = np.arange(n)
@@ -90,7 +94,6 @@ def test_a_quiet_tail_neither_fills_the_withheld_part_nor_inflates_the_gap() -> 
     cmd = command_history(np.random.default_rng(7), n, DT, 10.0) * envelope  # a coda
     record = _rig({}, cmd)  # no effect: instrument noise only
     old_stop = round(0.6 * n)
-    rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
     assert rms(record.force[old_stop:]) < 0.15 * rms(record.force)  # the tail is quiet
     stop = stop_of(record, Options())
     assert stop < 1200  # the withheld part starts in the loud part, with its share of signal
