@@ -32,7 +32,8 @@ __all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "diagnose_one", "effect_mag
 
 CLASSES = (*EFFECT_NAMES, "none", "none")
 MAGNITUDE_OF = {
-    "actuator_delay": "tau", "actuator_amplitude": "amplitude_error", "backlash": "gap",
+    "actuator_delay": "tau", "actuator_amplitude": "amplitude_error",
+    "actuator_undershoot": "undershoot", "backlash": "gap",
     "friction": "coulomb", "pinching": "zeta_s", "degradation": "delta_mean",
     "rate_dependence": "viscous", "sensor_bias": "force_bias", "sensor_noise": "force_noise_std",
 }

@@ -1,5 +1,7 @@
 """Where the gap lies: in which layer, when, at which amplitude and in which loop phase.
 
+Every NRMS here is over the whole record's RMS force (a quiet part cannot inflate its own).
+
 Layers (force gap = measured − sim, the sim driven by the command)::
 
     F − L(c) = [L(m) − L(c)]   interface: the actuator did not put the specimen where commanded
@@ -148,7 +150,7 @@ def localise(record: Record, sim_cmd: FloatArray, sim_meas: FloatArray | None,
     e_dm_f, e_md_f = ind.peak_errors(sim_cmd, f)
     out["force"] = {
         "nrms_pct": 100.0 * _rms(residual) / f_scale,
-        "nrms_withheld_pct": 100.0 * _rms(residual[stop:]) / (_rms(f[stop:]) or 1.0),
+        "nrms_withheld_pct": 100.0 * _rms(residual[stop:]) / f_scale,
         "peak_amplitude_error": e_dm_f, "peak_error": e_md_f,
         "energy_error_pct": _maybe(lambda: 100.0 * ind.energy_error(
             m if m is not None else c, f, sim_cmd)),

@@ -4,7 +4,7 @@ The baseline "sim" is a hysteresis law of ``sim_actuator.models`` driven by the 
 displacement. Each candidate effect adds a few parameters where the physics puts them, in the
 order of the load path of ``sim_actuator`` (the simulated lab the bench generates with)::
 
-    command c -> [actuator: amplitude a, delay tau] -> piston x  (the LVDT reads x)
+    command c -> [actuator: undershoot u, amplitude a, delay tau] -> piston x  (the LVDT reads x)
     x -> [pin gap g] -> specimen law (Bouc-Wen, + pinching, + degradation) -> connection force
     force + fixture friction Fc*sign(v) + viscous c_v*v -> load cell -> [sensor bias, noise]
 
@@ -167,6 +167,9 @@ def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
                                  "pure delay of the piston behind the command"),),
         "actuator_amplitude": (Param("amplitude_error", "path", "1", -0.5, 0.5, 0.0,
                                      "piston/command - 1"),),
+        "actuator_undershoot": (Param("undershoot", "path", "mm", 0.0, 0.3 * d, 0.01 * d,
+                                      "each move's end point falls short by this against the "
+                                      "direction of motion (OpenFresco ErrorSimUndershoot)"),),
         "backlash": (Param("gap", "gap", "mm", 0.0, 0.3 * d, 0.01 * d,
                            "clearance of the pin on each side"),),
         "friction": (Param("coulomb", "out", "kN", 0.0, f, 0.02 * f,
@@ -276,12 +279,27 @@ def baseline_report(kind: str, values: Mapping[str, float]) -> dict[str, float]:
 IntArray = npt.NDArray[np.int64]
 
 
+def reference(cmd: FloatArray, values: Mapping[str, float]) -> FloatArray:
+    """Each move's end point after undershoot and amplitude: ``(1 + a) (c - u s)``, s the
+    direction of the move from the previous command, held through moves of zero length and 0
+    before the first move (the rig's ``Actuator.end_point``, OpenFresco's ErrorSimUndershoot:
+    the undershoot acts on the reference, the gain after it)."""
+    u = values.get("undershoot", 0.0)
+    out = cmd
+    if u:
+        direction = np.zeros_like(cmd)
+        direction[1:] = np.diff(cmd)
+        out = cmd - u * _held_sign(direction)
+    a = values.get("amplitude_error", 0.0)
+    return out * (1.0 + a) if a else out
+
+
 def piston_path(ctx: Context, values: Mapping[str, float]) -> tuple[FloatArray, IntArray]:
-    """(drive path, indices of the record's samples in it): the piston after amplitude and
-    delay. A delayed piecewise-linear command passes through its own vertices between samples,
-    so the vertices are part of the path (a reversal is never cut short)."""
+    """(drive path, indices of the record's samples in it): the piston after undershoot,
+    amplitude and delay. A delayed piecewise-linear command passes through its own vertices
+    between samples, so the vertices are part of the path (a reversal is never cut short)."""
     rec = ctx.record
-    c = rec.cmd * (1.0 + values.get("amplitude_error", 0.0))
+    c = reference(rec.cmd, values)
     tau = values.get("tau", 0.0)
     if tau <= 0.0:
         return c, np.arange(c.size, dtype=np.int64)
@@ -312,9 +330,9 @@ def finish(ctx: Context, values: Mapping[str, float],
     """(predicted force, predicted displacement) from the connection force: fixture friction
     and viscosity on the piston velocity, sensor offsets."""
     rec = ctx.record
-    x = np.interp(rec.time - values.get("tau", 0.0), rec.time, rec.cmd) if values.get(
-        "tau", 0.0) > 0.0 else rec.cmd
-    x = x * (1.0 + values.get("amplitude_error", 0.0))
+    x = reference(rec.cmd, values)
+    if values.get("tau", 0.0) > 0.0:
+        x = np.interp(rec.time - values["tau"], rec.time, x)
     out = force + values.get("force_bias", 0.0)
     fc, cv = values.get("coulomb", 0.0), values.get("viscous", 0.0)
     if fc or cv:

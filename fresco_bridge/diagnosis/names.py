@@ -11,6 +11,7 @@ AUTO = "auto"
 AUTO_FAMILIES = ("bilinear", "bouc-wen", "menegotto-pinto")
 """What ``auto`` chooses from: the specimen laws without an effect built in (BWBN's pinching and
 degradation are candidate effects, so a BWBN baseline would hide them)."""
-EFFECT_NAMES = ("actuator_delay", "actuator_amplitude", "backlash", "friction", "pinching",
-                "degradation", "rate_dependence", "sensor_bias", "sensor_noise")
+EFFECT_NAMES = ("actuator_delay", "actuator_amplitude", "actuator_undershoot", "backlash",
+                "friction", "pinching", "degradation", "rate_dependence", "sensor_bias",
+                "sensor_noise")
 """The candidate effects, in the order they are reported (``none`` is the baseline alone)."""

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..numbers import fmt, pct
+from .verdict import LOW_CONFIDENCE
 
 __all__ = ["summary", "to_json", "write_json", "write_report"]
 
@@ -53,17 +54,25 @@ def summary(result: dict[str, Any]) -> str:
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
     lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
                  f"{verdict['explanation']}")
+    if verdict.get("not_separated_from"):
+        lines.append(f"UNSURE    confidence below {LOW_CONFIDENCE:g}: not separated from "
+                     f"{verdict['not_separated_from']}")
+    if verdict.get("better_family"):
+        lines.append(f"          try --baseline {verdict['better_family']}")
     winner = next((e for e in [*result["effects"], *result["pairs"]]
                    if e["name"] == verdict["effect"]), None)
     if winner is not None:
         for name, p in winner["params"].items():
+            flag = p.get("flag")
             lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], digits=2)} "
-                         f"{p['unit']}"
-                         f"  ({p['meaning']})")
+                         f"{p['unit']}  ({p['meaning']})"
+                         + ("" if not flag else f"  [UNSURE: {flag}]"))
     lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
-    for e in [*result["effects"], *result["pairs"][:3]]:
-        lines.append(f"  {e['name']:<34} {pct(e['gap_after']['total_pct']):>9}  "
-                     f"{pct(e['shrink_pct']):>9}  {fmt(e['score'], digits=3):>6}")
+    families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]
+    for e in [*result["effects"], *result["pairs"][:3], *families]:
+        mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
+        lines.append(f"  {e['name']:<40} {pct(e['gap_after']['total_pct']):>9}  "
+                     f"{pct(e['shrink_pct']):>9}  {fmt(e['score'], digits=3):>6}{mark}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
     return "\n".join(lines)

@@ -37,6 +37,7 @@ FloatArray = npt.NDArray[np.float64]
 MAGNITUDES: dict[str, str] = {
     "actuator_delay": "tau 5-40 ms",
     "actuator_amplitude": "amplitude error ±(3-10) %",
+    "actuator_undershoot": "end point short by 1-4 % of the peak displacement against the motion",
     "backlash": "gap 2-8 % of the peak displacement, each side",
     "friction": "Coulomb 3-10 % of fy",
     "pinching": "zeta_s 0.3-0.8, psi0 0.1-0.3, q 0-0.2",
@@ -120,6 +121,9 @@ def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
     elif effect == "actuator_amplitude":
         truth["amplitude_error"] = _signed(rng, 0.03, 0.10)
         actuator["amplitude"] = 1.0 + truth["amplitude_error"]
+    elif effect == "actuator_undershoot":
+        truth["undershoot"] = _uniform(rng, 0.01, 0.04) * peak
+        actuator["undershoot"] = truth["undershoot"]
     elif effect == "backlash":
         truth["gap"] = _uniform(rng, 0.02, 0.08) * peak
         effects["backlash"] = {"gap": truth["gap"]}

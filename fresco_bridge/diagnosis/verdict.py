@@ -2,26 +2,43 @@
 
 Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
 
-1. Split: the first :data:`CALIBRATION_FRACTION` of the samples calibrate, the rest is
-   withheld. Fits receive ``Record.part(stop)`` only: the withheld samples never reach them.
+1. Split by the command's energy: the calibration part is the first samples that carry
+   :data:`CALIBRATION_FRACTION` of the command's signal energy (sum of (c − mean c)²), the rest
+   is withheld, so a quiet tail never becomes the whole withheld part (on a stationary record
+   this is the first ~60 % of the samples). The command is the test's input, known before any
+   measurement; fits receive ``Record.part(stop)`` only: the withheld samples never reach them.
 2. Baseline: the law driven by the command, every parameter fitted (shape too); with
    ``auto`` (the default) the law family is chosen on the calibration part too (``baseline``).
-3. Gap on the withheld part, per channel, as NRMS in % (force: measured − predicted over the
-   RMS measured force; displacement: measured − predicted over the RMS command), and
-   ``total`` = their root sum of squares. Below :data:`NOISE_FLOOR_PCT` the verdict is ``none``.
+3. Gap on the withheld part, per channel, as NRMS in % of the *whole record's* scale (force:
+   measured − predicted over the record's RMS force; displacement: measured − predicted over
+   the record's RMS command), and ``total`` = their root sum of squares: a quiet withheld part
+   cannot inflate it. Below :data:`NOISE_FLOOR_PCT` the verdict is ``none``.
 4. Each candidate: the baseline plus one effect, all refitted on the calibration part,
    predicting the withheld part; ``sensor_noise`` claims the white part of the baseline's gap
    (its std estimated on the calibration residual, never on the withheld one).
    ``shrink_pct`` = 100 (1 − after/before); ``score`` = shrink − :data:`PARSIMONY_PCT` per
-   parameter. The best score wins if it shrinks the gap by at least :data:`MIN_SHRINK_PCT`;
-   otherwise the verdict is ``baseline_misfit`` when the baseline misses even its calibration
-   part by more than the floor beyond the white noise (the law family is the first suspect),
-   else ``unexplained`` (the law fits what it saw; something else departs later).
+   parameter. A candidate that needs another law family (pinching or degradation under a
+   bilinear or Menegotto-Pinto baseline drive BWBN) is compared with the best baseline *of
+   that family* (Bouc-Wen, fitted on the calibration part), never credited with the family
+   change. With a named baseline (not ``auto``) the other families of ``AUTO_FAMILIES`` are
+   fitted too; when a family change alone beats every effect (it shrinks the gap by at least
+   :data:`MIN_SHRINK_PCT` and scores higher, the extra law parameters counted), the verdict is
+   ``baseline_misfit`` naming that family. The best score wins if it shrinks the gap by at least
+   :data:`MIN_SHRINK_PCT`; otherwise the verdict is ``baseline_misfit`` when the baseline
+   misses even its calibration part by more than the floor beyond the white noise (the law
+   family is the first suspect), else ``unexplained``.
 5. Pairs: when the best single leaves more than twice the noise-only gap (and more than the
-   floor), pairs of the top three singles are fitted (and each top single with sensor noise);
-   a pair wins only if its score beats the best single's by :data:`PAIR_MARGIN_PCT`.
+   floor), pairs of the top three singles are fitted (and each top single with sensor noise).
+   A pair wins when both of its effects matter by the rule a single passes against the
+   baseline (each shrinks the gap the other leaves alone by :data:`MIN_SHRINK_PCT`) and its
+   score beats the best single's by :data:`PAIR_MARGIN_PCT`. A pair is named in alphabetical
+   order (``friction+sensor_bias``), whatever the ranking of its members.
 6. Confidence: the share of the winner's gap reduction that the runner-up does not achieve,
-   (after_second − after_best) / (before − after_best); for ``none``, 1 − gap/floor.
+   (after_second − after_best) / (before − after_best); for ``none``, 1 − gap/floor. Every
+   parameter of the winning effect at a bound (other than a zero lower bound: "absent") or with
+   a relative std above :data:`MAX_RELATIVE_STD` is flagged and halves it
+   (:data:`FLAG_CONFIDENCE_FACTOR`); below :data:`LOW_CONFIDENCE` the verdict names the
+   runner-up it could not separate (``not_separated_from``).
 """
 
 from __future__ import annotations
@@ -45,14 +62,23 @@ from .model import (
     BASELINES,
     EFFECT_NAMES,
     Context,
-    Param,
+    _held_sign,
     baseline_report,
     effect_parameters,
     make_spec,
 )
+from .names import AUTO_FAMILIES
+from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT
+from .scored import Scored as _Scored
+from .scored import finite as _finite
+from .scored import gap as _gap
+from .scored import rms as _rms
 
 __all__ = [
     "CALIBRATION_FRACTION",
+    "FLAG_CONFIDENCE_FACTOR",
+    "LOW_CONFIDENCE",
+    "MAX_RELATIVE_STD",
     "MIN_SHRINK_PCT",
     "NOISE_FLOOR_PCT",
     "PAIR_MARGIN_PCT",
@@ -60,6 +86,7 @@ __all__ = [
     "SCHEMA",
     "Options",
     "diagnose",
+    "stop_of",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -68,10 +95,11 @@ Progress = Callable[[int, int], None]
 SCHEMA = "fresco-bridge/diagnosis/1"
 CALIBRATION_FRACTION = 0.6
 NOISE_FLOOR_PCT = 1.0
-PARSIMONY_PCT = 2.0
+FLAG_CONFIDENCE_FACTOR = 0.5
+"""The confidence is multiplied by this for each flagged parameter of the winning effect."""
+LOW_CONFIDENCE = 0.5
+"""Below this confidence the verdict names the runner-up it could not separate."""
 MIN_SHRINK_PCT = 20.0
-GAP_ZERO_PCT = 1e-6
-"""A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
 PAIR_MARGIN_PCT = 5.0
 TOP_FOR_PAIRS = 3
 MAX_FIT_SAMPLES = 6000
@@ -109,71 +137,6 @@ class Options:
     max_fit_samples: int = MAX_FIT_SAMPLES
 
 
-@dataclass
-class _Scored:
-    name: str
-    effects: tuple[str, ...]
-    params: list[Param]
-    fit: Fit | None
-    values: dict[str, float]
-    std: dict[str, float]
-    before: dict[str, float | None]
-    after: dict[str, float | None]
-    force: FloatArray | None = None
-    disp: FloatArray | None = None
-
-    @property
-    def shrink(self) -> float:
-        b, a = self.before["total_pct"], self.after["total_pct"]
-        if b is None or a is None or not math.isfinite(a) or b < GAP_ZERO_PCT:
-            return -math.inf  # undefined (JSON null, "–"): there was no gap to shrink
-        return 100.0 * (1.0 - a / b)
-
-    @property
-    def score(self) -> float:
-        return self.shrink - PARSIMONY_PCT * len(self.params)
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "params": {p.name: {"value": self.values.get(p.name), "std": self.std.get(p.name),
-                                "unit": p.unit, "meaning": p.meaning} for p in self.params},
-            "n_params": len(self.params),
-            "law": None if self.fit is None else baseline_report(self.fit.spec.law_kind,
-                                                                 self.fit.values),
-            "gap_before": self.before, "gap_after": self.after,
-            "shrink_pct": _finite(self.shrink), "score": _finite(self.score),
-            "fit": None if self.fit is None else {
-                "converged": self.fit.ok, "evaluations": self.fit.evaluations,
-                "calibration_cost": self.fit.cost},
-        }
-
-
-def _finite(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def _rms(x: FloatArray) -> float:
-    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
-
-
-def _gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
-         noise: tuple[float, float] = (0.0, 0.0)) -> dict[str, float | None]:
-    """NRMS gap in % per channel on ``part``; ``noise`` (std) is removed from the variance."""
-    rf = (record.force - force)[part]
-    var_f = max(float(np.mean(rf * rf)) - noise[0] ** 2, 0.0)
-    g_f = 100.0 * math.sqrt(var_f) / (_rms(record.force[part]) or 1.0)
-    g_d: float | None = None
-    if record.meas_disp is not None and disp is not None:
-        rd = (record.meas_disp - disp)[part]
-        var_d = max(float(np.mean(rd * rd)) - noise[1] ** 2, 0.0)
-        g_d = 100.0 * math.sqrt(var_d) / (_rms(record.cmd[part]) or 1.0)
-    total = math.hypot(g_f, g_d or 0.0)
-    if not math.isfinite(total):
-        total = math.inf
-    return {"force_pct": _finite(g_f), "disp_pct": _finite(g_d), "total_pct": total}
-
-
 def _effect_start(effect: str, cal: Context) -> dict[str, float]:
     """Start values from the interface indicators where they say something directly."""
     rec = cal.record
@@ -191,6 +154,15 @@ def _effect_start(effect: str, cal: Context) -> dict[str, float]:
         return {"amplitude_error": float(np.dot(c, rec.meas_disp) / np.dot(c, c)) - 1.0}
     if effect == "sensor_bias":
         return {"disp_bias": float(np.mean(rec.meas_disp - rec.cmd))}
+    if effect == "actuator_undershoot":
+        step = np.zeros_like(rec.cmd)
+        step[1:] = np.diff(rec.cmd)
+        direction = _held_sign(step)
+        moving = direction != 0.0
+        if not np.any(moving):
+            return {}
+        short = -float(np.mean((rec.meas_disp - rec.cmd)[moving] * direction[moving]))
+        return {"undershoot": max(short, 1e-3 * cal.d_peak)}
     return {}
 
 
@@ -217,6 +189,9 @@ def diagnose(record: Record, options: Options | None = None,
         raise DiagnosisInputError(
             f"{record.source}: record too short to split: {n} samples give {stop} to calibrate "
             f"and {n - stop} to withhold (need >= 60 and >= 40)")
+    split_note = (f"split by the command's energy: calibration samples 0-{stop} "
+                  f"({100.0 * stop / n:.0f} % of the samples, "
+                  f"{100.0 * opts.calibration_fraction:.0f} % of the energy)")
     calibration = record.part(stop)
     cal = Context.of(calibration.thinned(opts.max_fit_samples))
     full = Context.of(record)
@@ -245,14 +220,17 @@ def diagnose(record: Record, options: Options | None = None,
     values0 = base_fit.values
     f0, d0 = predict(spec0, full, values0)
     before = _gap(record, f0, d0, withheld)
+    f_scale, d_scale = _rms(record.force) or 1.0, _rms(record.cmd) or 1.0
     noise_f = ind.white_noise_std((record.force - f0)[:stop])
     noise_d = (ind.white_noise_std((record.meas_disp - d0)[:stop])
                if record.meas_disp is not None else 0.0)
-    noise_only = math.hypot(100.0 * noise_f / (_rms(record.force[withheld]) or 1.0),
-                            100.0 * noise_d / (_rms(record.cmd[withheld]) or 1.0)
+    noise_only = math.hypot(100.0 * noise_f / f_scale, 100.0 * noise_d / d_scale
                             if record.meas_disp is not None else 0.0)
     noise_gap = {"force_noise_std": noise_f, "disp_noise_std": noise_d,
                  "noise_only_gap_pct": noise_only}
+    families = _families(record, cal, full, opts, requested, fixed, values0, spec0.law_kind,
+                         effects, before, withheld)
+    references = {f.name: f for f in families}
     eff_params = effect_parameters(cal)
     scored: list[_Scored] = []
     for effect in effects:
@@ -270,7 +248,7 @@ def diagnose(record: Record, options: Options | None = None,
             continue
         scored.append(_fit_candidate(record, cal, full, opts, fixed, (effect,),
                                      {**values0, **_effect_start(effect, cal)}, before,
-                                     withheld, base_fit.cost))
+                                     withheld, base_fit.cost, references))
         tick()
     singles = sorted(scored, key=lambda s: s.score, reverse=True)
     pairs: list[_Scored] = []
@@ -283,25 +261,23 @@ def diagnose(record: Record, options: Options | None = None,
             for b in fitted[i + 1:]:
                 start = {**values0, **b.values, **a.values}
                 pairs.append(_fit_candidate(record, cal, full, opts, fixed,
-                                            (*a.effects, *b.effects), start, before, withheld,
-                                            base_fit.cost))
+                                            tuple(sorted((*a.effects, *b.effects))), start,
+                                            before, withheld, base_fit.cost, references))
                 tick()
             if "sensor_noise" in effects and a.force is not None:
                 after = _gap(record, a.force, a.disp, withheld, (noise_f, noise_d))
                 noise = next(s for s in scored if s.name == "sensor_noise")
-                pairs.append(_Scored(f"{a.name}+sensor_noise", (*a.effects, "sensor_noise"),
+                members = tuple(sorted((*a.effects, "sensor_noise")))
+                pairs.append(_Scored("+".join(members), members,
                                      [*a.params, *noise.params], a.fit,
                                      {**a.values, **noise.values}, {**a.std, **noise.std},
-                                     before, after, a.force, a.disp))
+                                     a.before, after, a.force, a.disp, a.compared_with))
                 tick()
     gap_cal = _gap(record, f0, d0, slice(0, stop))
-    noise_cal = math.hypot(100.0 * noise_f / (_rms(record.force[:stop]) or 1.0),
-                           100.0 * noise_d / (_rms(record.cmd[:stop]) or 1.0)
-                           if record.meas_disp is not None else 0.0)
-    systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_cal**2, 0.0)) if (
+    systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_only**2, 0.0)) if (
         gap_cal["total_pct"] is not None and math.isfinite(gap_cal["total_pct"])) else math.inf
     noise_gap["systematic_calibration_gap_pct"] = systematic_cal
-    verdict = _verdict(before, singles, pairs, opts.noise_floor_pct, systematic_cal,
+    verdict = _verdict(before, singles, pairs, families, opts.noise_floor_pct, systematic_cal,
                        spec0.baseline)
     if progress is not None:
         progress(total_fits, total_fits)
@@ -321,7 +297,7 @@ def diagnose(record: Record, options: Options | None = None,
                                                                        - record.time[0]),
             "dt_s": full.dt, "channels": ["cmd_disp", "meas_force"]
             + (["meas_disp"] if record.meas_disp is not None else []),
-            "notes": [*record.notes, *cal.record.notes[len(record.notes):]],
+            "notes": [*record.notes, *cal.record.notes[len(record.notes):], split_note],
             "calibration": {"samples": [0, stop], "t_end": float(record.time[stop - 1])},
             "withheld": {"samples": [stop, n], "t_start": float(record.time[stop])},
         },
@@ -338,6 +314,8 @@ def diagnose(record: Record, options: Options | None = None,
         "localization": localise(record, f0, sim_meas, stop),
         "effects": [s.as_dict() for s in singles],
         "pairs": [s.as_dict() for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
+        "families": [{**s.as_dict(), "role": s.role}
+                     for s in sorted(families, key=lambda s: s.score, reverse=True)],
         "verdict": verdict,
         "seconds": time.perf_counter() - started,
         "_series": {
@@ -350,17 +328,80 @@ def diagnose(record: Record, options: Options | None = None,
 
 
 def stop_of(record: Record, opts: Options) -> int:
-    """The calibration part's length: the first ``calibration_fraction`` of the samples."""
-    return round(opts.calibration_fraction * record.size)
+    """The calibration part's length: the first samples that carry ``calibration_fraction`` of
+    the command's signal energy, sum of (c − mean c)² (the time fraction for a constant
+    command). The command only: it is the test's input, so the split never depends on a
+    measured (possibly withheld) value."""
+    c = record.cmd - float(np.mean(record.cmd))
+    energy = np.cumsum(c * c)
+    if not energy.size or energy[-1] <= 0.0:
+        return round(opts.calibration_fraction * record.size)
+    return int(np.searchsorted(energy, opts.calibration_fraction * energy[-1])) + 1
+
+
+def _families(record: Record, cal: Context, full: Context, opts: Options, requested: str,
+              fixed: Mapping[str, float], values0: Mapping[str, float], law_kind: str,
+              effects: Sequence[str], before: dict[str, float | None],
+              withheld: slice) -> list[_Scored]:
+    """Baselines of other law families, fitted on the calibration part, scored like effects.
+
+    ``role`` is "alternative" for an alternative to the baseline (a named baseline: every other
+    family of ``AUTO_FAMILIES``, when the baseline is fitted), and "reference" for the best
+    baseline of a family an effect candidate drives (Bouc-Wen for pinching or degradation under
+    a bilinear or Menegotto-Pinto baseline), against which that candidate is measured. Both
+    kinds are scored against the baseline: either can be the family that closes the gap."""
+    n_base = len(make_spec(cal, opts.baseline, [], fixed).params)
+    kinds: dict[str, str] = {}
+    if requested != AUTO and opts.fit_baseline:
+        kinds.update({k: "alternative" for k in AUTO_FAMILIES if k != opts.baseline})
+    for effect in effects:
+        if effect == "sensor_noise":
+            continue
+        spec = make_spec(cal, opts.baseline, [effect], fixed)
+        if spec.law_kind != law_kind:
+            reference = _reference_family(spec.law_kind)
+            if reference not in kinds:
+                kinds[reference] = "reference"
+    out: list[_Scored] = []
+    for kind, role in kinds.items():
+        held = {k: v for k, v in fixed.items()
+                if k in {p.name for p in make_spec(cal, kind, []).params}}
+        given = {k: values0[k] for k in ("k0", "fy", "alpha") if k in values0}
+        spec, fit = fit_baseline(kind, cal, {k: v for k, v in given.items() if k not in held},
+                                 held)
+        force, disp = predict(spec, full, fit.values)
+        out.append(_Scored(kind, (), [], fit, {}, {}, before, _gap(record, force, disp, withheld),
+                           force, disp, extra_law_params=len(spec.params) - n_base, role=role))
+    return out
+
+
+def _reference_family(law_kind: str) -> str:
+    """The baseline family an effect candidate driving ``law_kind`` is compared with: BWBN
+    without pinching and degradation is Bouc-Wen."""
+    return "bouc-wen" if law_kind == "bwbn" else law_kind
 
 
 def _fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
                    fixed: Mapping[str, float], effects: tuple[str, ...],
                    start: Mapping[str, float], before: dict[str, float | None],
-                   withheld: slice, base_cost: float) -> _Scored:
+                   withheld: slice, base_cost: float,
+                   references: Mapping[str, _Scored] | None = None) -> _Scored:
     spec = make_spec(cal, opts.baseline, effects, fixed)
     law_names = {p.name for p in make_spec(cal, opts.baseline, [], fixed).params}
     params = [p for p in spec.params if p.name not in law_names and p.role != "noise"]
+    compared_with = None
+    reference = (references or {}).get(_reference_family(spec.law_kind))
+    if reference is not None and reference.fit is not None and spec.law_kind != make_spec(
+            cal, opts.baseline, [], fixed).law_kind:
+        # another family: the law's own parameters are not the effect's, and the shrink is
+        # measured from the best baseline of that family
+        own = {p.name for p in reference.fit.spec.params} | {"n"}
+        params = [p for p in params if p.name not in own]
+        law_names |= own
+        before = reference.after
+        compared_with = f"{reference.name} baseline"
+        start = {**start, **{k: v for k, v in reference.fit.values.items()
+                             if k not in {p.name for p in params}}}
     staged = stop_of(record, opts) > opts.max_fit_samples
 
     def fit_from(values: Mapping[str, float]) -> Fit:
@@ -383,39 +424,78 @@ def _fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
             result = again
     force, disp = predict(spec, full, result.values)
     after = _gap(record, force, disp, withheld)
-    return _Scored("+".join(effects), effects, params, result,
+    return _Scored("+".join(sorted(effects)), effects, params, result,
                    {p.name: result.values[p.name] for p in params},
                    {p.name: result.std.get(p.name, math.nan) for p in params},
-                   before, after, force, disp)
+                   before, after, force, disp, compared_with)
+
+
+def _both_matter(pair: _Scored, singles: Sequence[_Scored]) -> bool:
+    """Each effect of ``pair`` shrinks the withheld gap the other leaves alone by at least
+    :data:`MIN_SHRINK_PCT` (the rule a single passes against the baseline)."""
+    after = pair.after["total_pct"]
+    if after is None or not math.isfinite(after):
+        return False
+    for member in pair.effects:
+        rest = tuple(e for e in pair.effects if e != member)
+        other = next((s for s in singles if s.effects == rest), None)
+        left = None if other is None else other.after["total_pct"]
+        if left is None or not math.isfinite(left) or left <= 0.0:
+            return False
+        if 100.0 * (1.0 - after / left) < MIN_SHRINK_PCT:
+            return False
+    return True
 
 
 def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: list[_Scored],
-             floor: float, systematic_cal: float, law: str) -> dict[str, Any]:
+             families: list[_Scored], floor: float, systematic_cal: float,
+             law: str) -> dict[str, Any]:
     gap = before["total_pct"] or 0.0
     if gap < floor:
         return {"effect": "none", "confidence": max(0.0, 1.0 - gap / floor),
                 "shrink_pct": 0.0, "gap_before_pct": gap, "gap_after_pct": gap,
+                "runner_up": None, "not_separated_from": None, "flags": {},
+                "better_family": None,
                 "explanation": f"withheld gap {gap:.2f} % is below the noise floor {floor:g} %"}
-    ranked = sorted([*singles, *pairs], key=lambda s: s.score, reverse=True)
+    ranked = sorted([*singles, *pairs, *families], key=lambda s: s.score, reverse=True)
     best_single = singles[0]
     best = best_single
     if pairs:
-        best_pair = max(pairs, key=lambda s: s.score)
-        if best_pair.score > best_single.score + PAIR_MARGIN_PCT:
+        eligible = [p for p in pairs if _both_matter(p, singles)]
+        best_pair = max(eligible, key=lambda s: s.score) if eligible else None
+        if best_pair is not None and best_pair.score > best_single.score + PAIR_MARGIN_PCT:
             best = best_pair
+    family = max(families, key=lambda s: s.score) if families else None
+    if family is not None and family.shrink >= MIN_SHRINK_PCT and family.score > best.score:
+        after = family.after["total_pct"] or 0.0
+        left = best.after["total_pct"]
+        return {"effect": "baseline_misfit",
+                "confidence": 0.0 if left is None else float(min(max(
+                    (left - after) / max(gap - after, 1e-12), 0.0), 1.0)),
+                "shrink_pct": _finite(family.shrink), "gap_before_pct": gap,
+                "gap_after_pct": after, "runner_up": best.name, "not_separated_from": None,
+                "flags": {}, "better_family": family.name,
+                "explanation": f"only a change of law family closes the gap: a {family.name} "
+                               f"baseline shrinks the withheld gap from {gap:.2f} % to "
+                               f"{after:.2f} %; the best effect on the {law} baseline, "
+                               f"{best.name}, leaves {_pct_text(left)}"}
     if best.shrink < MIN_SHRINK_PCT:
+        better = family.name if family is not None and family.score > best.score else None
         none_of_mine = (f"no candidate shrinks it by {MIN_SHRINK_PCT:g} % (best: {best.name}, "
                         f"{best.shrink:.1f} %)")
+        common: dict[str, Any] = {
+            "confidence": 0.0, "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
+            "gap_after_pct": best.after["total_pct"], "runner_up": best.name,
+            "not_separated_from": None, "flags": {}, "better_family": better}
         if systematic_cal > floor:
-            return {"effect": "baseline_misfit", "confidence": 0.0,
-                    "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
-                    "gap_after_pct": best.after["total_pct"],
+            return {"effect": "baseline_misfit", **common,
                     "explanation": f"the {law} baseline misses the calibration part it was "
                                    f"fitted to by {systematic_cal:.2f} % beyond the white noise "
                                    f"(withheld gap {gap:.2f} %) and {none_of_mine}: the law "
-                                   "family does not represent this specimen"}
-        return {"effect": "unexplained", "confidence": 0.0, "shrink_pct": _finite(best.shrink),
-                "gap_before_pct": gap, "gap_after_pct": best.after["total_pct"],
+                                   "family does not represent this specimen"
+                                   + ("" if better is None else
+                                      f" (a {better} baseline does better)")}
+        return {"effect": "unexplained", **common,
                 "explanation": f"the baseline fits its calibration part to the noise, but the "
                                f"withheld gap {gap:.2f} % is above the floor and "
                                + none_of_mine}
@@ -426,12 +506,29 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
         confidence = 1.0
     else:
         confidence = (runner.after["total_pct"] - after) / max(gap - after, 1e-12)
+    confidence = float(min(max(confidence, 0.0), 1.0))
+    flags = best.flags
+    confidence *= FLAG_CONFIDENCE_FACTOR ** len(flags)
+    unsure = runner.name if runner is not None and confidence < LOW_CONFIDENCE else None
+    text = (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} %"
+            + ("" if best.compared_with is None else
+               f" (on the {best.fit.spec.law_kind if best.fit else law} law; measured from the "
+               f"{best.compared_with}, which leaves {_pct_text(best.before['total_pct'])})")
+            + ("" if runner is None else
+               f"; the runner-up {runner.name} leaves {runner.after['total_pct']:.2f} %"))
+    if flags:
+        text += "; not measured by the record: " + ", ".join(
+            f"{k} {v}" for k, v in flags.items())
+    if unsure is not None:
+        text += f"; low confidence: not separated from {unsure}"
     return {
-        "effect": best.name, "confidence": float(min(max(confidence, 0.0), 1.0)),
+        "effect": best.name, "confidence": confidence,
         "shrink_pct": _finite(best.shrink), "gap_before_pct": gap, "gap_after_pct": after,
         "runner_up": None if runner is None else runner.name,
-        "explanation": f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} %"
-                       + ("" if runner is None else
-                          f"; the runner-up {runner.name} leaves "
-                          f"{runner.after['total_pct']:.2f} %"),
+        "not_separated_from": unsure, "flags": flags, "better_family": None,
+        "explanation": text,
     }
+
+
+def _pct_text(x: float | None) -> str:
+    return "—" if x is None or not math.isfinite(x) else f"{x:.2f} %"

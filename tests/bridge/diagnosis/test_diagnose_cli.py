@@ -43,9 +43,10 @@ def test_a_csv_is_diagnosed_with_summary_json_and_report(tmp_path: Path,
     assert doc["schema"] == "fresco-bridge/diagnosis/1"
     assert doc["verdict"]["effect"] == "friction" and 0.0 <= doc["verdict"]["confidence"] <= 1.0
     names = [e["name"] for e in doc["effects"]]
-    assert sorted(names) == sorted(["actuator_delay", "actuator_amplitude", "backlash",
-                                    "friction", "pinching", "degradation", "rate_dependence",
-                                    "sensor_bias", "sensor_noise"])
+    assert sorted(names) == sorted(["actuator_delay", "actuator_amplitude",
+                                    "actuator_undershoot", "backlash", "friction", "pinching",
+                                    "degradation", "rate_dependence", "sensor_bias",
+                                    "sensor_noise"])
     for e in doc["effects"]:
         assert {"name", "params", "gap_before", "gap_after", "shrink_pct"} <= set(e)
     assert {"layers", "time", "amplitude", "phase"} <= set(doc["localization"])

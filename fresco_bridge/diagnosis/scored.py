@@ -1,0 +1,141 @@
+"""A candidate's score on the withheld part, and the flags that say a number is not measured.
+
+The gap of a prediction is the NRMS of measured − predicted on a part of the record, over the
+*whole record's* RMS force and command, so a quiet part cannot inflate it; a candidate's shrink
+is measured from the gap it is compared with (the baseline's, or the best baseline of the law
+family it drives) and its score charges :data:`PARSIMONY_PCT` per parameter. A fitted effect
+parameter at a bound or with a relative std above :data:`MAX_RELATIVE_STD` is flagged
+(``verdict`` lowers the confidence for each).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .fit import Fit
+from .load import Record
+from .model import Param, baseline_report
+
+__all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "PARSIMONY_PCT", "Scored", "finite", "gap",
+           "rms"]
+
+FloatArray = npt.NDArray[np.float64]
+
+PARSIMONY_PCT = 2.0
+GAP_ZERO_PCT = 1e-6
+"""A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
+"""Score = shrink % − this per fitted parameter (law parameters of another family included)."""
+MAX_RELATIVE_STD = 0.5
+"""A fitted effect parameter whose std exceeds this share of its value (of 5 % of its range
+for a value nearer zero than that) is not measured by the record: flagged."""
+BOUND_TOLERANCE = 1e-3
+"""A parameter within this share of its range from a bound is at the bound: flagged (except a
+zero lower bound, which says the part of the effect it measures is absent)."""
+
+
+@dataclass
+class Scored:
+    """A candidate (or another law family's baseline) fitted and scored on the withheld part."""
+
+    name: str
+    effects: tuple[str, ...]
+    params: list[Param]
+    fit: Fit | None
+    values: dict[str, float]
+    std: dict[str, float]
+    before: dict[str, float | None]
+    after: dict[str, float | None]
+    force: FloatArray | None = None
+    disp: FloatArray | None = None
+    compared_with: str | None = None
+    """The baseline the shrink is measured from when it is not the diagnosis' own (a candidate
+    on another law family is compared with the best baseline of that family)."""
+    extra_law_params: int = 0
+    """Law parameters a family alternative has beyond the baseline's (counted in its score)."""
+    role: str = "candidate"
+    """``candidate``; for another law family's baseline ``alternative`` or ``reference``."""
+
+    @property
+    def shrink(self) -> float:
+        b, a = self.before["total_pct"], self.after["total_pct"]
+        if b is None or a is None or not math.isfinite(a) or b < GAP_ZERO_PCT:
+            return -math.inf  # undefined (JSON null, "–"): there was no gap to shrink
+        return 100.0 * (1.0 - a / b)
+
+    @property
+    def score(self) -> float:
+        return self.shrink - PARSIMONY_PCT * (len(self.params) + self.extra_law_params)
+
+    @property
+    def flags(self) -> dict[str, str]:
+        """Parameters the record does not measure: at a bound, or too uncertain (module doc)."""
+        out: dict[str, str] = {}
+        for p in self.params:
+            value, std = self.values.get(p.name), self.std.get(p.name)
+            if p.role == "noise" or value is None:
+                continue
+            span = p.hi - p.lo if math.isfinite(p.hi) else abs(value) or 1.0
+            tol = BOUND_TOLERANCE * span
+            if p.lo != 0.0 and value <= p.lo + tol:
+                out[p.name] = f"at its lower bound {p.lo:.4g}"
+            elif math.isfinite(p.hi) and value >= p.hi - tol:
+                out[p.name] = f"at its upper bound {p.hi:.4g}"
+            elif p.lo == 0.0 and value <= p.lo + tol:
+                continue  # absent, not unsure
+            elif std is None or not math.isfinite(std):
+                out[p.name] = "no uncertainty estimate"
+            else:
+                relative = std / max(abs(value), 0.05 * span)
+                if relative > MAX_RELATIVE_STD:
+                    out[p.name] = (f"relative std {relative:.3g} above {MAX_RELATIVE_STD:g}")
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        flags = self.flags
+        return {
+            "name": self.name,
+            "params": {p.name: {"value": self.values.get(p.name), "std": self.std.get(p.name),
+                                "unit": p.unit, "meaning": p.meaning,
+                                "flag": flags.get(p.name)} for p in self.params},
+            "n_params": len(self.params),
+            "law_family": None if self.fit is None else self.fit.spec.law_kind,
+            "compared_with": self.compared_with,
+            "law": None if self.fit is None else baseline_report(self.fit.spec.law_kind,
+                                                                 self.fit.values),
+            "gap_before": self.before, "gap_after": self.after,
+            "shrink_pct": finite(self.shrink), "score": finite(self.score),
+            "fit": None if self.fit is None else {
+                "converged": self.fit.ok, "evaluations": self.fit.evaluations,
+                "calibration_cost": self.fit.cost},
+        }
+
+
+def finite(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
+         noise: tuple[float, float] = (0.0, 0.0)) -> dict[str, float | None]:
+    """NRMS gap in % per channel on ``part``, over the whole record's RMS force and command
+    (a quiet part cannot inflate it); ``noise`` (std) is removed from the variance."""
+    rf = (record.force - force)[part]
+    var_f = max(float(np.mean(rf * rf)) - noise[0] ** 2, 0.0)
+    g_f = 100.0 * math.sqrt(var_f) / (rms(record.force) or 1.0)
+    g_d: float | None = None
+    if record.meas_disp is not None and disp is not None:
+        rd = (record.meas_disp - disp)[part]
+        var_d = max(float(np.mean(rd * rd)) - noise[1] ** 2, 0.0)
+        g_d = 100.0 * math.sqrt(var_d) / (rms(record.cmd) or 1.0)
+    total = math.hypot(g_f, g_d or 0.0)
+    if not math.isfinite(total):
+        total = math.inf
+    return {"force_pct": finite(g_f), "disp_pct": finite(g_d), "total_pct": total}
