@@ -40,7 +40,6 @@ MAGNITUDE_OF = {
     "actuator_delay": "tau", "actuator_amplitude": "amplitude_error", "backlash": "gap",
     "friction": "coulomb", "pinching": "zeta_s", "degradation": "delta_mean",
     "rate_dependence": "viscous", "sensor_bias": "force_bias", "sensor_noise": "force_noise_std",
-    UNDERSHOOT: "undershoot",
 }
 """The parameter whose relative error is the effect's "magnitude" error. For degradation it is
 the mean of delta_nu and delta_eta: on these records strength and stiffness degradation trade
