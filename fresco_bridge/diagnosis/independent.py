@@ -67,8 +67,8 @@ INDEPENDENT: dict[str, str] = {
     "actuator_delay": "transport delay 0-15 ms + first-order lag 5-30 ms; truth = their sum",
     "actuator_amplitude": "gain error ±(3-10) %",
     UNDERSHOOT: "1-4 % of the peak against the command's direction of motion",
-    "backlash": "pin gap 2-8 % of the peak each side, softplus contact 10-50 k0 (width "
-                "5-20 % of the gap), in equilibrium with the specimen",
+    "backlash": "pin gap 2-8 % of the peak each side, C1 penalty contact 10-50 k0 (reached "
+                "over 5-20 % of the gap), in equilibrium with the specimen",
     "friction": "Coulomb 3-10 % of fy behind a spring of 0.5-5 k0 (Jenkins element)",
     "rate_dependence": "c |v|^a (a 0.2-1), 3-10 % of fy at the RMS velocity, + hump 20-60 % "
                        "of that at 5-30 % of the RMS velocity; truth = power-equivalent c",
@@ -201,21 +201,24 @@ def _servo(target: FloatArray, dt: float, delay: float, lag: float) -> FloatArra
     return np.asarray(y, dtype=np.float64)
 
 
-def _softplus(z: float) -> float:
-    return max(z, 0.0) + math.log1p(math.exp(-abs(z)))
-
-
 def _contact(r: float, gap: float, k_c: float, width: float) -> float:
-    """Pin force for a relative displacement ``r`` (piston minus specimen): a smooth dead zone
-    of ``gap`` each side, stiffness ``k_c`` beyond it, rounded over ``width``."""
-    return k_c * width * (_softplus((r - gap) / width) - _softplus((-r - gap) / width))
+    """Pin force for a relative displacement ``r`` (piston minus specimen): none within the
+    clearance ``gap`` each side; beyond it a penalty contact whose stiffness grows linearly
+    from 0 to ``k_c`` over ``width`` (the pin bedding in), then stays: force and stiffness
+    continuous (C1), exactly zero inside the clearance, so ``gap`` is the clearance."""
+    depth = abs(r) - gap
+    if depth <= 0.0:
+        return 0.0
+    f = k_c * depth * depth / (2.0 * width) if depth < width else k_c * (depth - 0.5 * width)
+    return f if r > 0.0 else -f
 
 
 def _drive_with_gap(law: SpecimenLaw, x: FloatArray, gap: float, k_c: float, width: float,
                     fy: float, uy: float) -> FloatArray:
     """Connection force when the piston ``x`` drives the specimen through a pin gap: at each
     sample, the specimen displacement u where the pin force equals the specimen's resistance
-    (bracketed, then Illinois regula falsi; the residual falls as u grows)."""
+    (bracketed, then Illinois regula falsi; the residual falls as u grows: every specimen law
+    here has a positive tangent)."""
     out = np.empty(x.size)
     u = 0.0
     tol = 1e-9 * fy
