@@ -6,7 +6,11 @@ per cycle, so false alarms are measured on enough records) and is generated from
 command, measured displacement and force — never the effect, its magnitude or the specimen.
 Records run through ``fresco_bridge.sweeps.run_sweep`` (serial, local pool, or Dask). With
 ``realism`` the records come from ``realism.realistic_record`` (effects in the rig's physical
-forms, not the candidates' shapes) instead of ``synth.synthetic_record``; same seeds.
+forms, not the candidates' shapes) instead of ``synth.synthetic_record``; same seeds. With
+``independent`` they come from ``independent.independent_record`` (specimens and effect forms
+written anew, sharing no code with the rig; record i carries ``independent.case_label(S, i)``,
+a fifth of them two effects at once), scored as sets: a pair verdict in any order is right, and
+the overall score gives half credit when truth and verdict share one member.
 """
 
 from __future__ import annotations
@@ -23,12 +27,13 @@ from typing import Any
 import numpy as np
 
 from ..numbers import pct
+from .independent import UNDERSHOOT, IndependentRecord, case_label, independent_record
 from .model import EFFECT_NAMES
 from .synth import SyntheticRecord, synthetic_record
 from .verdict import diagnose
 
-__all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "diagnose_one", "effect_magnitude",
-           "format_bench", "generate", "summarise_bench"]
+__all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "credit", "diagnose_one",
+           "effect_magnitude", "format_bench", "generate", "summarise_bench"]
 
 CLASSES = (*EFFECT_NAMES, "none", "none")
 MAGNITUDE_OF = {
@@ -62,38 +67,45 @@ def effect_magnitude(effect: str, values: Mapping[str, float],
 MAGNITUDE_TOLERANCE = 0.20
 
 
-BenchItem = tuple[int, str, int, int, bool, str | None]
-"""(index, effect, record seed, steps, realism, record cache directory or None) of a record."""
+BenchItem = tuple[int, str, int, int | None, str, str | None]
+"""(index, effect, record seed, steps, generator, record cache directory or None) of a record;
+the generator is ``plain``, ``realism`` or ``independent`` (steps None: drawn per record)."""
+SYSTEMATIC = frozenset(EFFECT_NAMES) - {"sensor_noise"} | {UNDERSHOOT}
+"""Effects that claim a systematic departure (a 'none' record must never get one)."""
 
 
-def bench_items(n: int, seed: int, steps: int, realism: bool = False,
-                cache: str | None = None) -> list[BenchItem]:
-    """(index, effect, record seed, steps, realism, cache) of every record of the bench."""
-    return [(i, CLASSES[i % len(CLASSES)], seed * 100_003 + i, steps, realism, cache)
-            for i in range(n)]
+def bench_items(n: int, seed: int, steps: int | None, realism: bool = False,
+                cache: str | None = None, *, independent: bool = False) -> list[BenchItem]:
+    """(index, effect, record seed, steps, generator, cache) of every record of the bench."""
+    generator = "independent" if independent else "realism" if realism else "plain"
+    return [(i, case_label(seed, i) if independent else CLASSES[i % len(CLASSES)],
+             seed * 100_003 + i, steps if steps is not None or independent else 3000,
+             generator, cache) for i in range(n)]
 
 
-def generate(item: BenchItem) -> SyntheticRecord:
+def generate(item: BenchItem) -> SyntheticRecord | IndependentRecord:
     """Record ``item`` as the generator makes it; with a cache directory, read from there when
     it was generated before (a compliant-frame realism record takes minutes on the rig's
     substep solver, its diagnosis seconds), written there otherwise. The cache is keyed by
     bench, seed, effect and steps and is only ever written by this function (pickle: trusted,
     local)."""
-    _index, effect, record_seed, steps, realism, cache = item
+    _index, effect, record_seed, steps, generator, cache = item
     path = None
     if cache is not None:
-        path = Path(cache) / (f"{'realism' if realism else 'plain'}-{record_seed}-{effect}-"
-                              f"{steps}.pickle")
+        path = Path(cache) / f"{generator}-{record_seed}-{effect}-{steps}.pickle"
         if path.exists():
             loaded = pickle.loads(path.read_bytes())
-            if isinstance(loaded, SyntheticRecord):
+            if isinstance(loaded, SyntheticRecord | IndependentRecord):
                 return loaded
-    if realism:
+    synthetic: SyntheticRecord | IndependentRecord
+    if generator == "independent":
+        synthetic = independent_record(effect, record_seed, steps=steps)
+    elif generator == "realism":
         from .realism import realistic_record
 
-        synthetic = realistic_record(effect, record_seed, steps=steps)
+        synthetic = realistic_record(effect, record_seed, steps=steps or 3000)
     else:
-        synthetic = synthetic_record(effect, record_seed, steps=steps)
+        synthetic = synthetic_record(effect, record_seed, steps=steps or 3000)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
@@ -104,13 +116,14 @@ def generate(item: BenchItem) -> SyntheticRecord:
 
 def diagnose_one(item: BenchItem) -> dict[str, Any]:
     """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
-    index, effect, record_seed, _steps, _realism, _cache = item
+    index, effect, record_seed, _steps, _generator, _cache = item
     started = time.perf_counter()
     synthetic = generate(item)
     generated = time.perf_counter()
     result = diagnose(synthetic.record)
     verdict = result["verdict"]
-    true_candidate = next((e for e in result["effects"] if e["name"] == effect), None)
+    true_candidate = next((e for e in [*result["effects"], *result.get("pairs", [])]
+                           if _members(e["name"]) == _members(effect)), None)
     estimates = {} if true_candidate is None else {
         name: p["value"] for name, p in true_candidate["params"].items()}
     errors = {name: abs(estimates[name] - value) / abs(value)
@@ -126,7 +139,8 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
             # the earlier definition (per unit energy normalised by each law's own fy * dy)
             errors["magnitude_normalised"] = abs(plain_found - plain_truth) / abs(plain_truth)
     return {
-        "index": index, "effect": effect, "seed": record_seed, "predicted": verdict["effect"],
+        "index": index, "effect": effect, "seed": record_seed,
+        "samples": synthetic.record.size, "predicted": verdict["effect"],
         "baseline": result["baseline"]["kind"],
         "confidence": verdict["confidence"], "truth": synthetic.truth, "estimates": estimates,
         "relative_errors": errors, "specimen": synthetic.specimen, "law": synthetic.law,
@@ -137,14 +151,47 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
     }
 
 
+def _members(label: str) -> frozenset[str]:
+    """The effects a label names (``a+b`` in any order: the same pair)."""
+    return frozenset(label.split("+"))
+
+
+def _canonical(label: str) -> str:
+    return "+".join(sorted(_members(label)))
+
+
+def credit(truth: str, predicted: str) -> float:
+    """1 for the right verdict (a pair in any order), 0.5 when truth or verdict is a pair and
+    they share one member, else 0."""
+    t, p = _members(truth), _members(predicted)
+    if t == p:
+        return 1.0
+    return 0.5 if (len(t) > 1 or len(p) > 1) and t & p else 0.0
+
+
+def _right(row: dict[str, Any]) -> bool:
+    return credit(row["effect"], row["predicted"]) == 1.0
+
+
+def _pct(part: float, whole: int) -> float:
+    return 100.0 * part / whole if whole else math.nan
+
+
 def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Confusion matrix, top-1, false alarms, magnitude errors and shrink statistics."""
-    labels = [*EFFECT_NAMES, "none"]
-    predicted_labels = sorted({r["predicted"] for r in rows} - set(labels))
-    matrix = {t: Counter(r["predicted"] for r in rows if r["effect"] == t) for t in labels}
-    correct = [r for r in rows if r["predicted"] == r["effect"]]
+    """Confusion matrix, top-1 (singles, pairs, overall with half credit), false alarms (any,
+    and systematic), per-effect hits, magnitude errors and shrink statistics."""
+    truths = {r["effect"] for r in rows}
+    labels = [*EFFECT_NAMES, "none",
+              *sorted(t for t in truths if "+" not in t and t not in (*EFFECT_NAMES, "none"))]
+    pair_labels = sorted(t for t in truths if "+" in t)
+    predicted_labels = sorted({_canonical(r["predicted"]) for r in rows} - set(labels))
+    matrix = {t: Counter(_canonical(r["predicted"]) for r in rows if r["effect"] == t)
+              for t in (*labels, *pair_labels)}
+    correct = [r for r in rows if credit(r["effect"], r["predicted"]) == 1.0]
     none_rows = [r for r in rows if r["effect"] == "none"]
     effect_rows = [r for r in rows if r["effect"] != "none"]
+    single_rows = [r for r in effect_rows if "+" not in r["effect"]]
+    pair_rows = [r for r in effect_rows if "+" in r["effect"]]
     magnitude: dict[str, list[float]] = {}
     for r in correct:
         if "magnitude" in r["relative_errors"]:
@@ -154,17 +201,28 @@ def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
               and r["shrink_pct"] is not None]
     return {
         "records": len(rows),
-        "top1_pct": 100.0 * len(correct) / len(rows) if rows else math.nan,
-        "effects_top1_pct": 100.0 * sum(r in correct for r in effect_rows) / len(effect_rows)
-        if effect_rows else math.nan,
-        "none_false_alarm_pct": 100.0 * sum(r["predicted"] != "none" for r in none_rows)
-        / len(none_rows) if none_rows else math.nan,
-        "missed_as_none_pct": 100.0 * sum(r["predicted"] == "none" for r in effect_rows)
-        / len(effect_rows) if effect_rows else math.nan,
-        "labels": labels, "extra_predictions": predicted_labels,
-        "confusion": {t: dict(matrix[t]) for t in labels},
-        "magnitude_within_20pct": 100.0 * sum(e <= MAGNITUDE_TOLERANCE for e in all_mag)
-        / len(all_mag) if all_mag else math.nan,
+        "top1_pct": _pct(len(correct), len(rows)),
+        "effects_top1_pct": _pct(sum(_right(r) for r in effect_rows), len(effect_rows)),
+        "singles": len(single_rows),
+        "singles_top1_pct": _pct(sum(_right(r) for r in single_rows), len(single_rows)),
+        "pairs": len(pair_rows),
+        "pairs_exact_pct": _pct(sum(_right(r) for r in pair_rows), len(pair_rows)),
+        "overall_credit_pct": _pct(sum(credit(r["effect"], r["predicted"]) for r in rows),
+                                   len(rows)),
+        "none_false_alarm_pct": _pct(sum(r["predicted"] != "none" for r in none_rows),
+                                     len(none_rows)),
+        "none_systematic_pct": _pct(sum(bool(_members(r["predicted"]) & SYSTEMATIC)
+                                        for r in none_rows), len(none_rows)),
+        "missed_as_none_pct": _pct(sum(r["predicted"] == "none" for r in effect_rows),
+                                   len(effect_rows)),
+        "labels": labels, "pair_labels": pair_labels, "extra_predictions": predicted_labels,
+        "confusion": {t: dict(matrix[t]) for t in (*labels, *pair_labels)},
+        "per_effect": {t: {"records": len(sub), "correct": sum(_right(r) for r in sub),
+                           "credit": sum(credit(r["effect"], r["predicted"]) for r in sub)}
+                       for t in (*labels, *pair_labels)
+                       for sub in [[r for r in rows if r["effect"] == t]] if sub},
+        "magnitude_within_20pct": _pct(sum(e <= MAGNITUDE_TOLERANCE for e in all_mag),
+                                       len(all_mag)),
         "magnitude_error_median_pct": {k: 100.0 * float(np.median(v))
                                        for k, v in magnitude.items()},
         "magnitude_error_max_pct": {k: 100.0 * float(np.max(v)) for k, v in magnitude.items()},
@@ -173,47 +231,59 @@ def summarise_bench(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "diagnose_seconds": {"median": float(np.median([r["diagnose_seconds"] for r in rows])),
                              "max": float(np.max([r["diagnose_seconds"] for r in rows]))}
         if rows else {},
-        "by_law": {law: {"records": len(sub), "top1_pct": 100.0 * sum(
-            r["predicted"] == r["effect"] for r in sub) / len(sub)}
+        "by_law": {law: {"records": len(sub), "top1_pct": _pct(
+            sum(_right(r) for r in sub), len(sub))}
             for law in sorted({r.get("law", "bouc-wen") for r in rows})
             for sub in [[r for r in rows if r.get("law", "bouc-wen") == law]]},
         "failures": [{k: r.get(k) for k in ("index", "seed", "effect", "predicted",
                                             "confidence", "gap_before_pct", "truth", "law",
-                                            "baseline")}
-                     for r in rows if r["predicted"] != r["effect"]],
+                                            "baseline", "samples", "diagnose_seconds")}
+                     for r in rows if not _right(r)],
     }
 
 
 def format_bench(summary: dict[str, Any], seed: int, wall: float, *,
-                 realism: bool = False) -> str:
+                 realism: bool = False, independent: bool = False) -> str:
     """The bench's printout: headline numbers, confusion matrix, magnitudes, failures."""
     labels = summary["labels"]
+    rows = [*labels, *summary.get("pair_labels", [])]
     columns = [*labels, *summary["extra_predictions"]]
     short = {name: name.replace("actuator_", "act_").replace("rate_dependence", "rate")
              .replace("sensor_", "sens_").replace("degradation", "degrad")[:10]
              for name in columns}
-    width = max(len(x) for x in labels) + 1
+    width = max(len(x) for x in rows) + 1
+    mode = " --independent" if independent else " --realism" if realism else ""
     lines = [
-        f"diagnose-bench{' --realism' if realism else ''}: {summary['records']} records, "
-        f"seed {seed}, {wall:.1f} s wall",
+        f"diagnose-bench{mode}: {summary['records']} records, seed {seed}, {wall:.1f} s wall",
         f"top-1 {pct(summary['top1_pct'], 1)} (effects {pct(summary['effects_top1_pct'], 1)}); "
         f"none false alarms {pct(summary['none_false_alarm_pct'], 1)}; effects missed as none "
         f"{pct(summary['missed_as_none_pct'], 1)}",
+    ]
+    if summary.get("pairs"):
+        lines.append(
+            f"singles top-1 {pct(summary['singles_top1_pct'], 1)} of {summary['singles']}; "
+            f"pairs exact {pct(summary['pairs_exact_pct'], 1)} of {summary['pairs']}; overall "
+            f"with half credit {pct(summary['overall_credit_pct'], 1)}; none -> systematic "
+            f"effect {pct(summary['none_systematic_pct'], 1)}")
+    lines += [
         f"magnitude within 20 %: {pct(summary['magnitude_within_20pct'], 1)} of correctly "
         "named records",
         "confusion (rows: true effect, columns: verdict):",
         " " * width + " ".join(f"{short[c]:>10}" for c in columns),
     ]
-    for t in labels:
+    for t in rows:
         row = summary["confusion"][t]
         lines.append(f"{t:<{width}}" + " ".join(f"{row.get(c, 0):>10}" for c in columns))
+    if summary.get("pairs"):
+        lines.append("per truth (right / records): " + ", ".join(
+            f"{t} {v['correct']}/{v['records']}" for t, v in summary["per_effect"].items()))
     if len(summary["by_law"]) > 1:
         lines.append("top-1 by specimen law: " + ", ".join(
             f"{law} {pct(v['top1_pct'], 1)} of {v['records']}"
             for law, v in summary["by_law"].items()))
     lines.append("magnitude error (median / max, % of the true value):")
     for effect, median in summary["magnitude_error_median_pct"].items():
-        lines.append(f"  {effect:<20} {MAGNITUDE_OF[effect]:<16} {median:7.2f} / "
+        lines.append(f"  {effect:<20} {MAGNITUDE_OF.get(effect, '-'):<16} {median:7.2f} / "
                      f"{summary['magnitude_error_max_pct'][effect]:7.2f}")
     if summary["shrink_pct"]:
         s = summary["shrink_pct"]

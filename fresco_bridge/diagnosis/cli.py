@@ -59,7 +59,8 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                             "diagnose them blind: confusion matrix, top-1, magnitude errors")
     b.add_argument("--n", type=int, default=55, help="number of records (default 55)")
     b.add_argument("--seed", type=int, default=1, help="bench seed (default 1)")
-    b.add_argument("--steps", type=int, default=3000, help="samples per record (default 3000)")
+    b.add_argument("--steps", type=int, default=None,
+                   help="samples per record (default 3000; --independent: drawn, 1500-6000)")
     b.add_argument("--workers", type=int, default=None,
                    help="local worker processes (default: one per core; 1 = serial)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -68,6 +69,9 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                    help="harder records: effects in the rig's physical forms (servo lag, "
                         "compliant frame, other pinching/degradation laws), a Menegotto-Pinto "
                         "specimen in a third of the records, varied noise")
+    b.add_argument("--independent", action="store_true",
+                   help="records from an independent generator (own specimens and effect "
+                        "forms, no code shared with the rig; a fifth carry two effects)")
     b.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write every record's result and the summary as JSON")
     b.add_argument("--records", type=Path, default=None, metavar="DIR",
@@ -160,10 +164,14 @@ def _diagnose(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     if args.n < 1:
         raise DiagnosisInputError(f"--n: must be >= 1 (got {args.n})")
-    if args.steps < 200:
+    if args.steps is not None and args.steps < 200:
         raise DiagnosisInputError(f"--steps: must be >= 200 (got {args.steps})")
-    status(f"diagnose-bench: {args.n} record(s) of {args.steps} samples, seed {args.seed}"
-            f"{', realism' if args.realism else ''}: each generated on the simulated rig"
+    if args.realism and args.independent:
+        raise DiagnosisInputError("--realism and --independent: choose one generator")
+    samples = args.steps or ("1500-6000" if args.independent else 3000)
+    generated = "by the independent generator" if args.independent else "on the simulated rig"
+    status(f"diagnose-bench: {args.n} record(s) of {samples} samples, seed {args.seed}"
+            f"{', realism' if args.realism else ''}: each generated {generated}"
             + ("" if args.records is None else f" (or reused from {args.records})")
             + " and diagnosed blind")
     from ..progress import ProgressBar
@@ -171,17 +179,19 @@ def _bench(args: argparse.Namespace) -> int:
     from .bench import bench_items, diagnose_one, format_bench, summarise_bench
 
     items = bench_items(args.n, args.seed, args.steps, args.realism,
-                        None if args.records is None else str(args.records))
+                        None if args.records is None else str(args.records),
+                        independent=args.independent)
     started = time.perf_counter()
     with ProgressBar("diagnose-bench", len(items), enabled=not args.no_progress) as bar:
         rows = run_sweep(diagnose_one, items, workers=args.workers, scheduler=args.scheduler,
                          progress=bar)
     wall = time.perf_counter() - started
     result = summarise_bench(rows)
-    print(format_bench(result, args.seed, wall, realism=args.realism))
+    print(format_bench(result, args.seed, wall, realism=args.realism,
+                       independent=args.independent))
     if args.json is not None:
         doc: dict[str, Any] = {"seed": args.seed, "n": args.n, "steps": args.steps,
-                               "realism": args.realism,
+                               "realism": args.realism, "independent": args.independent,
                                "wall_seconds": wall, "summary": result, "records": rows}
         args.json.write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
