@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fresco_bridge.diagnosis.load import record_from_arrays
+from fresco_bridge.diagnosis.load import Record, record_from_arrays
 from fresco_bridge.diagnosis.model import Context, _law_vector, law_parameters
 from fresco_bridge.diagnosis.names import AUTO_FAMILIES, BASELINES
 from fresco_bridge.diagnosis.synth import command_history
@@ -31,12 +31,13 @@ FAMILIES = {
 }
 
 
-def _record(kind: str, law: dict[str, float], seed: int = 5):
+def _record(kind: str, law: dict[str, float], seed: int = 5) -> Record:
     rng = np.random.default_rng(seed)
     cmd = command_history(rng, 1500, 0.01, 5.0 * law.get("fy", 20.0) / law.get("k0", 10.0))
     force = drive(*_law_vector(kind, law), cmd, 0.0, 0.2)
     force = force + rng.normal(0.0, 0.005 * float(np.max(np.abs(force))), force.size)
-    return record_from_arrays(np.arange(cmd.size) * 0.01, cmd, force, source=kind)
+    time = np.arange(cmd.size, dtype=np.float64) * 0.01
+    return record_from_arrays(time, cmd, force, source=kind)
 
 
 @pytest.mark.parametrize("kind", list(FAMILIES))
