@@ -56,6 +56,11 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                    help=f"units of a CSV as disp=U,force=U,time=U ({units}); default mm,kN,s")
     p.add_argument("--noise-floor", type=float, default=None, metavar="PCT",
                    help="withheld gap (NRMS %%) below which the verdict is none (default 1)")
+    p.add_argument("--no-command", action="store_true",
+                   help="the record has no command channel: its displacement (meas_disp, or "
+                        "else cmd_disp) is the measured one; interface effects (delay, "
+                        "amplitude, undershoot) are reported as not identifiable. Detected "
+                        "without the flag when cmd_disp is absent or equal to meas_disp")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     b = sub.add_parser("diagnose-bench",
@@ -138,7 +143,8 @@ def _diagnose(args: argparse.Namespace) -> int:
     if args.noise_floor is not None and not args.noise_floor > 0.0:
         raise DiagnosisInputError(f"--noise-floor: must be > 0 (got {args.noise_floor})")
     status(f"diagnose: reading {args.record}" + (f" (site {args.site})" if args.site else ""))
-    record = load_record(args.record, site=args.site, units=args.units)
+    record = load_record(args.record, site=args.site, units=args.units,
+                         no_command=args.no_command)
     baseline = ("choosing the baseline law by BIC, then fitting each candidate effect"
                 if kind == AUTO else f"fitting the {kind} baseline, then each candidate effect")
     status(f"diagnose: {record.size} samples; {baseline}")

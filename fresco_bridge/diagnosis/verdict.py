@@ -40,6 +40,7 @@ from .baseline import choose_baseline, fit_baseline
 from .fit import Fit, fit_spec, predict
 from .load import DiagnosisInputError, Record
 from .localise import localise
+from .nocommand import hidden_effects, hidden_summary
 from .model import (
     AUTO,
     BASELINES,
@@ -221,7 +222,8 @@ def diagnose(record: Record, options: Options | None = None,
     cal = Context.of(calibration.thinned(opts.max_fit_samples))
     full = Context.of(record)
     withheld = slice(stop, n)
-    effects = [e for e in opts.effects]
+    hidden = hidden_effects(record, opts.effects)  # no command channel: the interface layer
+    effects = [e for e in opts.effects if e not in hidden]
     total_fits = 1 + len(effects) + (TOP_FOR_PAIRS * 2 if opts.pairs else 0)
     done = 0
     if progress is not None:
@@ -319,8 +321,10 @@ def diagnose(record: Record, options: Options | None = None,
         "record": {
             "source": record.source, "samples": n, "duration_s": float(record.time[-1]
                                                                        - record.time[0]),
-            "dt_s": full.dt, "channels": ["cmd_disp", "meas_force"]
+            "dt_s": full.dt, "channels": (["meas_disp (no command)"] if record.no_command
+                                          else ["cmd_disp"]) + ["meas_force"]
             + (["meas_disp"] if record.meas_disp is not None else []),
+            "command": not record.no_command,
             "notes": [*record.notes, *cal.record.notes[len(record.notes):]],
             "calibration": {"samples": [0, stop], "t_end": float(record.time[stop - 1])},
             "withheld": {"samples": [stop, n], "t_start": float(record.time[stop])},
@@ -339,6 +343,8 @@ def diagnose(record: Record, options: Options | None = None,
         "effects": [s.as_dict() for s in singles],
         "pairs": [s.as_dict() for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
         "verdict": verdict,
+        "not_identifiable": hidden,
+        "hidden": hidden_summary(record, opts.effects),
         "seconds": time.perf_counter() - started,
         "_series": {
             "time": record.time, "cmd": record.cmd, "meas_disp": record.meas_disp,
