@@ -40,7 +40,6 @@ from .baseline import choose_baseline, fit_baseline
 from .fit import Fit, fit_spec, predict
 from .load import DiagnosisInputError, Record
 from .localise import localise
-from .nocommand import hidden_effects, hidden_summary
 from .model import (
     AUTO,
     BASELINES,
@@ -51,6 +50,7 @@ from .model import (
     effect_parameters,
     make_spec,
 )
+from .nocommand import hidden_effects, hidden_summary
 
 __all__ = [
     "CALIBRATION_FRACTION",
