@@ -41,7 +41,7 @@ RESTARTS: Mapping[str, tuple[dict[str, float], ...]] = {
     "bouc-wen": ({"n": 1.2, "beta_share": 0.5}, {"n": 4.0, "beta_share": 0.8}),
     "bwbn": ({"n": 1.2, "beta_share": 0.5}, {"n": 4.0, "beta_share": 0.8}),
     "menegotto-pinto": ({"R0": 6.0, "cR1": 0.5}, {"R0": 30.0, "cR1": 0.95}),
-    "steel02": ({"R0": 6.0, "cR1": 0.5}, {"R0": 30.0, "cR1": 0.95, "a1": 0.1, "a3": 0.1}),
+    "steel02": ({"R0": 6.0, "cR1": 0.5}, {"R0": 30.0, "cR1": 0.95, "a1": 0.1}),
     "isotropic-bilinear": ({"q_iso": 0.5, "p_sat": 3.0}, {"q_iso": 1.5, "p_sat": 50.0}),
 }
 """Further starts of a baseline fit besides the parameters' own (the best calibration cost

@@ -26,11 +26,12 @@ _TOML_NAMES = {
     "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "p", "delta_psi",
              "delta_nu", "delta_eta"),
     "menegotto-pinto": ("k0", "fy", "alpha", "R0", "cR1", "cR2"),
-    "steel02": ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1", "a3"),
+    "steel02": ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1"),
     "isotropic-bilinear": ("k0", "fy", "alpha", "q_iso", "p_sat"),
     "elastic": ("k",),
 }
-"""A PARAMS.toml's parameters per kind (``steel02``: a2 = a4 = 1, only a1/a2**0.8 enters)."""
+"""A PARAMS.toml's parameters per kind (``steel02``: a3 = a1, a2 = a4 = 1; only a1/a2**0.8
+enters)."""
 
 
 def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

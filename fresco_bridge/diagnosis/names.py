@@ -8,8 +8,9 @@ BASELINES = ("bilinear", "bouc-wen", "bwbn", "menegotto-pinto", "steel02", "isot
              "elastic")
 """The laws a baseline can be: every kind of the ``sim_actuator.models`` registry (all have a
 fast drive; the elastic spring drives as a bilinear with alpha = 1), ``steel02`` (the
-``menegotto-pinto`` kind with its isotropic hardening a1, a3 fitted) and ``isotropic-bilinear``
-(``sim_actuator.models.IsotropicBilinear``: kinematic plus saturating isotropic hardening)."""
+``menegotto-pinto`` kind with its symmetric isotropic hardening a1 = a3 fitted) and
+``isotropic-bilinear`` (``sim_actuator.models.IsotropicBilinear``: kinematic plus saturating
+isotropic hardening)."""
 AUTO = "auto"
 """``--baseline auto`` (the default): the tool chooses the law on the calibration part."""
 AUTO_FAMILIES = ("bilinear", "bouc-wen", "menegotto-pinto", "isotropic-bilinear", "steel02")
