@@ -61,16 +61,13 @@ from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
 from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, _gap, diagnose, stop_of
 
-__all__ = ["MAGNITUDE_SPREAD", "MIN_SAMPLES_PER_RECORD", "SCHEMA", "diagnose_device",
-           "fit_joint", "summary_device"]
+__all__ = ["MAGNITUDE_SPREAD", "SCHEMA", "diagnose_device", "fit_joint",
+           "fit_joint_candidate", "summary_device"]
 
 SCHEMA = "fresco-bridge/diagnosis-device/1"
 MAGNITUDE_SPREAD = 0.25
 """An effect's parameter agrees across records when every value is within this share of
 their median (or within three combined standard deviations of it)."""
-MIN_SAMPLES_PER_RECORD = 2000
-"""Thinning budget of each record's calibration part in the joint fit: the single-record
-budget shared among the records, but never below this."""
 NOT_EFFECTS = frozenset({"none", "baseline_misfit", "unexplained"})
 JOINT_CANDIDATE_EVALUATIONS = 30
 """As a single record's candidate fit (``verdict``): from the joint baseline, few steps."""
@@ -78,8 +75,10 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def _calibration(records: Sequence[Record], opts: Options) -> list[Context]:
-    budget = max(MIN_SAMPLES_PER_RECORD, opts.max_fit_samples // len(records))
-    return [Context.of(r.part(stop_of(r, opts)).thinned(budget)) for r in records]
+    """Each record's calibration part, thinned for the fits as it would be alone (a shared,
+    smaller budget left an earthquake record at 1 kHz with a window of its quiet start)."""
+    return [Context.of(r.part(stop_of(r, opts)).thinned(opts.max_fit_samples))
+            for r in records]
 
 
 def fit_joint(kind: str, cals: Sequence[Context], given: Mapping[str, float] | None = None
