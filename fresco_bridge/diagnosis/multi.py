@@ -17,13 +17,16 @@ physics. ``diagnose A B C --same-device`` therefore:
    per record, so a magnitude may differ between tests. Holding the law at the joint baseline
    instead would not do: a law fitted to records that all carry the effect has absorbed what it
    can of it, and the effect alone on top no longer shrinks anything.
-3. **Consistent effects.** An effect is *consistent* when its joint candidate shrinks the
-   withheld gap of every record whose gap is above the noise floor by at least
-   :data:`~.verdict.MIN_SHRINK_PCT`; they are ranked by their smallest score over the records
-   (shrink − :data:`~.verdict.PARSIMONY_PCT` per parameter of one record), and the first one is
-   the device's story. Its parameters are listed per record with a flag saying whether they
-   agree (within :data:`MAGNITUDE_SPREAD` of their median, or within three combined standard
-   deviations).
+3. **Consistent effects.** An effect *explains the device* when its joint candidate shrinks
+   the withheld gaps of the records above the noise floor by at least
+   :data:`~.verdict.MIN_SHRINK_PCT` on average and makes none worse by more than
+   :data:`WORSE_PCT` (one effect may matter more in one test than in another: a pin gap is a
+   larger share of a small-amplitude test); it is *consistent* when every record carries it
+   (one of its per-record parameters more than three standard deviations from zero), else
+   *partial*. They are ranked consistent first, then by their mean score (shrink −
+   :data:`~.verdict.PARSIMONY_PCT` per parameter of one record); the first one is the device's
+   story. Its parameters are listed per record with a flag saying whether they agree (within
+   :data:`MAGNITUDE_SPREAD` of their median, or within three combined standard deviations).
 4. **Departures.** Each record is then diagnosed on its own with the story's law and the story
    effect at that record's magnitude *held* (or the joint baseline, with no story): its verdict
    is what departs from the device's story in that test, and a ``baseline_misfit`` or
@@ -69,6 +72,9 @@ MAGNITUDE_SPREAD = 0.25
 """An effect's parameter agrees across records when every value is within this share of
 their median (or within three combined standard deviations of it)."""
 NOT_EFFECTS = frozenset({"none", "baseline_misfit", "unexplained"})
+WORSE_PCT = 5.0
+"""An effect that makes one record's withheld gap worse by more than this does not explain the
+device, whatever it does to the others."""
 JOINT_CANDIDATE_EVALUATIONS = 30
 """As a single record's candidate fit (``verdict``): from the joint baseline, few steps."""
 FloatArray = npt.NDArray[np.float64]
@@ -254,16 +260,16 @@ def _present(j: _Joint, i: int) -> bool:
 
 def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
                 units: Mapping[str, str]) -> list[dict[str, Any]]:
-    """The joint candidates that shrink every active record's gap by the minimum: the
-    consistent ones (present in every record) first, then the partial ones, each by its
-    smallest score."""
+    """The joint candidates that explain the device (module docstring): the consistent ones
+    (present in every record) first, then the partial ones, each by its mean score."""
     active = [i for i in range(len(sources)) if joints and joints[0].before[i] >= floor]
     if not active:
         return []
     out = []
     for j in joints:
         shrinks = [j.shrink(i) for i in active]
-        if min(shrinks) < MIN_SHRINK_PCT:
+        mean = sum(shrinks) / len(shrinks)
+        if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT:
             continue
         names = [*(k for k in j.values[0] if k not in j.own and k in j.std[0]
                    and k in units), *j.own]
@@ -279,11 +285,11 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
                                    if p],
                     "absent_from": [sources[i] for i, p in zip(active, present, strict=True)
                                     if not p],
-                    "min_shrink_pct": min(shrinks), "shrink_pct": shrinks,
-                    "min_score": min(shrinks) - PARSIMONY_PCT * j.n_params,
+                    "mean_shrink_pct": mean, "shrink_pct": shrinks,
+                    "mean_score": mean - PARSIMONY_PCT * j.n_params,
                     "records": [sources[i] for i in active], "params": params,
                     "magnitudes_agree": all(p["agree"] for p in params.values())})
-    return sorted(out, key=lambda c: (c["consistent"], c["min_score"]), reverse=True)
+    return sorted(out, key=lambda c: (c["consistent"], c["mean_score"]), reverse=True)
 
 
 def diagnose_device(records: Sequence[Record], options: Options | None = None) -> dict[str, Any]:
@@ -358,24 +364,26 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
     elif top is not None and top["consistent"]:
         story = {"effect": top["effect"], "consistent": True,
                  "magnitudes_agree": top["magnitudes_agree"],
-                 "explanation": f"{top['effect']} shrinks the withheld gap of every record by "
-                                f"at least {top['min_shrink_pct']:.1f} % with one shared "
-                                f"{kind} law" + ("" if top["magnitudes_agree"] else
-                                                 "; its magnitudes differ between records")}
+                 "explanation": f"{top['effect']}, present in every record, shrinks their "
+                                f"withheld gaps by {top['mean_shrink_pct']:.1f} % on average "
+                                f"({_shrinks(top)}) with one shared {kind} law"
+                                + ("" if top["magnitudes_agree"] else
+                                   "; its magnitudes differ between records")}
     elif top is not None:
         story = {"effect": top["effect"], "consistent": False,
                  "magnitudes_agree": top["magnitudes_agree"],
                  "explanation": f"{top['effect']} with one shared {kind} law shrinks the "
-                                f"withheld gap of every record by at least "
-                                f"{top['min_shrink_pct']:.1f} %, but only "
+                                f"withheld gaps by {top['mean_shrink_pct']:.1f} % on average "
+                                f"({_shrinks(top)}), but only "
                                 f"{', '.join(top['present_in'])} carry it (absent from "
                                 f"{', '.join(top['absent_from'])}): a departure of those "
                                 "records, not of the device"}
     else:
         story = {"effect": "no_consistent_effect",
-                 "explanation": f"no candidate shrinks the gap of every record by "
-                                f"{MIN_SHRINK_PCT:g} % with one shared {kind} law: each "
-                                "record's verdict is its own departure"}
+                 "explanation": f"no candidate shrinks the records' gaps by {MIN_SHRINK_PCT:g} %"
+                                f" on average without making one worse by {WORSE_PCT:g} %, "
+                                f"with one shared {kind} law: each record's verdict is its "
+                                "own departure"}
     return {
         "schema": SCHEMA,
         "records": sources,
@@ -388,12 +396,17 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
         "partial": [c for c in explaining if not c["consistent"]],
         "candidates": [{"effect": j.effect, "shrink_pct": [j.shrink(i) for i in
                                                            range(len(records))],
-                        "n_params": j.n_params} for j in joints],
+                        "n_params": j.n_params, "values": j.values, "std": j.std}
+                       for j in joints],
         "per_record": per_record,
         "not_identifiable": sorted(hidden) if no_command else [],
         "results": results,
         "seconds": time.perf_counter() - started,
     }
+
+
+def _shrinks(c: Mapping[str, Any]) -> str:
+    return " / ".join(f"{x:.0f}" for x in c["shrink_pct"]) + " %"
 
 
 def summary_device(doc: dict[str, Any]) -> str:
@@ -408,7 +421,7 @@ def summary_device(doc: dict[str, Any]) -> str:
     lines.append(f"STORY     {story['effect']}: {story['explanation']}")
     for c in [*doc["consistent"], *doc["partial"]]:
         lines.append(f"  {'consistent' if c['consistent'] else 'partial':<10} {c['effect']:<20} "
-                     f"min shrink {c['min_shrink_pct']:.1f} %"
+                     f"mean shrink {c['mean_shrink_pct']:.1f} % ({_shrinks(c)})"
                      + ("" if c["magnitudes_agree"] else "  (magnitudes differ)")
                      + ("" if c["consistent"] else
                         f"  absent from {', '.join(c['absent_from'])}"))
