@@ -62,7 +62,7 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                    help="the record has no command channel: its displacement (meas_disp, or "
                         "else cmd_disp) is the measured one; interface effects (delay, "
                         "amplitude, undershoot) are reported as not identifiable. Detected "
-                        "without the flag when cmd_disp is absent or equal to meas_disp")
+                        "without the flag when there is no cmd_disp column")
     p.add_argument("--same-device", action="store_true",
                    help="the records are tests of one device: one law fitted on all their "
                         "calibration parts, each record diagnosed against it, the effects "

@@ -2,10 +2,11 @@
 
 The CSV header names the columns: ``time,cmd_disp,meas_force`` are required, ``meas_disp`` is
 optional (without it the interface layer cannot be seen). A record with no command channel —
-``time,meas_disp,meas_force``, a ``cmd_disp`` column identical to ``meas_disp``, or any record
-read with ``no_command`` (then ``meas_disp``, or else the one displacement column, is the
-measured displacement) — drives the law by the measured displacement
-(``Record.no_command``; what that hides: :mod:`.nocommand`). The bridge's own export
+``time,meas_disp,meas_force``, or any record read with ``no_command`` (then ``meas_disp``, or
+else the one displacement column, is the measured displacement) — drives the law by the
+measured displacement (``Record.no_command``; what that hides: :mod:`.nocommand`); a
+``cmd_disp`` identical to ``meas_disp`` gets a note (an ideal rig, or a copied channel?).
+The bridge's own export
 (``fresco-bridge runs export``: ``time,step,site,cmd_disp,meas_disp,meas_force,session``) is
 read as is; a site with several actuators uses actuator 1 (``cmd_disp_1``...), a record with
 several integrator sessions its longest. Reading is :mod:`fresco_bridge.element_history`'s (the
@@ -29,6 +30,7 @@ from ..element_history import (
 )
 
 __all__ = [
+    "IDENTICAL_NOTE",
     "MIN_SAMPLES",
     "NO_COMMAND_NOTE",
     "REVERSAL_SHARE",
@@ -218,6 +220,10 @@ def record_from_arrays(
                   clean["meas_force"], source, list(notes or []), no_command)
 
 
+IDENTICAL_NOTE = ("cmd_disp is identical to meas_disp, sample for sample: an ideal rig, or the "
+                  "measured displacement copied into the command column; if the record has no "
+                  "command channel, give --no-command (the interface effects found here would "
+                  "otherwise be invisible, not absent)")
 NO_COMMAND_NOTE = ("no command channel ({why}): the measured displacement drives the law; "
                    "interface effects are not identifiable")
 
@@ -234,27 +240,31 @@ def _from_history(path: Path, site: str | None, units: dict[str, float],
                   no_command: bool) -> Record:
     """The record through the one reader of a tested element's history; actuator 1, and the
     longest integrator session when the record holds several. Without a command channel
-    (given, or detected: no ``cmd_disp`` column, or one identical to ``meas_disp``) the
-    measured displacement is the one displacement."""
+    (given, or detected: no ``cmd_disp`` column) the measured displacement is the one
+    displacement. A ``cmd_disp`` identical to ``meas_disp`` is ambiguous — an ideal rig (the
+    simulated lab's, the demo's) or a copied channel — so it is kept as the command, with a
+    note saying what ``--no-command`` would change."""
     history = _read(path, site, ("time", "meas_force"), ("cmd_disp", "meas_disp"))
     cols = history.columns
     cmd, meas = cols.get("cmd_disp"), cols.get("meas_disp")
     if cmd is None and meas is None:
         _read(path, site, ("time", "cmd_disp", "meas_force"), ("meas_disp",))  # its message
     why = ("--no-command" if no_command else "the record has no cmd_disp column"
-           if cmd is None else "cmd_disp is identical to meas_disp"
-           if meas is not None and np.array_equal(cmd, meas) else None)
+           if cmd is None else None)
+    notes = list(history.notes)
+    if why is None and meas is not None and np.array_equal(cmd, meas):
+        notes.append(IDENTICAL_NOTE)
     time, force = cols["time"] * units["time"], cols["meas_force"] * units["force"]
     if why is not None or cmd is None:
         disp = meas if meas is not None else cmd
         assert disp is not None  # both absent raised above
         return record_from_arrays(
             time, disp * units["disp"], force, source=history.source,
-            notes=[*history.notes, NO_COMMAND_NOTE.format(why=why)], lines=history.lines,
+            notes=[*notes, NO_COMMAND_NOTE.format(why=why)], lines=history.lines,
             no_command=True)
     return record_from_arrays(
         time, cmd * units["disp"], force, None if meas is None else meas * units["disp"],
-        source=history.source, notes=history.notes, lines=history.lines,
+        source=history.source, notes=notes, lines=history.lines,
     )
 
 

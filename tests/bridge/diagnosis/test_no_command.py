@@ -62,15 +62,16 @@ def test_an_interface_effect_is_never_guessed_without_a_command() -> None:
     assert "actuator_delay" in result["not_identifiable"]
 
 
-def test_a_command_equal_to_the_measurement_is_detected_and_the_flag_forces_it(
+def test_a_command_equal_to_the_measurement_is_noted_and_the_flag_forces_it(
         tmp_path: Path) -> None:
+    """Identical columns are an ideal rig or a copied channel: kept, with a note."""
     rec = synthetic_record("none", 1, steps=300).record
     assert rec.meas_disp is not None
     same = _csv(tmp_path / "same.csv", "time,cmd_disp,meas_disp,meas_force", rec.time,
                 rec.meas_disp, rec.meas_disp, rec.force)
-    detected = load_record(same)
-    assert detected.no_command and detected.meas_disp is None
-    assert "identical to meas_disp" in detected.notes[-1]
+    noted = load_record(same)
+    assert not noted.no_command and "give --no-command" in noted.notes[-1]
+    assert load_record(same, no_command=True).no_command
     both = _csv(tmp_path / "both.csv", "time,cmd_disp,meas_disp,meas_force", rec.time, rec.cmd,
                 rec.meas_disp, rec.force)
     assert not load_record(both).no_command
