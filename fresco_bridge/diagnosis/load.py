@@ -252,7 +252,7 @@ def _from_history(path: Path, site: str | None, units: dict[str, float],
     why = ("--no-command" if no_command else "the record has no cmd_disp column"
            if cmd is None else None)
     notes = list(history.notes)
-    if why is None and meas is not None and np.array_equal(cmd, meas):
+    if why is None and cmd is not None and meas is not None and np.array_equal(cmd, meas):
         notes.append(IDENTICAL_NOTE)
     time, force = cols["time"] * units["time"], cols["meas_force"] * units["force"]
     if why is not None or cmd is None:
