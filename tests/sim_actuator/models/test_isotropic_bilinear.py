@@ -49,6 +49,7 @@ def test_elastic_inside_the_yield_surface_and_tangent_after_yield() -> None:
     model.revert_to_last_commit()
     f_plus, _ = model.set_trial(2.0 + eps)
     assert (f_plus - force) / eps == pytest.approx(tangent, rel=1e-4)
+    model.commit()
     assert model.state()[3] > 0.0  # the accumulated plastic displacement
 
 
