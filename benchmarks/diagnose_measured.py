@@ -1,13 +1,16 @@
 """Run ``fresco-bridge diagnose``, untuned, on every measured test in ``../shared/data/measured``.
 
 The tool itself never reads ``../shared``: this script converts each data set to the tool's CSV
-(``time,cmd_disp,meas_force``) and calls the command as a user would. None of these data sets
-has a command channel, so the *measured* displacement is the command (the interface layer is
-invisible) and the diagnosis speaks for the specimen and sensor layers only. Quasi-static tests
-without a time column (RC column, braces) get a sample index as time (dt = 1 s), so rate
-effects cannot be judged there.
+and calls the command as a user would. None of these data sets has a command channel, so each
+CSV is ``time,meas_disp,meas_force`` and the tool detects it: the measured displacement drives
+the law, the interface effects are reported as not identifiable and the diagnosis speaks for
+the specimen and sensor layers only. Quasi-static tests without a time column (RC column,
+braces) get a sample index as time (dt = 1 s), so rate effects cannot be judged there.
+``--device`` runs ``diagnose --same-device`` on the records of one device instead
+(:data:`DEVICES`: the BRFD's four records named in issue 29, one shared law).
 
     python -m benchmarks.diagnose_measured [--quick] [-o out/measured] [--only NAME]
+    python -m benchmarks.diagnose_measured --device BRFD [-o out/measured]
 
 Writes one CSV, one JSON and one report directory per test, and prints a table. Needs
 ``../shared`` (exits with a message naming the missing directory). Feeds BENCHMARKS.md,
@@ -32,11 +35,22 @@ import numpy as np
 from benchmarks._shared import MEASURED, require_shared
 from fresco_bridge.cli import main as cli_main
 
+DEVICES = {
+    "BRFD": ("BRFD dataset-3_ImperialValleyDBE", "BRFD dataset-3_0.5Hz30lbtension1amplitude",
+             "BRFD dataset-3_2Hz30lbtension0.5amplitude", "BRFD dataset-3_KocaeliDBE"),
+    "BRFD-all": tuple(f"BRFD dataset-3_{n}" for n in (
+        "0.25Hz30lbtension1amplitude", "0.5Hz30lbtension1amplitude", "1Hz30lbtension1amplitude",
+        "2Hz30lbtension0.5amplitude", "ImperialValleyDBE", "ImperialValleyMCE", "KocaeliDBE",
+        "KocaeliMCE")),
+}
+"""Records of one device for ``--device``: four stories of issue 29, and the whole dataset-3
+(same band tension, 30 lb)."""
+
 
 def _write(path: Path, t: np.ndarray, d: np.ndarray, f: np.ndarray) -> Path:
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(["time", "cmd_disp", "meas_force"])
+        w.writerow(["time", "meas_disp", "meas_force"])
         for row in zip(t, d, f, strict=True):
             w.writerow([repr(float(x)) for x in row])
     return path
@@ -92,12 +106,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", default=None, help="substring of the test names to run")
     parser.add_argument("--quick", action="store_true",
                         help="the RC column alone, into a temporary directory")
+    parser.add_argument("--device", choices=sorted(DEVICES), default=None,
+                        help="diagnose the device's records together (--same-device)")
     args = parser.parse_args(argv)
     require_shared(MEASURED, parser.prog)
     if args.quick:
         args.only = args.only or "RC column"
         args.out = Path(tempfile.mkdtemp(prefix="diagnose-measured-"))
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.device is not None:
+        _device(args.device, args.out)
+        return
     rows: list[tuple[str, ...]] = []
     for name, path, units, note in tests(args.out, args.only):
         out_json = path.with_suffix(".json")
@@ -123,6 +142,25 @@ def main(argv: list[str] | None = None) -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print("| " + " | ".join(r) + " |")
+
+
+def _device(device: str, out: Path) -> None:
+    """``diagnose --same-device`` on the device's records; the device summary is printed."""
+    names = DEVICES[device]
+    found = {name: (path, units) for name, path, units, _note in tests(out, "BRFD")
+             if name in names}
+    missing = [n for n in names if n not in found]
+    if missing:
+        raise SystemExit(f"benchmarks.diagnose_measured: no record {', '.join(missing)}")
+    units = {u for _p, u in found.values()}
+    assert len(units) == 1
+    out_json = out / f"device-{device}.json"
+    started, cpu_started = time.perf_counter(), time.process_time()
+    rc = cli_main(["diagnose", *(str(found[n][0]) for n in names), "--same-device",
+                   "--units", units.pop(), "--json", str(out_json),
+                   "--report", str(out / f"device-{device}"), "--no-progress"])
+    print(f"exit {rc}; wall {time.perf_counter() - started:.1f} s, CPU "
+          f"{time.process_time() - cpu_started:.1f} s")
 
 
 if __name__ == "__main__":

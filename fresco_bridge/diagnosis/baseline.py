@@ -34,12 +34,15 @@ from .fit import Fit, fit_spec, predict
 from .model import Context, Spec, make_spec
 from .names import AUTO_FAMILIES
 
-__all__ = ["BIC_EVIDENCE", "Baseline", "choose_baseline", "fit_baseline"]
+__all__ = ["BIC_EVIDENCE", "RESTARTS", "Baseline", "choose_baseline", "fit_baseline",
+           "select_family"]
 
 RESTARTS: Mapping[str, tuple[dict[str, float], ...]] = {
     "bouc-wen": ({"n": 1.2, "beta_share": 0.5}, {"n": 4.0, "beta_share": 0.8}),
     "bwbn": ({"n": 1.2, "beta_share": 0.5}, {"n": 4.0, "beta_share": 0.8}),
     "menegotto-pinto": ({"R0": 6.0, "cR1": 0.5}, {"R0": 30.0, "cR1": 0.95}),
+    "steel02": ({"R0": 6.0, "cR1": 0.5}, {"R0": 30.0, "cR1": 0.95, "a1": 0.1}),
+    "isotropic-bilinear": ({"q_iso": 0.5, "p_sat": 3.0}, {"q_iso": 1.5, "p_sat": 50.0}),
 }
 """Further starts of a baseline fit besides the parameters' own (the best calibration cost
 wins): a smooth and a sharp transition, so a record far from the default shape is not left in
@@ -76,32 +79,44 @@ def choose_baseline(cal: Context, families: Sequence[str] = AUTO_FAMILIES) -> Ba
     """Fit every family on ``cal`` and keep the one the criterion prefers (module docstring)."""
     rec = cal.record
     scale = float(np.sqrt(np.mean(rec.force**2))) or 1.0
-    fitted: dict[str, tuple[Spec, Fit, np.ndarray]] = {}
+    fitted: dict[str, tuple[Spec, Fit]] = {}
+    mse: dict[str, float] = {}
     for kind in families:
         spec, fit = fit_baseline(kind, cal, {}, {})
         force, _disp = predict(spec, cal, fit.values)
         r = (force - rec.force) / scale
-        fitted[kind] = (spec, fit, np.where(np.isfinite(r), r, 1e3))
-    mse = {kind: float(np.mean(r * r)) for kind, (_s, _f, r) in fitted.items()}
-    n = rec.size
-    bic = {kind: n * math.log(max(mse[kind], 1e-300))
-           + len(fitted[kind][0].params) * math.log(n) for kind in fitted}
+        r = np.where(np.isfinite(r), r, 1e3)
+        fitted[kind] = (spec, fit)
+        mse[kind] = float(np.mean(r * r))
+    chosen, selection = select_family(
+        {kind: (len(spec.params), mse[kind]) for kind, (spec, _f) in fitted.items()}, rec.size,
+        families)
+    spec, fit = fitted[chosen]
+    return Baseline(spec, fit, selection)
+
+
+def select_family(fitted: Mapping[str, tuple[int, float]], n: int,
+                  families: Sequence[str]) -> tuple[str, dict[str, Any]]:
+    """The family the criterion keeps from ``fitted`` ({kind: (parameters, mean squared
+    normalised force residual)} over ``n`` samples) and the ``baseline.selection`` record:
+    lowest BIC, the simplest within :data:`BIC_EVIDENCE` (module docstring)."""
+    mse = {kind: m for kind, (_k, m) in fitted.items()}
+    bic = {kind: n * math.log(max(mse[kind], 1e-300)) + fitted[kind][0] * math.log(n)
+           for kind in fitted}
     lowest = min(bic.values())
     plausible = [kind for kind in families if bic[kind] - lowest < BIC_EVIDENCE]
-    chosen = min(plausible, key=lambda kind: (len(fitted[kind][0].params),
-                                              families.index(kind)))
+    chosen = min(plausible, key=lambda kind: (fitted[kind][0], families.index(kind)))
     others = sorted((k for k in families if k != chosen), key=lambda k: bic[k])
     reason = (f"{chosen}: calibration force NRMS {100.0 * math.sqrt(mse[chosen]):.2f} % with "
-              f"{len(fitted[chosen][0].params)} parameters; "
+              f"{fitted[chosen][0]} parameters; "
               + "; ".join(f"{k} {100.0 * math.sqrt(mse[k]):.2f} % "
                           f"(BIC {bic[k] - bic[chosen]:+.0f})" for k in others))
-    spec, fit, _r = fitted[chosen]
-    return Baseline(spec, fit, {
+    return chosen, {
         "chosen": chosen,
         "criterion": "BIC on the calibration force residual",
         "samples": n,
-        "families": {kind: {"n_params": len(fitted[kind][0].params),
+        "families": {kind: {"n_params": fitted[kind][0],
                             "calibration_force_nrms_pct": 100.0 * math.sqrt(mse[kind]),
                             "bic": bic[kind]} for kind in families},
         "reason": reason,
-    })
+    }

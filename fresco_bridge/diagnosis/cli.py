@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..progress import status
-from .load import UNITS, DiagnosisInputError, load_record
+from .load import UNITS, DiagnosisInputError, Record, load_record
 from .names import AUTO, AUTO_FAMILIES, BASELINES
 
 __all__ = ["COMMANDS", "add_diagnosis_parsers", "diagnosis_command", "read_baseline"]
@@ -26,7 +26,12 @@ _TOML_NAMES = {
     "bwbn": ("k0", "fy", "alpha", "n", "beta", "gamma", "zeta_s", "psi0", "q", "p", "delta_psi",
              "delta_nu", "delta_eta"),
     "menegotto-pinto": ("k0", "fy", "alpha", "R0", "cR1", "cR2"),
+    "steel02": ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1"),
+    "isotropic-bilinear": ("k0", "fy", "alpha", "q_iso", "p_sat"),
+    "elastic": ("k",),
 }
+"""A PARAMS.toml's parameters per kind (``steel02``: a3 = a1, a2 = a4 = 1; only a1/a2**0.8
+enters)."""
 
 
 def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -35,9 +40,10 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
     p = sub.add_parser(
         "diagnose", help="where a test departs from its simulation, which unmodelled effect "
                          "causes it, and how far the gap shrinks once it is added")
-    p.add_argument("record", type=Path,
+    p.add_argument("record", type=Path, nargs="+",
                    help="a bridge run directory, or a CSV with time,cmd_disp,meas_force "
-                        "(meas_disp optional)")
+                        "(meas_disp optional); several records of one device with "
+                        "--same-device")
     p.add_argument("--baseline", default=AUTO,
                    help=f"the sim's law: {AUTO} (default: each of "
                         f"{', '.join(AUTO_FAMILIES)} fitted on the calibration part, the one "
@@ -52,6 +58,15 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                    help=f"units of a CSV as disp=U,force=U,time=U ({units}); default mm,kN,s")
     p.add_argument("--noise-floor", type=float, default=None, metavar="PCT",
                    help="withheld gap (NRMS %%) below which the verdict is none (default 1)")
+    p.add_argument("--no-command", action="store_true",
+                   help="the record has no command channel: its displacement (meas_disp, or "
+                        "else cmd_disp) is the measured one; interface effects (delay, "
+                        "amplitude, undershoot) are reported as not identifiable. Detected "
+                        "without the flag when there is no cmd_disp column")
+    p.add_argument("--same-device", action="store_true",
+                   help="the records are tests of one device: one law fitted on all their "
+                        "calibration parts, each record diagnosed against it, the effects "
+                        "consistent across them reported with each record's departures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     b = sub.add_parser("diagnose-bench",
@@ -137,17 +152,32 @@ def _diagnose(args: argparse.Namespace) -> int:
     kind, params, fit = read_baseline(args.baseline)
     if args.noise_floor is not None and not args.noise_floor > 0.0:
         raise DiagnosisInputError(f"--noise-floor: must be > 0 (got {args.noise_floor})")
-    status(f"diagnose: reading {args.record}" + (f" (site {args.site})" if args.site else ""))
-    record = load_record(args.record, site=args.site, units=args.units)
+    if len(args.record) > 1 and not args.same_device:
+        raise DiagnosisInputError(f"{len(args.record)} records given: add --same-device if "
+                                  "they are tests of one device, or diagnose them one by one")
+    if args.same_device and len(args.record) < 2:
+        raise DiagnosisInputError("--same-device needs two or more records of the device")
+    records = []
+    for path in args.record:
+        status(f"diagnose: reading {path}" + (f" (site {args.site})" if args.site else ""))
+        records.append(load_record(path, site=args.site, units=args.units,
+                                   no_command=args.no_command))
+    from .verdict import NOISE_FLOOR_PCT, Options
+
+    options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
+                      noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
+    if args.same_device:
+        status(f"diagnose: {len(records)} records of one device; one law fitted on all their "
+               "calibration parts, then each candidate effect on all of them")
+        return _device(args, records, options)
+    record = records[0]
     baseline = ("choosing the baseline law by BIC, then fitting each candidate effect"
                 if kind == AUTO else f"fitting the {kind} baseline, then each candidate effect")
     status(f"diagnose: {record.size} samples; {baseline}")
     from ..progress import ProgressBar
     from .report import summary, write_json, write_report
-    from .verdict import NOISE_FLOOR_PCT, Options, diagnose
+    from .verdict import diagnose
 
-    options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
-                      noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
     with ProgressBar("diagnose", 0, enabled=not args.no_progress) as bar:  # total: diagnose
         result = diagnose(record, options, progress=bar)
     print(summary(result))
@@ -158,6 +188,26 @@ def _diagnose(args: argparse.Namespace) -> int:
         files = write_report(result, args.report)
         print(f"wrote     {args.report}/ ({len(files)} files: "
               f"{', '.join(sorted(p.name for p in files))})")
+    return 0
+
+
+def _device(args: argparse.Namespace, records: list[Record], options: Any) -> int:
+    from .multi import diagnose_device, summary_device
+    from .report import to_json, write_report
+
+    doc = diagnose_device(records, options)
+    print(summary_device(doc))
+    if args.json is not None:
+        args.json.write_text(to_json(doc) + "\n", encoding="utf-8")
+        print(f"wrote     {args.json}")
+    if args.report is not None:
+        args.report.mkdir(parents=True, exist_ok=True)
+        for i, (path, result) in enumerate(zip(args.record, doc["results"], strict=True)):
+            write_report(result, args.report / f"{i + 1}-{path.stem}")
+        (args.report / "summary.txt").write_text(summary_device(doc) + "\n", encoding="utf-8")
+        (args.report / "device.json").write_text(to_json(doc) + "\n", encoding="utf-8")
+        print(f"wrote     {args.report}/ (summary.txt, device.json, one directory per "
+              "record)")
     return 0
 
 

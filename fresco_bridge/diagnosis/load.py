@@ -1,7 +1,12 @@
 """A test record for diagnosis, read from a bridge run directory or a CSV, checked, in mm/kN/s.
 
 The CSV header names the columns: ``time,cmd_disp,meas_force`` are required, ``meas_disp`` is
-optional (without it the interface layer cannot be seen). The bridge's own export
+optional (without it the interface layer cannot be seen). A record with no command channel —
+``time,meas_disp,meas_force``, or any record read with ``no_command`` (then ``meas_disp``, or
+else the one displacement column, is the measured displacement) — drives the law by the
+measured displacement (``Record.no_command``; what that hides: :mod:`.nocommand`); a
+``cmd_disp`` identical to ``meas_disp`` gets a note (an ideal rig, or a copied channel?).
+The bridge's own export
 (``fresco-bridge runs export``: ``time,step,site,cmd_disp,meas_disp,meas_force,session``) is
 read as is; a site with several actuators uses actuator 1 (``cmd_disp_1``...), a record with
 several integrator sessions its longest. Reading is :mod:`fresco_bridge.element_history`'s (the
@@ -17,10 +22,17 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ..element_history import HistoryInputError, check_increasing, read_element_history
+from ..element_history import (
+    ElementHistory,
+    HistoryInputError,
+    check_increasing,
+    read_element_history,
+)
 
 __all__ = [
+    "IDENTICAL_NOTE",
     "MIN_SAMPLES",
+    "NO_COMMAND_NOTE",
     "REVERSAL_SHARE",
     "UNITS",
     "DiagnosisInputError",
@@ -94,6 +106,9 @@ class Record:
     force: FloatArray
     source: str
     notes: list[str] = field(default_factory=list)
+    no_command: bool = False
+    """True: no command channel; ``cmd`` holds the *measured* displacement (``meas_disp`` is
+    None) and the interface layer cannot be seen (:mod:`.nocommand`)."""
 
     @property
     def size(self) -> int:
@@ -158,12 +173,16 @@ def parse_units(text: str | None) -> dict[str, float]:
 def record_from_arrays(
     time: FloatArray, cmd: FloatArray, force: FloatArray, meas_disp: FloatArray | None = None,
     *, source: str = "<arrays>", notes: list[str] | None = None,
-    lines: list[int] | None = None,
+    lines: list[int] | None = None, no_command: bool = False,
 ) -> Record:
     """A checked record: finite, strictly increasing time, long enough to split.
 
     ``lines`` are the file's line numbers of the samples, so that errors point into the file.
+    ``no_command``: ``cmd`` is the measured displacement (give no ``meas_disp``).
     """
+    if no_command and meas_disp is not None:
+        raise DiagnosisInputError(f"{source}: a record without a command channel has one "
+                                  "displacement, the measured one (pass it as cmd)")
 
     def where(i: int) -> str:
         return f"line {lines[i]}" if lines is not None else f"sample {i + 1}"
@@ -195,30 +214,64 @@ def record_from_arrays(
     except HistoryInputError as exc:
         raise DiagnosisInputError(str(exc)) from None
     if float(np.ptp(clean["cmd_disp"])) == 0.0:
-        raise DiagnosisInputError(f"{source}: cmd_disp is constant: nothing was tested")
+        what = "the measured displacement" if no_command else "cmd_disp"
+        raise DiagnosisInputError(f"{source}: {what} is constant: nothing was tested")
     return Record(clean["time"], clean["cmd_disp"], clean.get("meas_disp"),
-                  clean["meas_force"], source, list(notes or []))
+                  clean["meas_force"], source, list(notes or []), no_command)
 
 
-def _from_history(path: Path, site: str | None, units: dict[str, float]) -> Record:
-    """The record through the one reader of a tested element's history; actuator 1, and the
-    longest integrator session when the record holds several."""
+IDENTICAL_NOTE = ("cmd_disp is identical to meas_disp, sample for sample: an ideal rig, or the "
+                  "measured displacement copied into the command column; if the record has no "
+                  "command channel, give --no-command (the interface effects found here would "
+                  "otherwise be invisible, not absent)")
+NO_COMMAND_NOTE = ("no command channel ({why}): the measured displacement drives the law; "
+                   "interface effects are not identifiable")
+
+
+def _read(path: Path, site: str | None, required: tuple[str, ...],
+          optional: tuple[str, ...]) -> ElementHistory:
     try:
-        history = read_element_history(path, ("time", "cmd_disp", "meas_force"), ("meas_disp",),
-                                       site=site, session="longest")
+        return read_element_history(path, required, optional, site=site, session="longest")
     except HistoryInputError as exc:
         raise DiagnosisInputError(str(exc)) from None
+
+
+def _from_history(path: Path, site: str | None, units: dict[str, float],
+                  no_command: bool) -> Record:
+    """The record through the one reader of a tested element's history; actuator 1, and the
+    longest integrator session when the record holds several. Without a command channel
+    (given, or detected: no ``cmd_disp`` column) the measured displacement is the one
+    displacement. A ``cmd_disp`` identical to ``meas_disp`` is ambiguous — an ideal rig (the
+    simulated lab's, the demo's) or a copied channel — so it is kept as the command, with a
+    note saying what ``--no-command`` would change."""
+    history = _read(path, site, ("time", "meas_force"), ("cmd_disp", "meas_disp"))
     cols = history.columns
-    meas = cols.get("meas_disp")
+    cmd, meas = cols.get("cmd_disp"), cols.get("meas_disp")
+    if cmd is None and meas is None:
+        _read(path, site, ("time", "cmd_disp", "meas_force"), ("meas_disp",))  # its message
+    why = ("--no-command" if no_command else "the record has no cmd_disp column"
+           if cmd is None else None)
+    notes = list(history.notes)
+    if why is None and cmd is not None and meas is not None and np.array_equal(cmd, meas):
+        notes.append(IDENTICAL_NOTE)
+    time, force = cols["time"] * units["time"], cols["meas_force"] * units["force"]
+    if why is not None or cmd is None:
+        disp = meas if meas is not None else cmd
+        assert disp is not None  # both absent raised above
+        return record_from_arrays(
+            time, disp * units["disp"], force, source=history.source,
+            notes=[*notes, NO_COMMAND_NOTE.format(why=why)], lines=history.lines,
+            no_command=True)
     return record_from_arrays(
-        cols["time"] * units["time"], cols["cmd_disp"] * units["disp"],
-        cols["meas_force"] * units["force"], None if meas is None else meas * units["disp"],
-        source=history.source, notes=history.notes, lines=history.lines,
+        time, cmd * units["disp"], force, None if meas is None else meas * units["disp"],
+        source=history.source, notes=notes, lines=history.lines,
     )
 
 
-def load_record(path: Path, *, site: str | None = None, units: str | None = None) -> Record:
-    """Read a run directory or a CSV (``units`` converts a CSV's columns to mm, kN, s)."""
+def load_record(path: Path, *, site: str | None = None, units: str | None = None,
+                no_command: bool = False) -> Record:
+    """Read a run directory or a CSV (``units`` converts a CSV's columns to mm, kN, s);
+    ``no_command``: the record's displacement is the measured one, whatever its column."""
     if path.is_dir() and units:
         raise DiagnosisInputError("--units applies to a CSV; a run directory is in mm, kN, s")
-    return _from_history(path, site, parse_units(units))
+    return _from_history(path, site, parse_units(units), no_command)

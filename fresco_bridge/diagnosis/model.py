@@ -26,6 +26,7 @@ from sim_actuator.models.paths import (
     BWBN_PARAMETERS,
     LAW_BILINEAR,
     LAW_BWBN,
+    LAW_ISOTROPIC_BILINEAR,
     LAW_MENEGOTTO_PINTO,
     drive,
 )
@@ -125,12 +126,33 @@ def law_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
               "softening of the transition with the plastic excursion (Bauschinger, cR1)"),
         Param("cR2", "law", "1", 0.005, 1.0, 0.15, "excursion scale of that softening (cR2)"),
     )
+    isotropic = (
+        Param("a1", "law", "1", 0.0, 0.5, 0.02,
+              "isotropic growth of the yield force, both signs (Steel02 a1 = a3; a2 = a4 = 1)"),
+    )
+    saturating = (
+        Param("q_iso", "law", "1", 0.0, 3.0, 0.2,
+              "saturated growth of the yield force, fraction of fy"),
+        Param("p_sat", "law", "1", 0.5, 500.0, 10.0,
+              "accumulated plastic displacement (yield displacements) for 63 % of it"),
+    )
     return {
         "bilinear": (stiff, yield_, alpha),
         "bouc-wen": (stiff, yield_, alpha, *shape),
         "bwbn": (stiff, yield_, alpha, *shape, *_PINCHING, *_DEGRADATION),
         "menegotto-pinto": (stiff, yield_, alpha, *steel),
+        "steel02": (stiff, yield_, alpha, *steel, *isotropic),
+        "isotropic-bilinear": (stiff, yield_, alpha, *saturating),
+        "elastic": (Param("k", "law", "kN/mm", k / 30.0, k * 30.0, fp / ctx.d_peak,
+                          "stiffness (secant at the peak to start)"),),
     }
+
+
+STEEL02_FIXED = {"a2": 1.0, "a4": 1.0}
+"""Steel02's isotropic shift is ``1 + a1·(excursion / (2·a2·dy))**0.8``: only a1·a2**-0.8
+enters, so a2 (and a4) are held at 1 and a1 carries the growth. The growth is symmetric
+(a3 = a1): with a3 free, an asymmetric growth mimicked a load-cell offset (four of the five
+``sensor_bias`` records of the plain bench chose it, and their offsets came out wrong)."""
 
 
 _PINCHING = (
@@ -212,7 +234,7 @@ class Spec:
         return self.baseline
 
 
-NOT_BOUC_WEN = frozenset({"bilinear", "menegotto-pinto"})
+NOT_BOUC_WEN = frozenset(BASELINES) - {"bouc-wen", "bwbn"}
 """Baselines whose pinching and degradation candidates drive BWBN instead (with a sharp start,
 n = 8: both laws have a sharp elastic-plastic transition)."""
 
@@ -245,10 +267,17 @@ def make_spec(ctx: Context, baseline: str, effects: Sequence[str],
 def _law_vector(kind: str, values: Mapping[str, float]) -> tuple[int, FloatArray]:
     if kind == "bilinear":
         return LAW_BILINEAR, np.array([values["k0"], values["fy"], values["alpha"]])
-    if kind == "menegotto-pinto":  # no isotropic hardening: a1 = a3 = 0 (a2, a4 unused)
+    if kind == "elastic":  # a bilinear with alpha = 1 is k·d exactly, whatever fy
+        return LAW_BILINEAR, np.array([values["k"], 1.0, 1.0])
+    if kind in ("menegotto-pinto", "steel02"):  # menegotto-pinto: no isotropic hardening
         return LAW_MENEGOTTO_PINTO, np.array([
             values["k0"], values["fy"], values["alpha"], values.get("R0", 15.0),
-            values.get("cR1", 0.925), values.get("cR2", 0.15), 0.0, 1.0, 0.0, 1.0])
+            values.get("cR1", 0.925), values.get("cR2", 0.15), values.get("a1", 0.0),
+            STEEL02_FIXED["a2"], values.get("a3", values.get("a1", 0.0)), STEEL02_FIXED["a4"]])
+    if kind == "isotropic-bilinear":
+        return LAW_ISOTROPIC_BILINEAR, np.array([
+            values["k0"], values["fy"], values["alpha"], values.get("q_iso", 0.0),
+            values.get("p_sat", 10.0)])
     s, r = values.get("bg_sum", 1.0), values.get("beta_share", 0.5)
     full = {"k0": values["k0"], "fy": values["fy"], "alpha": values["alpha"],
             "n": values.get("n", 2.0), "beta": r * s, "gamma": (1.0 - r) * s, "A0": 1.0,
@@ -267,6 +296,16 @@ def baseline_report(kind: str, values: Mapping[str, float]) -> dict[str, float]:
     if kind == "menegotto-pinto":
         return {k: float(values[k]) for k in ("k0", "fy", "alpha", "R0", "cR1", "cR2")
                 if k in values}
+    if kind == "steel02":
+        out = {k: float(values[k]) for k in ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1")
+               if k in values}
+        return {**out, "a2": STEEL02_FIXED["a2"], "a3": out.get("a1", 0.0),
+                "a4": STEEL02_FIXED["a4"]}
+    if kind == "isotropic-bilinear":
+        return {k: float(values[k]) for k in ("k0", "fy", "alpha", "q_iso", "p_sat")
+                if k in values}
+    if kind == "elastic":
+        return {"k": float(values["k"])}
     s, r = values.get("bg_sum", 1.0), values.get("beta_share", 0.5)
     out = {k: float(values[k]) for k in ("k0", "fy", "alpha", "n") if k in values}
     out.update(beta=float(r * s), gamma=float((1.0 - r) * s))

@@ -54,6 +54,10 @@ def summary(result: dict[str, Any]) -> str:
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
     lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
                  f"{verdict['explanation']}")
+    if result.get("hidden"):
+        lines.append("hidden    no command channel: the measured displacement drives the law, "
+                     "so these were not judged:")
+        lines.extend(f"          {line}" for line in result["hidden"])
     if verdict.get("not_separated_from"):
         lines.append(f"UNSURE    confidence below {LOW_CONFIDENCE:g}: not separated from "
                      f"{verdict['not_separated_from']}")

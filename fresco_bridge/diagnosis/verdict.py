@@ -68,6 +68,7 @@ from .model import (
     make_spec,
 )
 from .names import AUTO_FAMILIES
+from .nocommand import hidden_effects, hidden_summary
 from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT
 from .scored import Scored as _Scored
 from .scored import finite as _finite
@@ -196,7 +197,8 @@ def diagnose(record: Record, options: Options | None = None,
     cal = Context.of(calibration.thinned(opts.max_fit_samples))
     full = Context.of(record)
     withheld = slice(stop, n)
-    effects = [e for e in opts.effects]
+    hidden = hidden_effects(record, opts.effects)  # no command channel: the interface layer
+    effects = [e for e in opts.effects if e not in hidden]
     total_fits = 1 + len(effects) + (TOP_FOR_PAIRS * 2 if opts.pairs else 0)
     done = 0
     if progress is not None:
@@ -295,8 +297,10 @@ def diagnose(record: Record, options: Options | None = None,
         "record": {
             "source": record.source, "samples": n, "duration_s": float(record.time[-1]
                                                                        - record.time[0]),
-            "dt_s": full.dt, "channels": ["cmd_disp", "meas_force"]
+            "dt_s": full.dt, "channels": (["meas_disp (no command)"] if record.no_command
+                                          else ["cmd_disp"]) + ["meas_force"]
             + (["meas_disp"] if record.meas_disp is not None else []),
+            "command": not record.no_command,
             "notes": [*record.notes, *cal.record.notes[len(record.notes):], split_note],
             "calibration": {"samples": [0, stop], "t_end": float(record.time[stop - 1])},
             "withheld": {"samples": [stop, n], "t_start": float(record.time[stop])},
@@ -317,6 +321,8 @@ def diagnose(record: Record, options: Options | None = None,
         "families": [{**s.as_dict(), "role": s.role}
                      for s in sorted(families, key=lambda s: s.score, reverse=True)],
         "verdict": verdict,
+        "not_identifiable": hidden,
+        "hidden": hidden_summary(record, opts.effects),
         "seconds": time.perf_counter() - started,
         "_series": {
             "time": record.time, "cmd": record.cmd, "meas_disp": record.meas_disp,

@@ -14,6 +14,7 @@ from sim_actuator.models.bilinear import Bilinear, BilinearState
 from sim_actuator.models.bouc_wen import BoucWen, BoucWenState
 from sim_actuator.models.bwbn import BoucWenBaberNoori, BwbnState
 from sim_actuator.models.elastic import Elastic, ElasticState
+from sim_actuator.models.isotropic_bilinear import IsotropicBilinear, IsotropicBilinearState
 from sim_actuator.models.menegotto_pinto import MenegottoPinto, MenegottoPintoState
 from sim_actuator.models.registry import (
     MODEL_DEFAULTS,
@@ -38,6 +39,8 @@ __all__ = [
     "ElasticState",
     "HysteresisBase",
     "HysteresisModel",
+    "IsotropicBilinear",
+    "IsotropicBilinearState",
     "MenegottoPinto",
     "MenegottoPintoState",
     "ModelInputError",

@@ -7,7 +7,8 @@ objects (``set_trial``/``commit``) cost tens of ms per 3000-step history, this f
 one. It is the *same* algorithm as the scalar models, operation for operation — Steel01 of
 ``bilinear``; the BWBN equations, RK4 substeps sized by ``dz_max`` and the split at z = 0 of
 ``bwbn`` (classic Bouc-Wen is BWBN with no degradation and no pinching); Steel02 of
-``menegotto_pinto`` (closed form per trial: no substeps) — and
+``menegotto_pinto`` (closed form per trial: no substeps); the return map of
+``isotropic_bilinear`` — and
 ``tests/sim_actuator/test_model_paths.py`` checks it against them to ~1e-12. Change a law in
 both places or in neither.
 
@@ -31,14 +32,17 @@ import numpy.typing as npt
 from numba import njit
 
 from sim_actuator.models.bouc_wen import DEFAULT_DZ_MAX, MAX_SUBSTEPS
+from sim_actuator.models.isotropic_bilinear import NEWTON_ITERATIONS as _ISO_NEWTON_ITERATIONS
 from sim_actuator.models.menegotto_pinto import MenegottoPinto
 
 __all__ = [
     "BOUC_WEN_PARAMETERS",
     "BWBN_PARAMETERS",
+    "ISOTROPIC_BILINEAR_PARAMETERS",
     "LAW_BILINEAR",
     "LAW_BOUC_WEN",
     "LAW_BWBN",
+    "LAW_ISOTROPIC_BILINEAR",
     "LAW_MENEGOTTO_PINTO",
     "MENEGOTTO_PINTO_PARAMETERS",
     "STATE_SIZE",
@@ -63,6 +67,9 @@ LAW_BOUC_WEN = 3
 """``params`` = :data:`BOUC_WEN_PARAMETERS` in that order: the classic ``bouc_wen`` object's
 own algorithm (its Simpson split at z = 0), bit for bit; ``LAW_BWBN`` with the classic
 parameters is the same law to rounding, not to the bit."""
+LAW_ISOTROPIC_BILINEAR = 4
+"""``params`` = :data:`ISOTROPIC_BILINEAR_PARAMETERS` in that order."""
+ISOTROPIC_BILINEAR_PARAMETERS = ("k0", "fy", "alpha", "q_iso", "p_sat")
 BOUC_WEN_PARAMETERS = ("k0", "fy", "alpha", "n", "beta", "gamma", "A")
 MENEGOTTO_PINTO_PARAMETERS = ("k0", "fy", "alpha", "R0", "cR1", "cR2", "a1", "a2", "a3", "a4")
 
@@ -101,8 +108,12 @@ def law_vector(kind: str, params: Mapping[str, float]) -> tuple[int, FloatArray]
         values.update(params)
         return LAW_MENEGOTTO_PINTO, np.array(
             [float(values[name]) for name in MENEGOTTO_PINTO_PARAMETERS], np.float64)
+    if kind == "isotropic-bilinear":
+        values = {"q_iso": 0.0, "p_sat": 10.0, **params}
+        return LAW_ISOTROPIC_BILINEAR, np.array(
+            [float(values[name]) for name in ISOTROPIC_BILINEAR_PARAMETERS], np.float64)
     raise ValueError(f"no fast drive for model kind {kind!r} "
-                     "(bilinear, bouc-wen, bwbn, menegotto-pinto)")
+                     "(bilinear, bouc-wen, bwbn, menegotto-pinto, isotropic-bilinear)")
 
 
 # -- BWBN (bwbn.py, line by line) ----------------------------------------------------------------
@@ -306,6 +317,37 @@ def _bilinear_trial(prm: FloatArray, d_c: float, f_c: float, d: float) -> float:
     return f_c
 
 
+# -- kinematic + saturating isotropic hardening (isotropic_bilinear.py, line by line) -----------
+@njit(cache=True)
+def _iso_trial(prm: FloatArray, c: FloatArray, d: float, out: FloatArray) -> bool:
+    """``isotropic_bilinear.return_map`` from the committed [d, f, back, p] into ``out``."""
+    k0, fy, alpha, q_iso, p_sat = prm[0], prm[1], prm[2], prm[3], prm[4]
+    d_c, f_c, back, p = c[0], c[1], c[2], c[3]
+    if not math.isfinite(d - d_c):
+        return False
+    h = alpha * k0 / (1.0 - alpha)
+    scale = p_sat * fy / k0
+    grow = q_iso * fy
+    trial = f_c + k0 * (d - d_c)
+    xi = trial - back
+    size = abs(xi)
+    radius = fy + grow * (1.0 - math.exp(-p / scale))
+    out[0], out[1], out[2], out[3] = d, trial, back, p
+    if size <= radius:
+        return math.isfinite(trial)
+    lam = 0.0
+    for _ in range(_ISO_NEWTON_ITERATIONS):
+        decay = math.exp(-(p + lam) / scale)
+        g = size - (k0 + h) * lam - fy - grow * (1.0 - decay)
+        step = g / (k0 + h + grow / scale * decay)
+        lam += step
+        if abs(step) <= 1e-15 * (abs(lam) + fy / k0):
+            break
+    sign = 1.0 if xi > 0.0 else -1.0
+    out[1], out[2], out[3] = trial - k0 * lam * sign, back + h * lam * sign, p + lam
+    return math.isfinite(out[1])
+
+
 # -- Giuffre-Menegotto-Pinto, Steel02 (menegotto_pinto.py, line by line) ----------------------
 _MP_VIRGIN, _MP_LOADING, _MP_UNLOADING, _MP_AT_REST = 0.0, 1.0, 2.0, 3.0
 
@@ -372,7 +414,8 @@ def _mp_trial(prm: FloatArray, c: FloatArray, d: float, out: FloatArray) -> bool
 
 # -- one trial of any law, and the whole-history drive -------------------------------------------
 STATE_SIZE = 12
-"""[d, f, z, e] (the Bouc-Wen family's committed state; bilinear uses d, f), then Steel02's
+"""[d, f, z, e] (the Bouc-Wen family's committed state; bilinear uses d, f; the isotropic
+bilinear d, f, back force, accumulated plastic displacement), then Steel02's
 d_max, d_min, d_pl, d_0, f_0, d_r, f_r, kon."""
 
 
@@ -391,6 +434,8 @@ def _trial(law: int, prm: FloatArray, state: FloatArray, d: float, dz_max: float
     """Trial to ``d`` from the committed ``state`` into ``out``; False if the law refuses."""
     if law == LAW_MENEGOTTO_PINTO:
         return _mp_trial(prm, state, d, out)
+    if law == LAW_ISOTROPIC_BILINEAR:
+        return _iso_trial(prm, state, d, out)
     if law == LAW_BILINEAR:
         f = _bilinear_trial(prm, state[0], state[1], d)
         out[0], out[1] = d, f

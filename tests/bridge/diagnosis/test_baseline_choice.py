@@ -15,6 +15,7 @@ from fresco_bridge.diagnosis.bench import bench_items, generate
 from fresco_bridge.diagnosis.fit import fit_spec
 from fresco_bridge.diagnosis.load import record_from_arrays
 from fresco_bridge.diagnosis.model import Context, make_spec
+from fresco_bridge.diagnosis.names import AUTO_FAMILIES
 from fresco_bridge.diagnosis.realism import realistic_record
 from fresco_bridge.diagnosis.synth import command_history, synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
@@ -36,7 +37,7 @@ def test_auto_chooses_the_specimens_family_on_the_calibration_part(seed: int,
     chosen = choose_baseline(Context.of(record.part(round(0.6 * record.size))))
     assert chosen.spec.baseline == law, chosen.selection
     assert chosen.selection is not None and chosen.selection["chosen"] == law
-    assert set(chosen.selection["families"]) == {"bilinear", "bouc-wen", "menegotto-pinto"}
+    assert set(chosen.selection["families"]) == set(AUTO_FAMILIES)
 
 
 def test_a_steel_specimen_without_effect_is_none_under_auto_and_a_misfit_under_bouc_wen(

@@ -150,7 +150,8 @@ def test_a_record_its_sim_explains_exactly_shows_no_shrink_and_no_float_dust(
     assert doc["verdict"]["effect"] == "none", text
     assert doc["baseline"]["gap_withheld"]["total_pct"] < 1e-6
     assert all(e["shrink_pct"] is None and e["score"] is None for e in doc["effects"]), text
-    table = text.split("candidates")[1].split("\ntime")[0].splitlines()[1:]
+    table = [line for line in text.split("candidates")[1].split("\ntime")[0].splitlines()[1:]
+             if not line.startswith("note")]
     assert len(table) == len(doc["effects"]) and all(
         line.split()[-2:] == ["–", "–"] for line in table), text
     assert "e-1" not in text and "e+" not in text and "-0.00" not in text, text

@@ -118,3 +118,23 @@ def test_the_classic_bouc_wen_drive_is_the_object_bit_for_bit(params: dict[str, 
         model.commit()
     got = drive(LAW_BOUC_WEN, bouc_wen_vector(params), d, 0.0, dz_max)
     assert np.array_equal(got, np.array(expected))  # the same operations: not merely close
+
+
+ISOTROPIC = {"k0": 10.0, "fy": 5.0, "alpha": 0.03, "q_iso": 0.7, "p_sat": 6.0}
+
+
+def test_isotropic_bilinear_drive_equals_the_scalar_model() -> None:
+    from sim_actuator.models import IsotropicBilinear
+
+    d = _history(7, 400)
+    model = IsotropicBilinear(**ISOTROPIC)
+    expected = []
+    for x in d:
+        force, _ = model.set_trial(float(x))
+        model.commit()
+        expected.append(force)
+    law, vec = law_vector("isotropic-bilinear", ISOTROPIC)
+    np.testing.assert_allclose(drive(law, vec, d), expected, rtol=0.0, atol=1e-12 * 5.0)
+    plain = law_vector("bilinear", {"k0": 10.0, "fy": 5.0, "alpha": 0.03})
+    without = law_vector("isotropic-bilinear", {**ISOTROPIC, "q_iso": 0.0})
+    np.testing.assert_allclose(drive(*without, d), drive(*plain, d), rtol=0.0, atol=1e-12)

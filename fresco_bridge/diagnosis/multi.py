@@ -1,0 +1,442 @@
+"""One device, one story: several records of one specimen diagnosed against one shared law.
+
+Diagnosed one by one, four records of one device can tell four stories (the friction damper
+BRFD: a gap on one earthquake record, an offset on a sine, pinching on another record) because
+each record fits its own baseline and each baseline absorbs a different share of the same
+physics. ``diagnose A B C --same-device`` therefore:
+
+1. **Joint baseline.** The law is fitted once, on the calibration parts of all records together
+   (each record's first ``calibration_fraction``, each run from the virgin state, each record's
+   force residual normalised by its RMS force and by √N so every record weighs the same
+   whatever its length); under ``auto`` the family is chosen by the same BIC rule as for one
+   record (``baseline.select_family``) on the pooled residual. The withheld parts are never
+   seen by this fit either.
+2. **Joint candidates.** Each effect is fitted over all the calibration parts at once too: the
+   law (and a specimen effect's own law parameters: pinching, degradation) shared, the
+   parameters of an interface, gap or output effect (delay, gap, friction, offset...) one set
+   per record, so a magnitude may differ between tests. Holding the law at the joint baseline
+   instead would not do: a law fitted to records that all carry the effect has absorbed what it
+   can of it, and the effect alone on top no longer shrinks anything.
+3. **Consistent effects.** An effect *explains the device* when its joint candidate shrinks
+   the withheld gaps of the records above the noise floor by at least
+   :data:`~.verdict.MIN_SHRINK_PCT` on average and makes none worse by more than
+   :data:`WORSE_PCT` (one effect may matter more in one test than in another: a pin gap is a
+   larger share of a small-amplitude test); it is *consistent* when every record carries it
+   (one of its per-record parameters more than three standard deviations from zero), else
+   *partial*. They are ranked consistent first, then by their mean score (shrink −
+   :data:`~.verdict.PARSIMONY_PCT` per parameter of one record); the first one is the device's
+   story. Its parameters are listed per record with a flag saying whether they agree (within
+   :data:`MAGNITUDE_SPREAD` of their median, or within three combined standard deviations).
+4. **Departures.** Each record is then diagnosed on its own with the story's law and the story
+   effect at that record's magnitude *held* (or the joint baseline, with no story): its verdict
+   is what departs from the device's story in that test, and a ``baseline_misfit`` or
+   ``unexplained`` there says the shared law misses it. (Pinching or degradation as the story on
+   a law that is not Bouc-Wen cannot be held this way: the shared law alone is held then.)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+from fresco_bridge.lawfit import Solution, bounded_least_squares, multi_start
+
+from .baseline import RESTARTS, SCOUT_EVALUATIONS, fit_baseline, select_family
+from .fit import autocorrelation, predict
+from .load import DiagnosisInputError, Record
+from .model import (
+    AUTO,
+    BASELINES,
+    NOT_BOUC_WEN,
+    Context,
+    baseline_report,
+    effect_parameters,
+    make_spec,
+)
+from .names import AUTO_FAMILIES
+from .nocommand import hidden_effects
+from .scored import gap as _gap
+from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, diagnose, stop_of
+
+__all__ = ["MAGNITUDE_SPREAD", "SCHEMA", "diagnose_device", "fit_joint",
+           "fit_joint_candidate", "summary_device"]
+
+SCHEMA = "fresco-bridge/diagnosis-device/1"
+MAGNITUDE_SPREAD = 0.25
+"""An effect's parameter agrees across records when every value is within this share of
+their median (or within three combined standard deviations of it)."""
+NOT_EFFECTS = frozenset({"none", "baseline_misfit", "unexplained"})
+WORSE_PCT = 5.0
+"""An effect that makes one record's withheld gap worse by more than this does not explain the
+device, whatever it does to the others."""
+JOINT_CANDIDATE_EVALUATIONS = 30
+"""As a single record's candidate fit (``verdict``): from the joint baseline, few steps."""
+FloatArray = npt.NDArray[np.float64]
+
+
+def _calibration(records: Sequence[Record], opts: Options) -> list[Context]:
+    """Each record's calibration part, thinned for the fits as it would be alone (a shared,
+    smaller budget left an earthquake record at 1 kHz with a window of its quiet start)."""
+    return [Context.of(r.part(stop_of(r, opts)).thinned(opts.max_fit_samples))
+            for r in records]
+
+
+def fit_joint(kind: str, cals: Sequence[Context], given: Mapping[str, float] | None = None
+              ) -> tuple[dict[str, float], float, int]:
+    """(law values, mean over records of the mean squared normalised force residual, number
+    of fitted parameters) of law ``kind`` fitted on all of ``cals`` at once (module doc)."""
+    ref = max(cals, key=lambda c: c.record.size)
+    spec = make_spec(ref, kind, [])
+    names = [p.name for p in spec.params]
+    lower = np.array([p.lo for p in spec.params])
+    upper = np.array([p.hi for p in spec.params])
+    specs = [make_spec(c, kind, []) for c in cals]
+    weights = [1.0 / ((float(np.sqrt(np.mean(c.record.force**2))) or 1.0)
+                      * math.sqrt(c.record.size)) for c in cals]
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        values = dict(zip(names, (float(v) for v in x), strict=True))
+        parts = []
+        for s, c, w in zip(specs, cals, weights, strict=True):
+            force, _disp = predict(s, c, values)
+            r = w * (force - c.record.force)
+            parts.append(np.where(np.isfinite(r), r, 1e3 * w))
+        return np.concatenate(parts)
+
+    def run(start: Mapping[str, float], evaluations: int) -> Solution:
+        x0 = [start.get(n, p.init) for n, p in zip(names, spec.params, strict=True)]
+        with threadpool_limits(1):
+            return bounded_least_squares(residual, x0, lower, upper, scale="jac",
+                                         max_nfev=evaluations, tolerance=1e-6)
+
+    # the law fitted on the longest calibration part alone is a good start for all of them
+    _s, alone = fit_baseline(kind, ref, dict(given or {}), {})
+    starts = [alone.values, *({**alone.values, **extra} for extra in RESTARTS.get(kind, ()))]
+    best = multi_start(run, starts, cost=lambda s: float(np.dot(s.residual, s.residual)),
+                       resume=lambda s: dict(zip(names, (float(v) for v in s.x), strict=True)),
+                       scout=SCOUT_EVALUATIONS, final=60)
+    values = dict(zip(names, (float(v) for v in best.x), strict=True))
+    return values, float(np.dot(best.residual, best.residual)) / len(cals), len(names)
+
+
+@dataclass
+class _Joint:
+    """A joint candidate: per record its values, the stds of its own parameters, gaps."""
+
+    effect: str
+    own: list[str]
+    """The per-record parameters (shared law parameters are not listed)."""
+    values: list[dict[str, float]]
+    std: list[dict[str, float]]
+    before: list[float]
+    after: list[float]
+    n_params: int
+    """Parameters a single record's candidate would have: shared effect ones plus own."""
+
+    def shrink(self, i: int) -> float:
+        b, a = self.before[i], self.after[i]
+        return 100.0 * (1.0 - a / b) if b > 0.0 and math.isfinite(a) else -math.inf
+
+
+def _jacobian(residual: Callable[..., list[Any]], x: FloatArray,
+              lower: FloatArray, upper: FloatArray, owner: list[int]) -> FloatArray:
+    """Forward differences; a per-record column (``owner[j] >= 0``) drives its record only."""
+    base = residual(x)
+    sizes = [b.size for b in base]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    jac = np.zeros((int(offsets[-1]), x.size))
+    for j in range(x.size):
+        h = 1e-3 * max(abs(float(x[j])), 1e-2 * float(upper[j] - lower[j]))
+        if x[j] + h > upper[j]:
+            h = -h
+        xj = x.copy()
+        xj[j] += h
+        parts = residual(xj, only=owner[j])
+        for i, part in enumerate(parts):
+            if part is not None:
+                jac[offsets[i]:offsets[i + 1], j] = (part - base[i]) / h
+    return jac
+
+
+def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
+                        fulls: Sequence[Context], law: Mapping[str, float],
+                        withheld: Sequence[slice], before: Sequence[float]) -> _Joint:
+    """``effect`` fitted over all of ``cals`` at once: role-``law`` parameters shared, the
+    effect's others one set per record (module docstring); scored on each withheld part."""
+    specs = [make_spec(c, kind, (effect,)) for c in cals]
+    ref = specs[int(np.argmax([c.record.size for c in cals]))]
+    shared = [p for p in ref.params if p.role == "law"]
+    own = [p for p in ref.params if p.role not in ("law", "noise")]
+    weights = [1.0 / ((float(np.sqrt(np.mean(c.record.force**2))) or 1.0)
+                      * math.sqrt(c.record.size)) for c in cals]
+    n = len(cals)
+    lower = np.array([p.lo for p in shared] + [p.lo for s in specs for p in s.params
+                                              if p.role not in ("law", "noise")])
+    upper = np.array([p.hi for p in shared] + [p.hi for s in specs for p in s.params
+                                              if p.role not in ("law", "noise")])
+    owner = [-1] * len(shared) + [i for i in range(n) for _p in own]
+    x0 = np.array([law.get(p.name, p.init) for p in shared]
+                  + [p.init for s in specs for p in s.params if p.role not in ("law", "noise")])
+
+    def values_of(x: FloatArray, i: int) -> dict[str, float]:
+        out = dict(law)
+        out.update({p.name: float(v) for p, v in zip(shared, x, strict=False)})
+        k = len(shared) + i * len(own)
+        out.update({p.name: float(x[k + j]) for j, p in enumerate(own)})
+        return out
+
+    def parts(x: FloatArray, only: int = -1) -> list[Any]:
+        out: list[Any] = []
+        for i, (spec, c, w) in enumerate(zip(specs, cals, weights, strict=True)):
+            if only >= 0 and i != only:
+                out.append(None)
+                continue
+            force, _d = predict(spec, c, values_of(x, i))
+            r = w * (force - c.record.force)
+            out.append(np.where(np.isfinite(r), r, 1e3 * w))
+        return out
+
+    with threadpool_limits(1):
+        sol = bounded_least_squares(
+            lambda x: np.concatenate(parts(x)), x0, lower, upper, scale="jac",
+            max_nfev=JOINT_CANDIDATE_EVALUATIONS,
+            jac=lambda x: _jacobian(parts, x, lower, upper, owner), tolerance=1e-5)
+    r, jac = sol.residual, sol.jacobian
+    rho = min(max(autocorrelation(r), 0.0), 0.99)
+    s2 = float(np.dot(r, r)) / max(r.size - sol.x.size, 1) * (1.0 + rho) / (1.0 - rho)
+    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    values, stds, after = [], [], []
+    for i in range(n):
+        v = values_of(sol.x, i)
+        k = len(shared) + i * len(own)
+        values.append({p.name: v[p.name] for p in [*shared, *own]})
+        stds.append({p.name: math.sqrt(max(float(cov[k + j, k + j]), 0.0))
+                     for j, p in enumerate(own)}
+                    | {p.name: math.sqrt(max(float(cov[j, j]), 0.0))
+                       for j, p in enumerate(shared)})
+        force, disp = predict(specs[i], fulls[i], v)
+        after.append(_total(fulls[i].record, force, disp, withheld[i]))
+    effect_shared = [p for p in shared if p.name in {q.name for q in
+                                                     effect_parameters(ref_ctx(cals))[effect]}]
+    return _Joint(effect, [p.name for p in own], values, stds, list(before), after,
+                  len(effect_shared) + len(own))
+
+
+def _total(record: Record, force: FloatArray, disp: FloatArray, part: slice) -> float:
+    """The withheld gap's total NRMS in % (``verdict``'s measure, one home)."""
+    total = _gap(record, force, disp, part)["total_pct"]
+    return math.inf if total is None else float(total)
+
+
+def ref_ctx(cals: Sequence[Context]) -> Context:
+    """The longest calibration part: whose scales bound the shared parameters."""
+    return max(cals, key=lambda c: c.record.size)
+
+
+def _agree(values: list[float], stds: list[float]) -> bool:
+    median = float(np.median(values))
+    for v, s in zip(values, stds, strict=True):
+        near = abs(v - median) <= MAGNITUDE_SPREAD * abs(median)
+        within = math.isfinite(s) and abs(v - median) <= 3.0 * math.sqrt(
+            s * s + float(np.median(stds)) ** 2)
+        if not (near or within):
+            return False
+    return True
+
+
+def _present(j: _Joint, i: int) -> bool:
+    """Whether record ``i`` carries the effect: one of its own parameters is more than three
+    standard deviations from zero (an effect with shared parameters only: always)."""
+    if not j.own:
+        return True
+    return any(abs(j.values[i][n]) > 3.0 * j.std[i].get(n, math.inf) for n in j.own)
+
+
+def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
+                units: Mapping[str, str]) -> list[dict[str, Any]]:
+    """The joint candidates that explain the device (module docstring): the consistent ones
+    (present in every record) first, then the partial ones, each by its mean score."""
+    active = [i for i in range(len(sources)) if joints and joints[0].before[i] >= floor]
+    if not active:
+        return []
+    out = []
+    for j in joints:
+        shrinks = [j.shrink(i) for i in active]
+        mean = sum(shrinks) / len(shrinks)
+        if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT:
+            continue
+        names = [*(k for k in j.values[0] if k not in j.own and k in j.std[0]
+                   and k in units), *j.own]
+        params = {}
+        for name in names:
+            values = [j.values[i][name] for i in active]
+            stds = [j.std[i].get(name, math.nan) for i in active]
+            params[name] = {"values": values, "std": stds, "unit": units.get(name, ""),
+                            "shared": name not in j.own, "agree": _agree(values, stds)}
+        present = [_present(j, i) for i in active]
+        out.append({"effect": j.effect, "consistent": all(present),
+                    "present_in": [sources[i] for i, p in zip(active, present, strict=True)
+                                   if p],
+                    "absent_from": [sources[i] for i, p in zip(active, present, strict=True)
+                                    if not p],
+                    "mean_shrink_pct": mean, "shrink_pct": shrinks,
+                    "mean_score": mean - PARSIMONY_PCT * j.n_params,
+                    "records": [sources[i] for i in active], "params": params,
+                    "magnitudes_agree": all(p["agree"] for p in params.values())})
+    return sorted(out, key=lambda c: (c["consistent"], c["mean_score"]), reverse=True)
+
+
+def diagnose_device(records: Sequence[Record], options: Options | None = None) -> dict[str, Any]:
+    """Diagnose ``records`` of one device against one jointly fitted law (module docstring)."""
+    opts = options or Options()
+    if len(records) < 2:
+        raise DiagnosisInputError("--same-device needs two or more records of the device")
+    if opts.baseline not in (AUTO, *BASELINES):
+        raise DiagnosisInputError(f"unknown baseline {opts.baseline!r}; choose {AUTO} or "
+                                  f"{', '.join(BASELINES)}")
+    started = time.perf_counter()
+    cals = _calibration(records, opts)
+    fulls = [Context.of(r) for r in records]
+    withheld = [slice(stop_of(r, opts), r.size) for r in records]
+    selection = None
+    if not opts.fit_baseline:
+        kind, law = opts.baseline, dict(opts.baseline_params)
+    else:
+        families = AUTO_FAMILIES if opts.baseline == AUTO else (opts.baseline,)
+        fitted = {k: fit_joint(k, cals, opts.baseline_params) for k in families}
+        kind = families[0]
+        if opts.baseline == AUTO:
+            kind, selection = select_family(
+                {k: (n, mse) for k, (_v, mse, n) in fitted.items()},
+                sum(c.record.size for c in cals), families)
+            selection["criterion"] = ("BIC on the calibration force residual, all records "
+                                      "together")
+        law = fitted[kind][0]
+    base_spec = make_spec(ref_ctx(cals), kind, [], law)
+    before = []
+    for full, part in zip(fulls, withheld, strict=True):
+        force, disp = predict(base_spec, full, law)
+        before.append(_total(full.record, force, disp, part))
+    no_command = any(r.no_command for r in records)
+    hidden = {e for r in records for e in hidden_effects(r, opts.effects)}
+    joint_effects = [e for e in opts.effects if e != "sensor_noise" and e not in hidden]
+    joints = [fit_joint_candidate(kind, e, cals, fulls, law, withheld, before)
+              for e in joint_effects]
+    units = {p.name: p.unit for ps in effect_parameters(ref_ctx(cals)).values() for p in ps}
+    sources = [r.source for r in records]
+    explaining = _explaining(joints, sources, opts.noise_floor_pct, units)
+    consistent = [c for c in explaining if c["consistent"]]
+    top = explaining[0] if explaining else None
+    story_joint = next((j for j in joints if top is not None and j.effect == top["effect"]),
+                       None)
+    results = []
+    for i, r in enumerate(records):
+        held_values = dict(law)
+        if story_joint is not None and not (kind in NOT_BOUC_WEN and story_joint.effect in
+                                            ("pinching", "degradation")):
+            held_values = {**law, **story_joint.values[i]}
+        held = replace(opts, baseline=kind, baseline_params=held_values, fit_baseline=False)
+        results.append(diagnose(r, held))
+    names = {c["effect"] for c in consistent}
+    per_record = []
+    for i, result in enumerate(results):
+        verdict = result["verdict"]["effect"]
+        own = set(verdict.split("+")) - NOT_EFFECTS
+        if top is not None and not top["consistent"] and sources[i] in top["present_in"]:
+            own.add(top["effect"])  # the story's effect, held here, is this test's own
+        departures = sorted(own - names) + ([verdict] if verdict in ("baseline_misfit",
+                                                                      "unexplained") else [])
+        per_record.append({"source": sources[i], "gap_shared_law_pct": before[i],
+                           "verdict": verdict, "confidence": result["verdict"]["confidence"],
+                           "gap_before_pct": result["verdict"]["gap_before_pct"],
+                           "gap_after_pct": result["verdict"]["gap_after_pct"],
+                           "departures": departures})
+    story: dict[str, Any]
+    if all(b < opts.noise_floor_pct for b in before):
+        story = {"effect": "none", "explanation": "every record is within the noise floor of "
+                                                  "the shared law"}
+    elif top is not None and top["consistent"]:
+        story = {"effect": top["effect"], "consistent": True,
+                 "magnitudes_agree": top["magnitudes_agree"],
+                 "explanation": f"{top['effect']}, present in every record, shrinks their "
+                                f"withheld gaps by {top['mean_shrink_pct']:.1f} % on average "
+                                f"({_shrinks(top)}) with one shared {kind} law"
+                                + ("" if top["magnitudes_agree"] else
+                                   "; its magnitudes differ between records")}
+    elif top is not None:
+        story = {"effect": top["effect"], "consistent": False,
+                 "magnitudes_agree": top["magnitudes_agree"],
+                 "explanation": f"{top['effect']} with one shared {kind} law shrinks the "
+                                f"withheld gaps by {top['mean_shrink_pct']:.1f} % on average "
+                                f"({_shrinks(top)}), but only "
+                                f"{', '.join(top['present_in'])} carry it (absent from "
+                                f"{', '.join(top['absent_from'])}): a departure of those "
+                                "records, not of the device"}
+    else:
+        story = {"effect": "no_consistent_effect",
+                 "explanation": f"no candidate shrinks the records' gaps by {MIN_SHRINK_PCT:g} %"
+                                f" on average without making one worse by {WORSE_PCT:g} %, "
+                                f"with one shared {kind} law: each record's verdict is its "
+                                "own departure"}
+    return {
+        "schema": SCHEMA,
+        "records": sources,
+        "baseline": {"kind": kind, "requested": opts.baseline, "selection": selection,
+                     "fitted": opts.fit_baseline, "params": baseline_report(kind, law),
+                     "calibration_samples": [c.record.size for c in cals],
+                     "gap_withheld_pct": before},
+        "story": story,
+        "consistent": consistent,
+        "partial": [c for c in explaining if not c["consistent"]],
+        "candidates": [{"effect": j.effect, "shrink_pct": [j.shrink(i) for i in
+                                                           range(len(records))],
+                        "n_params": j.n_params, "values": j.values, "std": j.std}
+                       for j in joints],
+        "per_record": per_record,
+        "not_identifiable": sorted(hidden) if no_command else [],
+        "results": results,
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def _shrinks(c: Mapping[str, Any]) -> str:
+    return " / ".join(f"{x:.0f}" for x in c["shrink_pct"]) + " %"
+
+
+def summary_device(doc: dict[str, Any]) -> str:
+    """The terminal summary of a ``--same-device`` diagnosis."""
+    base = doc["baseline"]
+    lines = [f"device    {len(doc['records'])} records, one shared {base['kind']} law: "
+             + ", ".join(f"{k} {v:.4g}" for k, v in base["params"].items())]
+    if base["selection"] is not None:
+        lines.append(f"          chosen by auto (BIC, all calibration parts): "
+                     f"{base['selection']['reason']}")
+    story = doc["story"]
+    lines.append(f"STORY     {story['effect']}: {story['explanation']}")
+    for c in [*doc["consistent"], *doc["partial"]]:
+        lines.append(f"  {'consistent' if c['consistent'] else 'partial':<10} {c['effect']:<20} "
+                     f"mean shrink {c['mean_shrink_pct']:.1f} % ({_shrinks(c)})"
+                     + ("" if c["magnitudes_agree"] else "  (magnitudes differ)")
+                     + ("" if c["consistent"] else
+                        f"  absent from {', '.join(c['absent_from'])}"))
+        for name, p in c["params"].items():
+            lines.append(f"    {name}: " + ", ".join(
+                f"{v:.4g}" + ("" if not math.isfinite(s) else f" ± {s:.2g}")
+                for v, s in zip(p["values"], p["std"], strict=True)) + f" {p['unit']}")
+    lines.append("per record (verdict against the shared law; departures):")
+    for p in doc["per_record"]:
+        lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}), gap "
+                     f"{p['gap_before_pct']:.2f} → {p['gap_after_pct']:.2f} %; departures: "
+                     + (", ".join(p["departures"]) or "none"))
+    hidden = {line for r in doc["results"] for line in r.get("hidden", [])}
+    if hidden:
+        lines.append("hidden    no command channel in some records: " + "; ".join(sorted(hidden)))
+    lines.append(f"time      {doc['seconds']:.1f} s")
+    return "\n".join(lines)
