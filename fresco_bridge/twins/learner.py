@@ -1,11 +1,10 @@
 """The learner of one source site, on the bridge's side: its worker process, the messages to
 it and its answers, never blocking the event loop.
 
-Messages go out in batches: what changes the worker's state (the source's steps, the twins'
-commits) is held and flushed once the current callback is done (the source's reply is sent
-first, so its step pays an append), and the worker learns ahead while the step goes on.
-Batches go through a bounded queue with ``put_nowait``; when it is full they wait in a local
-backlog that a flush task drains, in order (training data is never dropped).
+Messages go out in batches, one per request (a twin's trial): what changes the worker's state
+(the source's steps, the twins' commits) waits in a list until then, so the source's step
+costs no IPC. Batches go through a bounded queue with ``put_nowait``; when it is full they
+wait in a local backlog that a flush task drains, in order (training data is never dropped).
 Answers come back through a reader thread and ``call_soon_threadsafe``. Every wait has a
 deadline; a missed deadline or a dead worker is a *learner loss*. A twin whose rule is
 ``hold`` then fails (``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers
@@ -85,8 +84,7 @@ class Learner:
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._backlog: deque[list[Message]] = deque()
         self._held: list[Message] = []
-        """Messages for the worker that wait for the next flush or request (``_send``)."""
-        self._flush_soon = False
+        """Messages for the worker that wait for its next request (``_send``)."""
         self._flush: asyncio.Task[None] | None = None
         self._restart: asyncio.Task[None] | None = None
         self._proc: BaseProcess | None = None
@@ -372,23 +370,13 @@ class Learner:
             self._backlog.popleft()
 
     def _send(self, msg: Message) -> None:
-        """A message that changes the worker's state: logged, and held for the flush after
-        this callback unless a new worker is being started (the replay of the log will carry
-        it)."""
+        """A message that changes the worker's state: logged, and held for the worker's next
+        request unless a new worker is being started (the replay of the log will carry it).
+        The worker needs the source's steps and the twins' commits only before its next
+        answer, so the source's committed step costs the step loop an append, no IPC."""
         self.log.append(msg)
         if self.state in ("live", "catching-up"):
             self._held.append(msg)
-            if not self._flush_soon and self._loop is not None:
-                self._flush_soon = True  # after this callback: the source's reply goes first
-                self._loop.call_soon(self._flush_held)
-
-    def _flush_held(self) -> None:
-        """What is held goes to the worker now, so it learns while the step goes on (the
-        worker learns ahead: the twin's next trial does not wait for training)."""
-        self._flush_soon = False
-        if self._held and self.state in ("live", "catching-up"):
-            batch, self._held = self._held, []
-            self._post(batch)
 
     async def _request(self, msg: Message, deadline: float) -> tuple[Any, ...]:
         assert self._loop is not None

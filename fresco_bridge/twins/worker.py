@@ -1,9 +1,8 @@
 """The learner's worker process: one updater per twin, fed the source's committed steps, asked
 for the twins' forces, strictly in the order the bridge saw the messages.
 
-``LearnerState.handle`` is the whole behaviour (tested in process); ``worker_main`` moves
-messages between the queues and, when the inbox is empty, learns ahead
-(``LearnerState.learn_ahead``). Causality ``previous-step`` is made exact here, whatever order the
+``LearnerState.handle`` is the whole behaviour (tested in process); ``worker_main`` only moves
+messages between the queues. Causality ``previous-step`` is made exact here, whatever order the
 client commits its elements in: a source step is queued when it arrives and learned only by
 the first trial of a later twin step (the twin's step k answers from the source's steps
 through k − 1), so a twin commit is never preceded by the learning of its own step. A trial
@@ -94,8 +93,6 @@ class LearnerState:
     twins: dict[str, _Twin] = field(default_factory=dict)
     observations: list[tuple[int, float, float]] = field(default_factory=list)
     rejected: int = 0
-    ahead_failures: dict[str, str] = field(default_factory=dict)
-    """Twins whose learning ahead failed, and why (their next trial answers the error)."""
 
     def __post_init__(self) -> None:
         for twin in self.spec.twins:
@@ -114,9 +111,6 @@ class LearnerState:
             return None
         if kind == "trial":
             _, rid, name, d, same_step = msg
-            failure = self.ahead_failures.pop(name, None)
-            if failure is not None:
-                return ("error", rid, failure)
             twin = self._learned(name, same_step)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
@@ -139,16 +133,6 @@ class LearnerState:
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
-
-    def learn_ahead(self) -> None:
-        """Learn now what every twin's next trial will need (the source's steps through each
-        twin's committed steps), so the trial's answer does not wait for training. The same
-        steps are learned in the same order as at the trial: the results are unchanged."""
-        for name in self.twins:
-            try:
-                self._learned(name, same_step=False)
-            except Exception as exc:  # an updater bug: the trial that needed it says so
-                self.ahead_failures[name] = f"{type(exc).__name__}: {exc}"
 
     def _learned(self, name: str, same_step: bool) -> _Twin:
         """Twin ``name`` with every source step before its current one learned, and with
@@ -207,8 +191,6 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
             reply = _handled(state, msg)
             if reply is not None:
                 outbox.put(reply)
-        if inbox.empty():
-            state.learn_ahead()  # while the bridge and the integrator do the rest of the step
     del limits
 
 

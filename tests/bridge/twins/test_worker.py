@@ -56,49 +56,6 @@ def test_previous_step_equals_the_in_process_replay(source_first: bool) -> None:
     assert worker.handle(("sync", 7)) == ("sync", 7, sd.size - 1)
 
 
-@pytest.mark.parametrize("causality", ["previous-step", "same-step"])
-def test_learning_ahead_changes_no_answer(causality: str) -> None:
-    """The worker learns ahead after each batch (``learn_ahead``, between the twin's commit and
-    its next trial): the answers, learned-through steps and one-step errors are those of a
-    worker that learns only at the trial."""
-    sd, sf, td = histories()
-    same = causality == "same-step"
-    ahead, lazy = state("twin"), state("twin")
-    for i in range(sd.size):
-        observe = ("observe", i + 1, float(sd[i]), float(sf[i]))
-        replies = []
-        for worker in (ahead, lazy):
-            if same:
-                worker.handle(observe)
-            reply = worker.handle(("trial", i, "twin", float(td[i]), same))
-            assert reply is not None and reply[0] == "trial"
-            replies.append(reply)
-            if not same:
-                worker.handle(observe)
-            worker.handle(("commit", "twin"))
-        ahead.learn_ahead()
-        (_, _, f_a, k_a, through_a, _, err_a), (_, _, f_l, k_l, through_l, _, err_l) = replies
-        assert (f_a, k_a, through_a, err_a) == (f_l, k_l, through_l, err_l)
-    # ahead has learned the last step too: what a next trial would have needed
-    assert ahead.handle(("sync", 1)) == ("sync", 1, sd.size)
-
-
-def test_a_failure_while_learning_ahead_is_the_next_trials_error() -> None:
-    sd, sf, td = histories(5)
-    worker = state("twin")
-    worker.handle(("observe", 1, float(sd[0]), float(sf[0])))
-    worker.handle(("commit", "twin"))
-
-    def broken(d: float, f: float) -> None:
-        raise RuntimeError("diverged")
-
-    worker.twins["twin"].updater.observe = broken  # type: ignore[method-assign]
-    worker.learn_ahead()
-    reply = worker.handle(("trial", 3, "twin", float(td[1]), False))
-    assert reply is not None and reply[0] == "error" and reply[1] == 3
-    assert "RuntimeError: diverged" in reply[2]
-
-
 def test_each_twin_follows_the_learned_parameters() -> None:
     """A second twin of the same source learns too (its own updater, the same steps)."""
     sd, sf, td = histories(30)
