@@ -38,7 +38,8 @@ def test_a_record_with_only_the_measured_displacement(tmp_path: Path,
     assert doc["record"]["command"] is False
     assert any("no command channel (the record has no cmd_disp column)" in n
                for n in doc["record"]["notes"])
-    assert set(doc["not_identifiable"]) == {"actuator_delay", "actuator_amplitude"}
+    assert set(doc["not_identifiable"]) == {"actuator_delay", "actuator_amplitude",
+                                            "actuator_undershoot"}
     tried = {e["name"] for e in doc["effects"]}
     assert not tried & set(NOT_IDENTIFIABLE)
     assert doc["verdict"]["effect"] == "friction"  # acts between the LVDT and the load cell
