@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         description="OpenFresco-compatible lab daemon for hybrid simulation: serve experimental "
                     "sites to OpenSees genericClient / ShadowExpSite clients, run the demo, "
                     "report on recorded runs, operate a running bridge.",
-        epilog="Units: mm, kN, s. Configuration: see examples/lab.toml and the README.")
+        epilog="Units: mm, kN, s. Configuration: see examples/lab.toml and docs/configuration.md.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
     p_serve = sub.add_parser("serve", help="run the bridge daemon from a lab config")
