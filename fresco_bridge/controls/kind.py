@@ -2,7 +2,8 @@
 actuators it can drive, and the line docs/configuration.md's table shows for it.
 
 Each kind's module ends with its ``KIND``; ``controls/registry.py`` lists them (one line each),
-and the config's discriminated union, its error texts and docs/configuration.md's table derive from it.
+and the config's discriminated union, its error texts and docs/configuration.md's table derive
+from it.
 """
 
 from __future__ import annotations

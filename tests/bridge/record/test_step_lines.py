@@ -90,7 +90,7 @@ def test_a_newton_step_is_one_line_with_the_monitor_of_the_step_before(tmp_path:
     assert math.isnan(float(lines[15]["fei_delay"])) and lines[15]["fei_amp"] == 1.01
     assert lines[19]["err"] == 0.0625 and lines[19]["fei_amp"] == 1.01
     assert math.isnan(float(lines[19]["fei_delay"]))
-    assert_same_lines(lines, raw_lines(record.directory))  # docs/run-record.md's rules, decoded apart
+    assert_same_lines(lines, raw_lines(record.directory))  # docs/run-record.md, decoded apart
     assert [(s.step, s.cmd_disp, s.meas_force) for s in committed_steps(record.directory)] == [
         (1, (0.0,), (0.0,)), (2, (0.5,), (5.0,)), (3, (0.5,), (5.0,)), (4, (0.5,), (5.0,)),
         (5, (0.5,), (5.0,))]
