@@ -23,7 +23,6 @@ The bridge is closed before acts 3 and 4, so nothing they compute touches an eve
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -47,7 +46,7 @@ from .integrator import (
 from .integrator.coupling import Placement, StoryCoupling
 from .integrator.link import GenericClientLink, SiteElement
 from .numbers import fmt, pct
-from .progress import ProgressBar
+from .progress import ProgressBar, command_name
 from .record import export_csv
 
 __all__ = [
@@ -308,15 +307,6 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
     }
 
 
-def _command() -> str:
-    """How this process was started, for the next commands (``.venv/bin/fresco-bridge``)."""
-    argv0 = sys.argv[0] if sys.argv else ""
-    if Path(argv0).name == "fresco-bridge":
-        rel = os.path.relpath(argv0)
-        return rel if not rel.startswith("..") else argv0
-    return "fresco-bridge"
-
-
 def format_story(s: dict[str, Any]) -> str:
     """The closing note: what happened, in a few lines, and what to try next."""
     tw, dg = s["twin"], s["diagnosis"]
@@ -326,7 +316,7 @@ def format_story(s: dict[str, Any]) -> str:
         diagnosis = f"diagnosis      skipped: {dg['skipped']}"
     else:
         diagnosis = _diagnosis_line(dg)
-    run, char, cmd = s["run_dir"], s["characterisation_dir"], _command()
+    run, char, cmd = s["run_dir"], s["characterisation_dir"], command_name()
     drift = " / ".join(fmt(d, digits=3) for d in s["peak_story_drift_mm"])
     peak_f = s["peak_damper_force_kN"]
     return "\n".join([
@@ -346,7 +336,7 @@ def format_story(s: dict[str, Any]) -> str:
         f"cuts the RMS error by {pct(tw['rmseth_reduction_pct'], 0)}",
         diagnosis,
         f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)"
-        f" and {TWIN_FIGURE}",
+        f" and {run}/{TWIN_FIGURE}",
         f"next           {cmd} report {run} --diagnose {SOURCE}   (again, from the record)",
         f"               {cmd} diagnose {run} --site {SOURCE}",
         f"               {cmd} updater replay --source {run} --site {SOURCE} --twin {run} "
