@@ -145,8 +145,9 @@ def _twin_site_section(run: Run, site: str, source: str) -> str:
         "force it answered is its updater's prediction at the trial displacement, so there "
         "is no tracking error to show. How it learned: "
         f'<a href="#updating-{_e(site)}">Updating: {_e(site)}</a>.</p>',
-        _img(figures.hysteresis(site, signals), f"{site} hysteresis",
-             "The force the twin served against its trial displacement."),
+        _img(figures.hysteresis(site, signals, served=True), f"{site} hysteresis",
+             "The force the twin served (its updater's prediction) against its trial "
+             "displacement."),
         "</section>",
     ])
 
