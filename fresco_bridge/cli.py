@@ -19,6 +19,7 @@ from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
 from .exit_codes import exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .logs import configure as configure_logging
+from .progress import command_name
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
 from .runs import RunDirError, check_resumable, resolve_run
@@ -53,6 +54,10 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
         await stop.wait()
     finally:
         await bridge.close()
+    if bridge.record is not None:  # Ctrl-C: say where the run went and what to do with it
+        run, cmd = bridge.record.directory, command_name()
+        logging.getLogger("fresco_bridge").info(
+            "stopped; run record %s (next: %s runs show %s)", run, cmd, run)
     return 0
 
 
