@@ -48,7 +48,7 @@ def _remove_extensions(compiled: ModuleType, keep: bool) -> None:
 
 
 def _pure(compiled: ModuleType, why: str) -> list[object]:
-    _say(f"{why}: installing pure Python (the step path runs slower; see README)")
+    _say(f"{why}: installing pure Python (the step path runs slower; see docs/development.md)")
     _remove_extensions(compiled, keep=False)
     return []
 

@@ -19,6 +19,7 @@ from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
 from .exit_codes import exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .logs import configure as configure_logging
+from .progress import command_name
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
 from .runs import RunDirError, check_resumable, resolve_run
@@ -53,6 +54,10 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
         await stop.wait()
     finally:
         await bridge.close()
+    if bridge.record is not None:  # Ctrl-C: say where the run went and what to do with it
+        run, cmd = bridge.record.directory, command_name()
+        logging.getLogger("fresco_bridge").info(
+            "stopped; run record %s (next: %s runs show %s)", run, cmd, run)
     return 0
 
 
@@ -81,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         description="OpenFresco-compatible lab daemon for hybrid simulation: serve experimental "
                     "sites to OpenSees genericClient / ShadowExpSite clients, run the demo, "
                     "report on recorded runs, operate a running bridge.",
-        epilog="Units: mm, kN, s. Configuration: see examples/lab.toml and the README.")
+        epilog="Units: mm, kN, s. Configuration: see examples/lab.toml and docs/configuration.md.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)
     p_serve = sub.add_parser("serve", help="run the bridge daemon from a lab config")

@@ -275,7 +275,7 @@ class TelemetryConfig(_Strict):
     tls_key_file: ConfigPath | None = None
     accept_commands: bool = False
     """Accept operator commands (pause/resume/abort) on ``<prefix>/<site>/cmd``; needs
-    ``username``/``password`` and ``command_token`` (see README, threat model)."""
+    ``username``/``password`` and ``command_token`` (see SECURITY.md, the threat model)."""
     command_token: SecretStr | None = None
     """Shared secret every command message must carry (at least 16 characters)."""
     monitor_dt: float = Field(default=0.01, gt=0)

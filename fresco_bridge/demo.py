@@ -32,6 +32,7 @@ from .integrator import (
     run_coupled,
 )
 from .integrator.link import GenericClientLink
+from .numbers import fmt
 from .progress import ProgressBar
 from .record import export_csv
 
@@ -180,15 +181,18 @@ def _plot(resp: Any, path: Path) -> None:
 
 
 def _print_summary(s: dict[str, Any]) -> None:
+    drift = " / ".join(fmt(d) for d in s["peak_story_drift_mm"])
+    periods = " / ".join(fmt(x) for x in s["periods_s_with_damper"])
+    f_max, f_min = s["peak_damper_force_kN"]
     print(
         f"\nrun directory     {s['run_dir']}\n"
-        f"steps             {s['steps']} x {s['dt_s']} s in {s['wall_s']} s "
-        f"({s['ms_per_step']} ms/step through the bridge)\n"
-        f"periods (s)       {s['periods_s_with_damper']}\n"
-        f"peak story drift  {s['peak_story_drift_mm']} mm   roof {s['peak_roof_disp_mm']} mm\n"
-        f"damper force      max {s['peak_damper_force_kN'][0]} / min "
-        f"{s['peak_damper_force_kN'][1]} kN, ductility {s['damper_ductility']} "
-        f"(yield at {s['damper_yield_disp_mm']:.2f} mm)\n"
+        f"steps             {s['steps']} x {fmt(s['dt_s'])} s in {fmt(s['wall_s'], 's', 3)} "
+        f"({fmt(s['ms_per_step'], 'ms', 3)}/step through the bridge)\n"
+        f"periods           {periods} s\n"
+        f"peak story drift  {drift} mm   roof {fmt(s['peak_roof_disp_mm'], 'mm')}\n"
+        f"damper force      max {fmt(f_max)} / min {fmt(f_min, 'kN')}, ductility "
+        f"{fmt(s['damper_ductility'], digits=3)} (yield at "
+        f"{fmt(s['damper_yield_disp_mm'], 'mm', 3)})\n"
         f"record            {s['committed_steps_in_record']} committed steps (the first is "
         f"the initial state at t = 0) -> steps.csv, "
         f"hysteresis.png, summary.json, report.html",

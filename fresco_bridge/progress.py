@@ -12,15 +12,27 @@ terminal only: the commands that start light stay light.
 from __future__ import annotations
 
 import atexit
+import os
 import sys
 import time
 from types import TracebackType
 from typing import Any, TextIO
 
-__all__ = ["ProgressBar", "close_all", "status"]
+__all__ = ["ProgressBar", "close_all", "command_name", "status"]
 
 _LIVE: set[ProgressBar] = set()
 """Bars drawing on a terminal now (``close_all`` ends them before an error line)."""
+
+
+def command_name() -> str:
+    """How this process was started, for the next commands a person is told to type:
+    ``.venv/bin/fresco-bridge`` after ``make demo`` (no activated environment), else
+    ``fresco-bridge``."""
+    argv0 = sys.argv[0] if sys.argv else ""
+    if os.path.basename(argv0) == "fresco-bridge":
+        rel = os.path.relpath(argv0)
+        return rel if not rel.startswith("..") else argv0
+    return "fresco-bridge"
 
 
 def status(text: str, stream: TextIO | None = None) -> None:

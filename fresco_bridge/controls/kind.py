@@ -1,8 +1,9 @@
 """What a controller kind declares, in one place: its config model, its factory, how many
-actuators it can drive, and the line the README's configuration table shows for it.
+actuators it can drive, and the line docs/configuration.md's table shows for it.
 
 Each kind's module ends with its ``KIND``; ``controls/registry.py`` lists them (one line each),
-and the config's discriminated union, its error texts and the README table derive from it.
+and the config's discriminated union, its error texts and docs/configuration.md's table derive
+from it.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ class ControllerKind:
     """``factory(config, n_actuators)``: the adapter for a site whose setup drives
     ``n_actuators`` control points (``setups.py`` owns that count)."""
     summary: str
-    """The README's description of the kind (markdown, one cell)."""
+    """The kind's description in docs/configuration.md's table (markdown, one cell)."""
     max_actuators: int | None = 1
     """How many actuators one controller of this kind drives (None: any number)."""
 

@@ -1,5 +1,5 @@
 """The one list of controller kinds; the config's union, its error texts, the daemon's factory
-and the README's table derive from it.
+and the configuration table of docs/configuration.md derive from it.
 
 Adding a kind: one new module in this package (its config model, adapter and ``KIND``) plus
 one line below.
@@ -48,7 +48,7 @@ def make_controller(config: ControllerConfigBase, n_actuators: int) -> Controlle
 
 
 def controller_kinds_markdown() -> str:
-    """The README configuration table's cell for ``[sites.controller] kind``."""
+    """docs/configuration.md's table cell for ``[sites.controller] kind``."""
     parts = []
     for kind in CONTROLLER_KINDS.values():
         keys = ", ".join(f"`{k}`" for k in kind.config.model_fields if k != "kind")

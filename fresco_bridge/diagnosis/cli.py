@@ -51,7 +51,7 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                         "(kind, [params], fit = true|false)")
     p.add_argument("--site", default=None, help="the site to diagnose (records with several)")
     p.add_argument("--json", type=Path, default=None, metavar="OUT",
-                   help="write the diagnosis as JSON (schema: README)")
+                   help="write the diagnosis as JSON (schema: docs/diagnosis.md)")
     p.add_argument("--report", type=Path, default=None, metavar="DIR",
                    help="write plots, summary.txt and diagnosis.json into DIR")
     p.add_argument("--units", default=None,

@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..numbers import pct
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -23,10 +25,6 @@ __all__ = ["NO_EFFECT", "overlay_figure", "plots"]
 
 NO_EFFECT = ("none", "unexplained", "baseline_misfit")
 """Verdicts that add no effect to the sim: the plots show the baseline alone."""
-
-
-def _gap(pct: float | None) -> str:
-    return "–" if pct is None or not math.isfinite(pct) else f"{pct:.2f} %"
 
 
 def overlay_figure(result: dict[str, Any]) -> Figure:
@@ -72,7 +70,7 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
         ax.plot(x[::k], f[::k], label="measured", **{**TRUTH, "lw": 1.6, "color": "0.7"})
         if model is not None:
             ax.plot(disp[::k], model[::k], label=label, **{**style, "lw": 0.8, "ls": "-"})
-            title = f"{label}: withheld gap {_gap(gap)}"
+            title = f"{label}: withheld gap {pct(gap)}"
         else:
             ax.text(0.97, 0.04, f"verdict {name}:\nno effect added to the sim", ha="right",
                     va="bottom", transform=ax.transAxes, fontsize=LABEL_SIZE, color="0.3",
@@ -83,10 +81,10 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
     ax = axes["residual"]
     ax.axvspan(float(t[stop]), float(t[-1]), color="0.93", zorder=0,
                label="withheld part (scored)")
-    ax.plot(t[::k], (f - sim)[::k], label=f"measured − sim (gap {_gap(gap_base)})",
+    ax.plot(t[::k], (f - sim)[::k], label=f"measured − sim (gap {pct(gap_base)})",
             **{**BASELINE, "ls": "-", "lw": 0.7})
     if added:
-        ax.plot(t[::k], (f - best)[::k], label=f"measured − (sim + {name}) (gap {_gap(gap_best)})",
+        ax.plot(t[::k], (f - best)[::k], label=f"measured − (sim + {name}) (gap {pct(gap_best)})",
                 **{**PREDICTION, "lw": 0.8})
     ax.axhline(0.0, color="0.3", lw=0.6)
     _residual_span(ax, result, f - sim, f - best if added else f - sim)

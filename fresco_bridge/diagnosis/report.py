@@ -68,8 +68,9 @@ def summary(result: dict[str, Any]) -> str:
     if winner is not None:
         for name, p in winner["params"].items():
             flag = p.get("flag")
-            lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], digits=2)} "
-                         f"{p['unit']}  ({p['meaning']})"
+            unit = "" if p["unit"] == "1" else p["unit"]  # "1": dimensionless
+            lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], unit, 2)}"
+                         f"  ({p['meaning']})"
                          + ("" if not flag else f"  [UNSURE: {flag}]"))
     lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
     families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]

@@ -1,6 +1,6 @@
 """The diagnosis: baseline on the calibration part, every candidate scored on the withheld part.
 
-Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
+Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for users):
 
 1. Split by the command's energy: the calibration part is the first samples that carry
    :data:`CALIBRATION_FRACTION` of the command's signal energy (sum of (c − mean c)²), the rest
@@ -169,7 +169,7 @@ def _effect_start(effect: str, cal: Context) -> dict[str, float]:
 
 def diagnose(record: Record, options: Options | None = None,
              progress: Progress | None = None) -> dict[str, Any]:
-    """Diagnose ``record``; the JSON-ready result (schema in the README)."""
+    """Diagnose ``record``; the JSON-ready result (schema in docs/diagnosis.md)."""
     opts = options or Options()
     if opts.baseline not in (AUTO, *BASELINES):
         raise DiagnosisInputError(

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+from ..progress import command_name
 from .compose import DEFAULT_COMPOSE, LabError, LabService, Topology, localize_bridge_config
 
 CONSOLE_SCRIPTS = {"fresco-bridge": "fresco_bridge.cli", "sim-actuator": "sim_actuator.cli"}
@@ -231,8 +232,9 @@ def _while_up(running: list[_Running], bridge: str) -> str:
                           if ln.startswith(child.svc.ready_line)), "")
     first = ports.split(",")[0].strip()
     site, _, port = first.partition("=")
-    drive = (f"`fresco-bridge lab integrate --port {port}` drives site {site}"
-             if port.isdigit() else "`fresco-bridge lab integrate --port PORT` drives a site")
+    cmd = command_name()
+    drive = (f"`{cmd} lab integrate --port {port}` drives site {site}"
+             if port.isdigit() else f"`{cmd} lab integrate --port PORT` drives a site")
     return f"next: in another terminal, {drive}; Ctrl-C here stops the lab"
 
 
@@ -265,7 +267,8 @@ def _next_steps(out: TextIO, new_runs: set[Path]) -> None:
         _say(out, f"run record: {run}")
     if new_runs:
         run = max(new_runs)
-        _say(out, f"next: fresco-bridge runs show {run}  (then: fresco-bridge report {run})")
+        cmd = command_name()
+        _say(out, f"next: {cmd} runs show {run}  (then: {cmd} report {run})")
 
 
 def _say(out: TextIO, text: str) -> None:

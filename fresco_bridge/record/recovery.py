@@ -208,7 +208,8 @@ def flag_interrupted(run_root: Path, *, exclude: Path | None = None) -> list[Pat
         unclosed = ", ".join(f"{s} session {n}" for s, n in open_sessions(run_dir))
         log.warning("run %s ended without a clean close (bridge killed or host lost); last "
                     "committed: %s%s%s. The actuators hold where the controller left them: see "
-                    "README 'After a crash', then 'fresco-bridge runs resume %s'", run_dir.name,
+                    "docs/run-record.md 'After a crash', then 'fresco-bridge runs resume %s'",
+                    run_dir.name,
                     where, f"; sessions never closed: {unclosed}" if unclosed else "",
                     f"; stale control socket removed: {', '.join(map(str, removed))}"
                     if removed else "", run_dir.name)

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import html
 import json
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
+
+from ..numbers import fmt, pct
 
 __all__ = ["DIAGNOSIS_PREFIX", "diagnosis_sections", "headline"]
 
@@ -52,11 +53,15 @@ def _e(v: object) -> str:
     return html.escape(str(v), quote=True)
 
 
-def _num(x: Any, digits: int = 3, unit: str = "") -> str:
-    """``x`` to ``digits`` significant digits; ``–`` when undefined."""
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    return f"{x:.{digits}g}{'' if unit in ('', '1') else ' ' + unit}"
+def _gap_row(h: dict[str, Any], floor_pct: float | None) -> str:
+    """The withheld gap without → with the effect; one number when nothing was added, and below
+    the noise floor said as such (a gap of round-off is no gap: issue 27's ``3.26e-12 %``)."""
+    before, after = h["gap_before_pct"], h["gap_after_pct"]
+    if floor_pct is not None and before is not None and before < floor_pct:
+        return f"{pct(before)}: below the noise floor ({fmt(floor_pct)} %), nothing to explain"
+    if h["effect"] in _NOT_AN_EFFECT:
+        return f"{pct(before)} → {pct(after)} with the best candidate ({h['effect']})"
+    return f"{pct(before)} → {pct(after)}"
 
 
 def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> str:
@@ -68,25 +73,28 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
                 f'<p class="note">{_e(folder)}/diagnosis.json is unreadable ({_e(exc)}).'
                 "</p></section>")
     magnitude = "; ".join(
-        f"{name} = {_num(p['value'])} ± {_num(p['std'], 2, p['unit'])} ({p['meaning']})"
+        f"{name} = {fmt(p['value'], digits=3)} ± "
+        f"{fmt(p['std'], '' if p['unit'] == '1' else p['unit'], digits=2)} ({p['meaning']})"
         for name, p in h["magnitude"].items()) or "–"
-    shrink = _num(h["shrink_pct"], 3, "%")
+    floor = result.get("noise_floor", {}).get("floor_pct")
+    below_floor = floor is not None and (h["gap_before_pct"] or 0.0) < floor
     rows = [
         ("record", h["record"]),
         ("sim (baseline law, fitted on the calibration part)", h["baseline"]),
-        ("verdict", f"{h['effect']} (confidence {_num(h['confidence'], 2)})"),
+        ("verdict", f"{h['effect']} (confidence {h['confidence']:.2f})"),
         ("magnitude", magnitude),
-        ("withheld gap without → with it (force and displacement NRMS)",
-         f"{_num(h['gap_before_pct'], 3, '%')} → {_num(h['gap_after_pct'], 3, '%')}"),
-        ("shrink", shrink if h["effect"] not in _NOT_AN_EFFECT else f"– ({h['effect']})"),
+        ("withheld gap without → with it (force and displacement NRMS)", _gap_row(h, floor)),
+        ("shrink", pct(h["shrink_pct"], 1) if h["effect"] not in _NOT_AN_EFFECT
+         else f"– ({h['effect']}: no effect added)"),
         ("explanation", h["explanation"]),
     ]
     table = "".join(f'<tr><th>{_e(k)}</th><td data-key="{_e(k.split()[0])}">{_e(v)}</td></tr>'
                     for k, v in rows)
     candidates = "".join(
-        f'<tr><td>{_e(c["name"])}</td><td class="n">{_num(c["gap_after"]["total_pct"], 3)}</td>'
-        f'<td class="n">{_num(c["shrink_pct"], 3)}</td><td class="n">{_num(c["score"], 3)}'
-        "</td></tr>" for c in [*result["effects"], *result["pairs"][:3]])
+        f'<tr><td>{_e(c["name"])}</td><td class="n">{pct(c["gap_after"]["total_pct"])}</td>'
+        f'<td class="n">{"–" if below_floor else pct(c["shrink_pct"], 1)}</td>'
+        f'<td class="n">{"–" if below_floor else fmt(c["score"], digits=3)}</td></tr>'
+        for c in [*result["effects"], *result["pairs"][:3]])
     parts = [
         f'<section id="diagnosis-{_e(site)}"><h2>Diagnosis: {_e(site)}</h2>',
         "<p>Where the test departs from its simulation: a law fitted on the first part of the "
@@ -98,10 +106,14 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
     overlay = folder / OVERLAY
     if overlay.is_file():
         parts.append(img(overlay.read_bytes(), f"{site} diagnosis overlay",
-                         "Measured hysteresis against the sim without the effect and with it "
-                         "(fitted on the calibration part, predicting the whole record)."))
-    parts.append("<table><tr><th>candidate</th><th>withheld gap after (%)</th>"
-                 f"<th>shrink (%)</th><th>score</th></tr>{candidates}</table></section>")
+                         "Top: the measured hysteresis (grey) against the sim without the "
+                         "effect (left) and with it (right), both fitted on the calibration part "
+                         "and predicting the whole record. Bottom: the force residual in time, "
+                         "measured − sim, for each model; the shaded part is the withheld one "
+                         "the gaps are scored on."))
+    parts.append("<table><tr><th>candidate effect</th><th>withheld gap after</th>"
+                 "<th>shrink</th><th>score (shrink − 2 % per parameter)</th></tr>"
+                 f"{candidates}</table></section>")
     return "".join(parts)
 
 

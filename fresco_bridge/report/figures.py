@@ -116,8 +116,9 @@ def outer_labels(axes: Sequence[Axes], cols: int) -> None:
             ax.set_ylabel("")
 
 
-def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
-    """Measured force against measured displacement, per actuator and session."""
+def hysteresis(site: str, signals: Sequence[SessionSignals], *, served: bool = False) -> bytes:
+    """Measured force against measured displacement, per actuator and session; ``served``: an
+    updatable site's, which measures nothing (its trial displacement and predicted force)."""
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.add_subplot()
     many = len(signals) > 1
@@ -128,9 +129,9 @@ def hysteresis(site: str, signals: Sequence[SessionSignals]) -> bytes:
                     label=_label(sig, a, many) or None)
     if not signals:
         _no_data(ax, "no committed steps")
-    ax.set_xlabel("measured displacement (mm)")
-    ax.set_ylabel("measured force (kN)")
-    ax.set_title(f"{site}: hysteresis")
+    ax.set_xlabel("trial displacement (mm)" if served else "measured displacement (mm)")
+    ax.set_ylabel("served force, predicted (kN)" if served else "measured force (kN)")
+    ax.set_title(f"{site}: served hysteresis" if served else f"{site}: hysteresis")
     ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()

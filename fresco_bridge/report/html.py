@@ -81,10 +81,19 @@ def _json_safe(v: Any) -> Any:
     return v
 
 
+def _meta_value(value: Any) -> str:
+    """A run.json value as a person reads it: ``disp mm, force kN, time s``, ``damper, twin``."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_meta_value(v)}" for k, v in value.items())
+    if isinstance(value, list):
+        return ", ".join(_meta_value(v) for v in value)
+    return str(value)
+
+
 def _meta_section(run: Run) -> str:
     rows = [("run directory", str(run.directory)), ("size", human_size(run.size_bytes))]
     for key, value in run.meta.items():
-        rows.append((key, json.dumps(value) if isinstance(value, dict | list) else str(value)))
+        rows.append((key, _meta_value(value)))
     body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)
     notes = "".join(f'<p class="note">{_e(n)}</p>' for n in run.notes)
     return f'<section id="run"><h2>Run</h2><table>{body}</table>{notes}</section>'
@@ -145,8 +154,9 @@ def _twin_site_section(run: Run, site: str, source: str) -> str:
         "force it answered is its updater's prediction at the trial displacement, so there "
         "is no tracking error to show. How it learned: "
         f'<a href="#updating-{_e(site)}">Updating: {_e(site)}</a>.</p>',
-        _img(figures.hysteresis(site, signals), f"{site} hysteresis",
-             "The force the twin served against its trial displacement."),
+        _img(figures.hysteresis(site, signals, served=True), f"{site} hysteresis",
+             "The force the twin served (its updater's prediction) against its trial "
+             "displacement."),
         "</section>",
     ])
 

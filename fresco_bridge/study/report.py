@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from fresco_bridge.integrator import DEMO_DT as STEP_S
+from fresco_bridge.numbers import fmt, pct
 from fresco_bridge.study.constants import (
     BOUNDED_PEAK_RATIO,
     TARGET_BASELINE,
@@ -44,10 +45,6 @@ __all__ = [
 ]
 
 
-def _f(value: float | None) -> str:
-    return "—" if value is None else f"{value:.3f}"
-
-
 _CAUSALITY = {
     "same-step": "the twin's step i learned from the tested damper's step i",
     "previous-step": "the twin's step i knew the tested damper through step i-1",
@@ -57,7 +54,7 @@ _CAUSALITY = {
 def markdown_tables(document: Mapping[str, Any]) -> str:
     """Both layouts of one run as markdown, one table each, the paper's rows and columns."""
     head = (f"Run: record {document['record']}, specimen {document['specimen']}, noise "
-            f"{document['noise_pct']:g} % ({document['noise_std_kN']:.3f} kN), seed "
+            f"{document['noise_pct']:g} % ({fmt(document['noise_std_kN'], 'kN')}), seed "
             f"{document['seed']}, {document['steps']} steps, causality "
             f"{document['causality']} ({_CAUSALITY[document['causality']]})\n")  # fmt: skip
     parts = [head]
@@ -70,12 +67,12 @@ def markdown_tables(document: Mapping[str, Any]) -> str:
         )
         for case, m in body["cases"].items():
             ms = m["update_time_ms"]
-            sd = "/".join(f"{v:.3f}" for v in m["maesd"])
+            sd = "/".join(fmt(v) for v in m["maesd"])
             parts.append(
-                f"| {case} | + | {_f(m['pv_es_pos'])} | {_f(m['pv_ums_pos'])} | "
-                f"{_f(m['aepv_pos'])} | {_f(m['maeth'])} | {_f(m['rmseth'])} | "
-                f"{_f(m['one_step_rmse'])} | {sd} | {_f(ms['median'])}/{_f(ms['p99'])} |\n"
-                f"|  | − | {_f(m['pv_es_neg'])} | {_f(m['pv_ums_neg'])} | {_f(m['aepv_neg'])} "
+                f"| {case} | + | {fmt(m['pv_es_pos'])} | {fmt(m['pv_ums_pos'])} | "
+                f"{fmt(m['aepv_pos'])} | {fmt(m['maeth'])} | {fmt(m['rmseth'])} | "
+                f"{fmt(m['one_step_rmse'])} | {sd} | {fmt(ms['median'])}/{fmt(ms['p99'])} |\n"
+                f"|  | − | {fmt(m['pv_es_neg'])} | {fmt(m['pv_ums_neg'])} | {fmt(m['aepv_neg'])} "
                 f"|  |  |  |  |  |\n"
             )
     return "".join(parts)
@@ -256,11 +253,11 @@ def summary_table(documents: Sequence[Mapping[str, Any]]) -> str:
     for doc in documents:
         gen = doc["layouts"][TARGET_LAYOUT]["cases"]
         paper = doc["layouts"]["paper"]["cases"]
-        maeths = " / ".join(f"{gen[c]['maeth']:.3f}" if c in gen else "–" for c in _SHORT)
+        maeths = " / ".join(fmt(gen[c]["maeth"]) if c in gen else "–" for c in _SHORT)
         reduction = rms_reduction = "–"
         if TARGET_SUBJECT in gen and TARGET_BASELINE in gen:
-            reduction = f"{_reduction(gen, 'maeth'):.1f} %"
-            rms_reduction = f"{_reduction(gen, 'rmseth'):.1f} %"
+            reduction = pct(_reduction(gen, "maeth"), 1)
+            rms_reduction = pct(_reduction(gen, "rmseth"), 1)
         covering = [s for s in TARGETS if s.kind == "reduction" and _applies(s, doc)]
         target = _run_mark([_check_run(s, doc) for s in covering]) if covering else "no target"
         beats = _run_mark([_check_run(s, doc) for s in TARGETS if s.kind == "below"])

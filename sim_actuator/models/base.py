@@ -289,7 +289,7 @@ class ModelKind:
 
     @property
     def summary(self) -> str:
-        """First line of the kind's module docstring (for docs and the README table)."""
+        """First line of the kind's module docstring (for docs/configuration.md's table)."""
         doc = sys.modules[self.cls.__module__].__doc__ or self.cls.__doc__ or self.name
         return doc.strip().splitlines()[0].replace("``", "`")
 

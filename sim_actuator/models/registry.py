@@ -62,7 +62,7 @@ def make_model(kind: str, **params: float) -> ParametricModel:
 
 
 def model_kinds_markdown() -> str:
-    """The README configuration table's cell for ``controller.model`` (and the rig's
+    """docs/configuration.md's table cell for ``controller.model`` (and the rig's
     ``[specimen] kind``): every kind, its parameters (optional ones in brackets), its summary."""
     parts = []
     for kind in MODEL_KINDS.values():

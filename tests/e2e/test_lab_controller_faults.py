@@ -729,7 +729,7 @@ def test_opensees_stops_by_itself_instead_of_running_on_frozen_forces(tmp_path: 
     client stops on its own — its analysis fails or ends in NaN, never a plausible result built
     on frozen forces — and its exit closes the session. (Closing the connection instead would
     not stop it: OpenFresco's ``TCP_Socket::recvVector`` ignores recv's 0/-1 and OpenSees spins
-    in its receive loop forever; see README.)"""
+    in its receive loop forever; see docs/safety.md.)"""
     window = 1.5
     (port,) = free_ports(1)
     with sim_actuator("modbus", port, "--time-scale", "1.0") as proc, \

@@ -129,12 +129,12 @@ def record_sessions(root: Path, toml: str, sessions: list[tuple[str, int]]) -> P
 
 def raw_lines(run_dir: Path) -> list[dict[str, Any]]:
     """Every complete line of record.jsonl, decoded independently of fresco_bridge.record:
-    format 2 (README "Run record") filled in here by its written rules — a missing ``seq`` is
-    the line's position, missing ``site``/``session`` are the previous line's, a missing value
-    of a trial/daq/commit/monitor line is that of the previous line of its kind, site and
-    session, a missing ``ctrl`` equals the trial — format 3's step lines unfolded into the
-    monitor, trial, daq and commit lines they stand for, and format 4's monitors lines into
-    their monitor lines."""
+    format 2 (docs/run-record.md "The record format") filled in here by its written rules — a
+    missing ``seq`` is the line's position, missing ``site``/``session`` are the previous line's, a
+    missing value of a trial/daq/commit/monitor line is that of the previous line of its kind, site
+    and session, a missing ``ctrl`` equals the trial — format 3's step lines unfolded into the
+    monitor, trial, daq and commit lines they stand for, and format 4's monitors lines into their
+    monitor lines."""
     text = (run_dir / "record.jsonl").read_text()
     out: list[dict[str, Any]] = []
     seen: dict[tuple[str, int, str], dict[str, Any]] = {}

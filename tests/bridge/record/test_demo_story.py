@@ -15,6 +15,7 @@ import pytest
 
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.demo_story import characterisation_path, story_config_text
+from fresco_bridge.numbers import pct
 from fresco_bridge.record.export import committed_steps
 from fresco_bridge.report.html import write_report
 from tests.bridge.record.test_report import PNG_SIGNATURE, parse
@@ -85,7 +86,7 @@ def test_the_report_shows_tracking_error_the_served_twin_and_the_diagnosis(
     assert diagnosis["effect"] not in ("none", "unexplained", "baseline_misfit")
     assert cells["verdict"].startswith(diagnosis["effect"])
     assert diagnosis["shrink_pct"] > 20.0 and diagnosis["magnitude"]
-    assert cells["shrink"] == f"{diagnosis['shrink_pct']:.3g} %"
+    assert cells["shrink"] == pct(diagnosis["shrink_pct"], 1)
     assert next(iter(diagnosis["magnitude"])) in cells["magnitude"]
 
 

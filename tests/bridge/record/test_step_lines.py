@@ -90,7 +90,7 @@ def test_a_newton_step_is_one_line_with_the_monitor_of_the_step_before(tmp_path:
     assert math.isnan(float(lines[15]["fei_delay"])) and lines[15]["fei_amp"] == 1.01
     assert lines[19]["err"] == 0.0625 and lines[19]["fei_amp"] == 1.01
     assert math.isnan(float(lines[19]["fei_delay"]))
-    assert_same_lines(lines, raw_lines(record.directory))  # the README's rules, decoded apart
+    assert_same_lines(lines, raw_lines(record.directory))  # docs/run-record.md, decoded apart
     assert [(s.step, s.cmd_disp, s.meas_force) for s in committed_steps(record.directory)] == [
         (1, (0.0,), (0.0,)), (2, (0.5,), (5.0,)), (3, (0.5,), (5.0,)), (4, (0.5,), (5.0,)),
         (5, (0.5,), (5.0,))]
@@ -121,7 +121,7 @@ def test_the_format2_run_reads_unchanged_by_every_reader(tmp_path: Path, capsys:
     shutil.copytree(FORMAT2, run)
     steps = committed_steps(run)
     assert [s.step for s in steps] == list(range(1, 41))
-    lines = raw_lines(run)  # decoded apart from fresco_bridge.record, by the README's rules
+    lines = raw_lines(run)  # decoded apart from fresco_bridge.record, by docs/run-record.md
     assert_same_lines(list(read_record(run)), lines)
     assert len(monitor_lines(lines)) == 40
     assert sum(m.fei_amplitude is not None for m in monitor_lines(lines)) >= 6

@@ -156,7 +156,7 @@ def test_a_udp_handshake_while_a_vanished_peer_holds_the_site_is_answered_when_i
 def test_a_queued_udp_handshake_is_answered_when_the_operator_resumes_an_aborted_site(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The README's advice: ``ctl abort`` ends the vanished client's session at once, the
+    """docs/safety.md's advice: ``ctl abort`` ends the vanished client's session at once, the
     site stays in FAULT (the queued handshake waits), ``ctl resume`` lets the new one in."""
     monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 0.5)
     with RunningBridge(config(), tmp_path) as bridge:  # the idle deadline: 60 s

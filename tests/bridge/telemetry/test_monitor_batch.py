@@ -117,7 +117,7 @@ def test_batched_monitors_read_back_as_the_per_step_ones(tmp_path: Path) -> None
     assert len(got) == 150 + 70 and [(m.session, m.step) for m in got] == [
         (1, s) for s in range(1, 151)] + [(2, s) for s in range(1, 71)]
     assert repr(got) == repr(want)  # NaN-proof: every value identical
-    assert monitor_lines(raw_lines(batched.record.directory)) == got  # the README's rules
+    assert monitor_lines(raw_lines(batched.record.directory)) == got  # docs/run-record.md
     # the warnings: the same, each at the commit of the step it names
     assert len(each.warnings) >= 3
     assert batched.warnings == each.warnings

@@ -68,7 +68,7 @@ def test_a_served_twin_records_what_each_step_was_learned_through(tmp_path: Path
     assert all(math.isfinite(s) and s >= 0.0 for s in seconds)
     assert seconds[0] == 0.0 and all(s > 0.0 for s in seconds[1:])  # the UKF learned each
     assert not any("err" in u for u in updates)  # the UKF makes no one-step prediction
-    # each follows its step line; the independent decoder of the README's rules agrees
+    # each follows its step line; the independent decoder of the rules of docs/run-record.md agrees
     assert [r for r in raw_lines(run_dir) if r["kind"] == "update"] == updates
     kinds = [(r["kind"], r["site"]) for r in read_record(run_dir)]
     for n, (kind, site) in enumerate(kinds):
