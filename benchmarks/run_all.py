@@ -35,6 +35,7 @@ BENCHMARKS: dict[str, str] = {
     "twin": "Online updating",
     "diagnosis": "Diagnosis",
     "diagnose_measured": "Diagnosis",
+    "diagnosis_speed": "Diagnosis",
     "first_output": "First output of long commands",
 }
 """Benchmark name -> the BENCHMARKS.md section it feeds. The module is ``bench_NAME`` if that
