@@ -11,7 +11,7 @@ parameter at a bound or with a relative std above :data:`MAX_RELATIVE_STD` is fl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -22,7 +22,7 @@ from .load import Record
 from .model import Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "PARSIMONY_PCT", "Scored", "finite", "gap",
-           "rms"]
+           "rms", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -139,3 +139,20 @@ def gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
     if not math.isfinite(total):
         total = math.inf
     return {"force_pct": finite(g_f), "disp_pct": finite(g_d), "total_pct": total}
+
+
+def without_noise(s: Scored, record: Record, part: slice, noise: tuple[float, float],
+                  before: dict[str, float | None],
+                  references: dict[str, dict[str, float | None]]) -> Scored:
+    """``s`` scored on the *systematic* gap: its withheld gap with the white noise (std
+    estimated on the calibration residual) removed from the variance, measured from
+    ``before`` (the baseline's systematic gap) or, for a candidate compared with another
+    family, from that family's systematic gap in ``references`` (by name). White measurement
+    noise is in every record and no systematic candidate can predict it: on the raw gap it
+    dilutes every real effect's shrink, while the noise candidate claims all of it."""
+    if s.force is None:
+        return s
+    base = before
+    if s.compared_with is not None:
+        base = references.get(s.compared_with.removesuffix(" baseline"), before)
+    return replace(s, before=base, after=gap(record, s.force, s.disp, part, noise))
