@@ -27,7 +27,7 @@ def _noisy(record: Record, force_share: float, seed: int) -> Record:
 
 def test_friction_under_loud_white_noise_is_friction_not_noise() -> None:
     synthetic = synthetic_record("friction", 20261128, steps=1500)
-    result = diagnose(_noisy(synthetic.record, 0.03, 1))
+    result = diagnose(_noisy(synthetic.record, 0.018, 1))
     assert result["verdict"]["effect"] == "friction", result["verdict"]
     floor = result["noise_floor"]
     assert floor["systematic_withheld_gap_pct"] < result["baseline"]["gap_withheld"]["total_pct"]
