@@ -27,8 +27,8 @@ Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
    :data:`MIN_SHRINK_PCT`; otherwise the verdict is ``baseline_misfit`` when the baseline
    misses even its calibration part by more than the floor beyond the white noise (the law
    family is the first suspect), else ``unexplained``.
-5. Pairs: when the best single leaves more than twice the noise-only gap (and more than the
-   floor), pairs of the top three singles are fitted (and each top single with sensor noise).
+5. Pairs: when the best single by the systematic gap (item 7) leaves more than the systematic
+   floor (and more than the floor), pairs of the top three singles are fitted (and each top single with sensor noise).
    A pair wins when both of its effects matter by the rule a single passes against the
    baseline (each shrinks the gap the other leaves alone by :data:`MIN_SHRINK_PCT`) and its
    score beats the best single's by :data:`PAIR_MARGIN_PCT`. A pair is named in alphabetical
@@ -39,6 +39,10 @@ Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
    a relative std above :data:`MAX_RELATIVE_STD` is flagged and halves it
    (:data:`FLAG_CONFIDENCE_FACTOR`); below :data:`LOW_CONFIDENCE` the verdict names the
    runner-up it could not separate (``not_separated_from``).
+7. White noise is no rival: unless the verdict is ``none``, the candidates are scored again on
+   the *systematic* gap (the white noise estimated on the calibration residual removed from
+   each withheld variance); ``sensor_noise`` wins only when that gap is below what the record
+   resolves (:func:`systematic_floor`). See :func:`_systematic_verdict`.
 """
 
 from __future__ import annotations
