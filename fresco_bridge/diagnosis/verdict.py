@@ -28,7 +28,8 @@ Procedure (the README's "Diagnosing the sim-to-real gap" states it for users):
    misses even its calibration part by more than the floor beyond the white noise (the law
    family is the first suspect), else ``unexplained``.
 5. Pairs: when the best single by the systematic gap (item 7) leaves more than the systematic
-   floor (and more than the floor), pairs of the top three singles are fitted (and each top single with sensor noise).
+   floor (and more than the floor), pairs of the top three singles are fitted (and each top
+   single with sensor noise).
    A pair wins when both of its effects matter by the rule a single passes against the
    baseline (each shrinks the gap the other leaves alone by :data:`MIN_SHRINK_PCT`) and its
    score beats the best single's by :data:`PAIR_MARGIN_PCT`. A pair is named in alphabetical
@@ -73,7 +74,7 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects, hidden_summary
-from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT, without_noise
+from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT, systematic_floor, without_noise
 from .scored import Scored as _Scored
 from .scored import finite as _finite
 from .scored import gap as _gap
@@ -452,25 +453,6 @@ def _fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
                    {p.name: result.values[p.name] for p in params},
                    {p.name: result.std.get(p.name, math.nan) for p in params},
                    before, after, force, disp, compared_with)
-
-
-NOISE_ESTIMATE_SPREAD = 2.7
-"""Variance of the white-noise estimate (MAD of the differences) relative to a sample
-variance's, for Gaussian noise (the MAD's efficiency is 37 %)."""
-NOISE_SIGMAS = 2.0
-"""How many standard errors of (withheld variance − estimated noise variance) a systematic gap
-must exceed to be told from white noise."""
-
-
-def systematic_floor(floor: float, noise_only: float, n_cal: int, n_withheld: int) -> float:
-    """The smallest systematic gap (white noise removed) the record resolves: the noise floor,
-    or :data:`NOISE_SIGMAS` standard errors of a variance difference whose two terms are each
-    estimated from a finite sample (withheld: 2/N relative variance; calibration: the MAD
-    estimate's, :data:`NOISE_ESTIMATE_SPREAD` times that), whichever is larger."""
-    if noise_only <= 0.0 or n_cal < 2 or n_withheld < 2:
-        return floor
-    relative = math.sqrt(2.0 / n_withheld + 2.0 * NOISE_ESTIMATE_SPREAD / n_cal)
-    return max(floor, math.sqrt(NOISE_SIGMAS * relative) * noise_only)
 
 
 def _systematic_verdict(record: Record, withheld: slice, noise: tuple[float, float],

@@ -12,8 +12,9 @@ import numpy as np
 
 from fresco_bridge.diagnosis.bench import SYSTEMATIC
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
+from fresco_bridge.diagnosis.scored import systematic_floor
 from fresco_bridge.diagnosis.synth import synthetic_record
-from fresco_bridge.diagnosis.verdict import diagnose, systematic_floor
+from fresco_bridge.diagnosis.verdict import diagnose
 
 
 def _noisy(record: Record, force_share: float, seed: int) -> Record:
