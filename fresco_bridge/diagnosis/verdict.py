@@ -298,6 +298,7 @@ def diagnose(record: Record, options: Options | None = None,
         verdict = _systematic_verdict(record, withheld, white, sys_before, sys_floor, verdict,
                                       singles, pairs, families, opts.noise_floor_pct,
                                       systematic_cal, spec0.baseline)
+    verdict.setdefault("gap_basis", "raw")  # the gaps and shrink the verdict quotes
     noise_gap["systematic_withheld_gap_pct"] = sys_before["total_pct"] or 0.0
     noise_gap["systematic_floor_pct"] = sys_floor
     if progress is not None:
@@ -497,6 +498,7 @@ def _systematic_verdict(record: Record, withheld: slice, noise: tuple[float, flo
         return raw
     verdict["explanation"] = ("scored without the white noise (std from the calibration "
                               "residual): " + verdict["explanation"])
+    verdict["gap_basis"] = "systematic"
     return verdict
 
 

@@ -30,6 +30,7 @@ def test_friction_under_loud_white_noise_is_friction_not_noise() -> None:
     synthetic = synthetic_record("friction", 20261128, steps=1500)
     result = diagnose(_noisy(synthetic.record, 0.018, 1))
     assert result["verdict"]["effect"] == "friction", result["verdict"]
+    assert result["verdict"]["gap_basis"] == "systematic"
     floor = result["noise_floor"]
     assert floor["systematic_withheld_gap_pct"] < result["baseline"]["gap_withheld"]["total_pct"]
 
