@@ -11,7 +11,7 @@ parameter at a bound or with a relative std above :data:`MAX_RELATIVE_STD` is fl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -22,7 +22,7 @@ from .load import Record
 from .model import Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "PARSIMONY_PCT", "Scored", "finite", "gap",
-           "rms"]
+           "rms", "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -139,3 +139,39 @@ def gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
     if not math.isfinite(total):
         total = math.inf
     return {"force_pct": finite(g_f), "disp_pct": finite(g_d), "total_pct": total}
+
+
+def without_noise(s: Scored, record: Record, part: slice, noise: tuple[float, float],
+                  before: dict[str, float | None],
+                  references: dict[str, dict[str, float | None]]) -> Scored:
+    """``s`` scored on the *systematic* gap: its withheld gap with the white noise (std
+    estimated on the calibration residual) removed from the variance, measured from
+    ``before`` (the baseline's systematic gap) or, for a candidate compared with another
+    family, from that family's systematic gap in ``references`` (by name). White measurement
+    noise is in every record and no systematic candidate can predict it: on the raw gap it
+    dilutes every real effect's shrink, while the noise candidate claims all of it."""
+    if s.force is None:
+        return s
+    base = before
+    if s.compared_with is not None:
+        base = references.get(s.compared_with.removesuffix(" baseline"), before)
+    return replace(s, before=base, after=gap(record, s.force, s.disp, part, noise))
+
+
+NOISE_ESTIMATE_SPREAD = 2.7
+"""Variance of the white-noise estimate (MAD of the differences) relative to a sample
+variance's, for Gaussian noise (the MAD's efficiency is 37 %)."""
+NOISE_SIGMAS = 2.0
+"""How many standard errors of (withheld variance − estimated noise variance) a systematic gap
+must exceed to be told from white noise."""
+
+
+def systematic_floor(floor: float, noise_only: float, n_cal: int, n_withheld: int) -> float:
+    """The smallest systematic gap (white noise removed) the record resolves: the noise floor,
+    or :data:`NOISE_SIGMAS` standard errors of a variance difference whose two terms are each
+    estimated from a finite sample (withheld: 2/N relative variance; calibration: the MAD
+    estimate's, :data:`NOISE_ESTIMATE_SPREAD` times that), whichever is larger."""
+    if noise_only <= 0.0 or n_cal < 2 or n_withheld < 2:
+        return floor
+    relative = math.sqrt(2.0 / n_withheld + 2.0 * NOISE_ESTIMATE_SPREAD / n_cal)
+    return max(floor, math.sqrt(NOISE_SIGMAS * relative) * noise_only)
