@@ -11,6 +11,7 @@ parameter at a bound or with a relative std above :data:`MAX_RELATIVE_STD` is fl
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -21,12 +22,15 @@ from .fit import Fit
 from .load import Record
 from .model import Param, baseline_report
 
-__all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "PARSIMONY_PCT", "Scored", "finite", "gap",
-           "rms", "systematic_floor", "without_noise"]
+__all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
+           "both_matter", "finite", "gap", "raw_before", "rms", "systematic_floor",
+           "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
 PARSIMONY_PCT = 2.0
+MIN_SHRINK_PCT = 20.0
+"""The share of the gap a winning candidate (or each member of a pair) must shrink."""
 GAP_ZERO_PCT = 1e-6
 """A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
 """Score = shrink % − this per fitted parameter (law parameters of another family included)."""
@@ -175,3 +179,25 @@ def systematic_floor(floor: float, noise_only: float, n_cal: int, n_withheld: in
         return floor
     relative = math.sqrt(2.0 / n_withheld + 2.0 * NOISE_ESTIMATE_SPREAD / n_cal)
     return max(floor, math.sqrt(NOISE_SIGMAS * relative) * noise_only)
+
+
+def raw_before(noise_single: list[Scored], raw: dict[str, Any]) -> dict[str, float | None]:
+    """The baseline's raw withheld gap (the noise candidate's ``before``)."""
+    return noise_single[0].before if noise_single else {"total_pct": raw["gap_before_pct"]}
+
+
+def both_matter(pair: Scored, singles: Sequence[Scored]) -> bool:
+    """Each effect of ``pair`` shrinks the withheld gap the other leaves alone by at least
+    :data:`MIN_SHRINK_PCT` (the rule a single passes against the baseline)."""
+    after = pair.after["total_pct"]
+    if after is None or not math.isfinite(after):
+        return False
+    for member in pair.effects:
+        rest = tuple(e for e in pair.effects if e != member)
+        other = next((s for s in singles if s.effects == rest), None)
+        left = None if other is None else other.after["total_pct"]
+        if left is None or not math.isfinite(left) or left <= 0.0:
+            return False
+        if 100.0 * (1.0 - after / left) < MIN_SHRINK_PCT:
+            return False
+    return True

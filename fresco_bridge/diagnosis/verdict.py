@@ -74,7 +74,15 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects, hidden_summary
-from .scored import MAX_RELATIVE_STD, PARSIMONY_PCT, systematic_floor, without_noise
+from .scored import (
+    MAX_RELATIVE_STD,
+    MIN_SHRINK_PCT,
+    PARSIMONY_PCT,
+    both_matter,
+    raw_before,
+    systematic_floor,
+    without_noise,
+)
 from .scored import Scored as _Scored
 from .scored import finite as _finite
 from .scored import gap as _gap
@@ -106,7 +114,6 @@ FLAG_CONFIDENCE_FACTOR = 0.5
 """The confidence is multiplied by this for each flagged parameter of the winning effect."""
 LOW_CONFIDENCE = 0.5
 """Below this confidence the verdict names the runner-up it could not separate."""
-MIN_SHRINK_PCT = 20.0
 PAIR_MARGIN_PCT = 5.0
 TOP_FOR_PAIRS = 3
 MAX_FIT_SAMPLES = 6000
@@ -515,28 +522,6 @@ def _systematic_verdict(record: Record, withheld: slice, noise: tuple[float, flo
     return verdict
 
 
-def raw_before(noise_single: list[_Scored], raw: dict[str, Any]) -> dict[str, float | None]:
-    """The baseline's raw withheld gap (the noise candidate's ``before``)."""
-    return noise_single[0].before if noise_single else {"total_pct": raw["gap_before_pct"]}
-
-
-def _both_matter(pair: _Scored, singles: Sequence[_Scored]) -> bool:
-    """Each effect of ``pair`` shrinks the withheld gap the other leaves alone by at least
-    :data:`MIN_SHRINK_PCT` (the rule a single passes against the baseline)."""
-    after = pair.after["total_pct"]
-    if after is None or not math.isfinite(after):
-        return False
-    for member in pair.effects:
-        rest = tuple(e for e in pair.effects if e != member)
-        other = next((s for s in singles if s.effects == rest), None)
-        left = None if other is None else other.after["total_pct"]
-        if left is None or not math.isfinite(left) or left <= 0.0:
-            return False
-        if 100.0 * (1.0 - after / left) < MIN_SHRINK_PCT:
-            return False
-    return True
-
-
 def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: list[_Scored],
              families: list[_Scored], floor: float, systematic_cal: float,
              law: str) -> dict[str, Any]:
@@ -551,7 +536,7 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
     best_single = singles[0]
     best = best_single
     if pairs:
-        eligible = [p for p in pairs if _both_matter(p, singles)]
+        eligible = [p for p in pairs if both_matter(p, singles)]
         best_pair = max(eligible, key=lambda s: s.score) if eligible else None
         if best_pair is not None and best_pair.score > best_single.score + PAIR_MARGIN_PCT:
             best = best_pair
