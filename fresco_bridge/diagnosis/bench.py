@@ -28,7 +28,8 @@ import numpy as np
 
 from ..numbers import pct
 from .independent import UNDERSHOOT, IndependentRecord, case_label, independent_record
-from .model import EFFECT_NAMES
+from .load import Record
+from .model import EFFECT_NAMES, rate_force
 from .synth import SyntheticRecord, synthetic_record
 from .verdict import diagnose
 
@@ -126,6 +127,8 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
                            if _members(e["name"]) == _members(effect)), None)
     estimates = {} if true_candidate is None else {
         name: p["value"] for name, p in true_candidate["params"].items()}
+    if "rate_exponent" in estimates:
+        estimates = {**estimates, **power_equivalent(synthetic.record, estimates)}
     errors = {name: abs(estimates[name] - value) / abs(value)
               for name, value in synthetic.truth.items() if name in estimates and value}
     true_size = effect_magnitude(effect, synthetic.truth, synthetic.specimen)
@@ -149,6 +152,17 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
         "verdict_shrink_pct": verdict["shrink_pct"],
         "generate_seconds": generated - started, "diagnose_seconds": result["seconds"],
     }
+
+
+def power_equivalent(record: Record, estimates: Mapping[str, float]) -> dict[str, float]:
+    """The fitted rate law as the linear coefficient that dissipates the same energy on the
+    record's command velocity (how the generators state their truth); the coefficient at the
+    RMS velocity stays beside it as ``viscous_at_rms_velocity``."""
+    v = np.diff(record.cmd) / np.diff(record.time)
+    force = rate_force(v, estimates["viscous"], estimates["rate_exponent"],
+                       record.velocity_scale)
+    return {"viscous": float(np.sum(force * v) / np.sum(v * v)),
+            "viscous_at_rms_velocity": float(estimates["viscous"])}
 
 
 def _members(label: str) -> frozenset[str]:

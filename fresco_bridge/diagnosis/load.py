@@ -109,6 +109,17 @@ class Record:
     no_command: bool = False
     """True: no command channel; ``cmd`` holds the *measured* displacement (``meas_disp`` is
     None) and the interface layer cannot be seen (:mod:`.nocommand`)."""
+    velocity_scale: float = 0.0
+    """The whole record's RMS command velocity, mm/s (0: computed here): the reference of the
+    rate law, kept by :meth:`part` and :meth:`thinned` so a calibration fit and a prediction
+    of the withheld part mean the same coefficient (the command is known before the test)."""
+
+    def __post_init__(self) -> None:
+        if self.velocity_scale <= 0.0:
+            v = np.diff(self.cmd) / np.diff(self.time) if self.size > 1 else np.zeros(1)
+            scale = float(np.sqrt(np.mean(v * v)))
+            object.__setattr__(self, "velocity_scale",
+                               scale if scale > 0.0 and np.isfinite(scale) else 1.0)
 
     @property
     def size(self) -> int:

@@ -6,7 +6,8 @@ order of the load path of ``sim_actuator`` (the simulated lab the bench generate
 
     command c -> [actuator: undershoot u, amplitude a, delay tau] -> piston x  (the LVDT reads x)
     x -> [pin gap g] -> specimen law (Bouc-Wen, + pinching, + degradation) -> connection force
-    force + fixture friction Fc*sign(v) + viscous c_v*v -> load cell -> [sensor bias, noise]
+    force + fixture friction Fc (behind a spring) + rate law c_v*sign(v)|v|^a -> load cell
+      -> [sensor bias, noise]
 
 so every candidate predicts both channels: the measured displacement and the measured force.
 ``sensor_noise`` predicts nothing new: it claims the white part of the gap (see ``fit``).
@@ -180,6 +181,18 @@ first one) and the growth of the spread with energy delta_psi (the pinched zone 
 damage grows; without it the loop's drift over a record was taken by a degradation pair)."""
 
 
+RATE_EXPONENT = (0.1, 2.0)
+"""Bounds of the rate law's velocity exponent: fluid dampers and rate-sensitive fixtures span
+0.1-1 (1: linear viscous), a few exceed 1. Below 0.1 the law is Coulomb friction in all but
+name, which is its own candidate."""
+
+
+LIMIT_FORMS = {("rate_dependence", "rate_exponent", "lower"): "friction"}
+"""(effect, parameter, bound) -> the candidate whose form the effect takes at that bound: a
+rate law at its smallest exponent is Coulomb friction in all but name. When the record cannot
+separate the two (``verdict``'s low confidence), the candidate that states the form is named."""
+
+
 def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
     """Candidate effects and their parameters, bounded by the record's scales."""
     d, f = ctx.d_peak, ctx.f_peak
@@ -195,11 +208,18 @@ def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
         "backlash": (Param("gap", "gap", "mm", 0.0, 0.3 * d, 0.01 * d,
                            "clearance of the pin on each side"),),
         "friction": (Param("coulomb", "out", "kN", 0.0, f, 0.02 * f,
-                           "Coulomb friction of the fixture"),),
+                           "Coulomb friction of the fixture"),
+                     Param("slip", "out", "mm", 0.0, 0.2 * d, 0.005 * d,
+                           "piston travel after a reversal until the fixture slips (Coulomb "
+                           "behind a spring; 0: rigid)")),
         "pinching": _PINCHING,
         "degradation": _DEGRADATION,
         "rate_dependence": (Param("viscous", "out", "kN*s/mm", 0.0, 2.0 * f / ctx.v_rms,
-                                  0.02 * f / ctx.v_rms, "viscous force per velocity"),),
+                                  0.02 * f / ctx.v_rms,
+                                  "force per velocity at the record's RMS command velocity"),
+                            Param("rate_exponent", "out", "1", RATE_EXPONENT[0],
+                                  RATE_EXPONENT[1], 1.0,
+                                  "velocity exponent a of c·sign(v)|v|^a (1: linear viscous)")),
         "sensor_bias": (Param("force_bias", "out", "kN", -f, f, 0.0, "load-cell offset"),
                         *([] if ctx.record.meas_disp is None else
                           [Param("disp_bias", "out", "mm", -d, d, 0.0, "LVDT offset")])),
@@ -377,8 +397,33 @@ def finish(ctx: Context, values: Mapping[str, float],
     if fc or cv:
         v = np.zeros_like(x)
         v[1:] = np.diff(x) / np.diff(rec.time)
-        out = out + fc * _held_sign(v) + cv * v
+        out = (out + friction_force(x, v, fc, values.get("slip", 0.0))
+               + rate_force(v, cv, values.get("rate_exponent", 1.0), rec.velocity_scale))
     return out, x + values.get("disp_bias", 0.0)
+
+
+def friction_force(x: FloatArray, v: FloatArray, coulomb: float, slip: float) -> FloatArray:
+    """Coulomb friction behind a spring (a Jenkins element: elastic-perfectly-plastic on the
+    piston travel, slipping at ``coulomb`` after ``slip`` mm); ``slip`` 0 is the rigid
+    fixture, ``coulomb·sign(v)`` held through holds."""
+    if not coulomb:
+        return np.zeros_like(x)
+    if slip <= 1e-9 * (float(np.max(np.abs(x))) or 1.0):
+        return coulomb * _held_sign(v)
+    out: FloatArray = drive(LAW_BILINEAR, np.array([coulomb / slip, coulomb, 0.0]), x, 0.0,
+                            DZ_MAX)
+    return out
+
+
+def rate_force(v: FloatArray, viscous: float, exponent: float, v_ref: float) -> FloatArray:
+    """The rate law ``c·v_ref·sign(v)·|v/v_ref|^a``: ``viscous`` (c) is the force per
+    velocity at ``v_ref`` whatever the exponent, so c and a stay separable in the fit."""
+    if not viscous:
+        return np.zeros_like(v)
+    if exponent == 1.0:
+        return viscous * v
+    out: FloatArray = viscous * v_ref * np.sign(v) * np.abs(v / v_ref) ** exponent
+    return out
 
 
 def _held_sign(v: FloatArray) -> FloatArray:

@@ -54,6 +54,7 @@ from .load import DiagnosisInputError, Record
 from .model import (
     AUTO,
     BASELINES,
+    LIMIT_FORMS,
     NOT_BOUC_WEN,
     Context,
     baseline_report,
@@ -62,6 +63,7 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
+from .scored import BOUND_TOLERANCE
 from .scored import gap as _gap
 from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, diagnose, stop_of
 
@@ -72,6 +74,8 @@ SCHEMA = "fresco-bridge/diagnosis-device/1"
 MAGNITUDE_SPREAD = 0.25
 """An effect's parameter agrees across records when every value is within this share of
 their median (or within three combined standard deviations of it)."""
+AGREE_FLOOR = 0.01
+"""A share of a parameter's range below which values count as equal (see ``_agree``)."""
 NOT_EFFECTS = frozenset({"none", "baseline_misfit", "unexplained"})
 WORSE_PCT = 5.0
 """An effect that makes one record's withheld gap worse by more than this does not explain the
@@ -139,6 +143,15 @@ class _Joint:
     after: list[float]
     n_params: int
     """Parameters a single record's candidate would have: shared effect ones plus own."""
+    bounds: dict[str, tuple[float, float]]
+    """(lower, upper) of every parameter (the first record's context: the flags' tolerance)."""
+
+    def at_bound(self, name: str, side: str, i: int) -> bool:
+        """Record ``i``'s ``name`` within :data:`BOUND_TOLERANCE` of its range from ``side``."""
+        lo, hi = self.bounds[name]
+        tol = BOUND_TOLERANCE * (hi - lo if math.isfinite(hi) else abs(self.values[i][name]))
+        value = self.values[i][name]
+        return value <= lo + tol if side == "lower" else value >= hi - tol
 
     def shrink(self, i: int) -> float:
         b, a = self.before[i], self.after[i]
@@ -226,7 +239,8 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
     effect_shared = [p for p in shared if p.name in {q.name for q in
                                                      effect_parameters(ref_ctx(cals))[effect]}]
     return _Joint(effect, [p.name for p in own], values, stds, list(before), after,
-                  len(effect_shared) + len(own))
+                  len(effect_shared) + len(own),
+                  {p.name: (p.lo, p.hi) for p in [*shared, *own]})
 
 
 def _total(record: Record, force: FloatArray, disp: FloatArray, part: slice) -> float:
@@ -240,10 +254,14 @@ def ref_ctx(cals: Sequence[Context]) -> Context:
     return max(cals, key=lambda c: c.record.size)
 
 
-def _agree(values: list[float], stds: list[float]) -> bool:
+def _agree(values: list[float], stds: list[float], span: float) -> bool:
+    """Within :data:`MAGNITUDE_SPREAD` of the median (of :data:`AGREE_FLOOR` of the
+    parameter's range for a median nearer zero: a rigid fixture's 0.0002 and 0.0015 mm of
+    slip agree), or within three combined standard deviations."""
     median = float(np.median(values))
+    scale = max(abs(median), AGREE_FLOOR * span) if math.isfinite(span) else abs(median)
     for v, s in zip(values, stds, strict=True):
-        near = abs(v - median) <= MAGNITUDE_SPREAD * abs(median)
+        near = abs(v - median) <= MAGNITUDE_SPREAD * scale
         within = math.isfinite(s) and abs(v - median) <= 3.0 * math.sqrt(
             s * s + float(np.median(stds)) ** 2)
         if not (near or within):
@@ -267,7 +285,12 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
     if not active:
         return []
     out = []
+    named = {j.effect for j in joints}
     for j in joints:
+        if any(effect == j.effect and form in named and any(j.at_bound(param, side, i)
+                                                             for i in active)
+               for (effect, param, side), form in LIMIT_FORMS.items()):
+            continue  # a rate law become Coulomb friction: the friction candidate says it
         shrinks = [j.shrink(i) for i in active]
         mean = sum(shrinks) / len(shrinks)
         if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT:
@@ -278,8 +301,10 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
         for name in names:
             values = [j.values[i][name] for i in active]
             stds = [j.std[i].get(name, math.nan) for i in active]
+            lo, hi = j.bounds[name]
             params[name] = {"values": values, "std": stds, "unit": units.get(name, ""),
-                            "shared": name not in j.own, "agree": _agree(values, stds)}
+                            "shared": name not in j.own,
+                            "agree": _agree(values, stds, hi - lo)}
         present = [_present(j, i) for i in active]
         out.append({"effect": j.effect, "consistent": all(present),
                     "present_in": [sources[i] for i, p in zip(active, present, strict=True)

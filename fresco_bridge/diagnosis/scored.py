@@ -20,11 +20,11 @@ import numpy.typing as npt
 
 from .fit import Fit
 from .load import Record
-from .model import Param, baseline_report
+from .model import LIMIT_FORMS, Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
-           "both_matter", "finite", "gap", "raw_before", "rms", "systematic_floor",
-           "without_noise"]
+           "both_matter", "finite", "gap", "limit_form", "raw_before", "rms",
+           "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -201,3 +201,14 @@ def both_matter(pair: Scored, singles: Sequence[Scored]) -> bool:
         if 100.0 * (1.0 - after / left) < MIN_SHRINK_PCT:
             return False
     return True
+
+
+def limit_form(best: Scored, runner: Scored | None) -> bool:
+    """``best`` sits at a bound where its form becomes ``runner``'s (:data:`LIMIT_FORMS`): the
+    record measured the runner-up's form, reached from the edge of the winner's."""
+    if runner is None or len(best.effects) != 1:
+        return False
+    flags = best.flags
+    return any(effect == best.name and form == runner.name
+               and flags.get(param, "").startswith(f"at its {side} bound")
+               for (effect, param, side), form in LIMIT_FORMS.items())

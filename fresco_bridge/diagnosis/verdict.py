@@ -39,7 +39,9 @@ Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for us
    parameter of the winning effect at a bound (other than a zero lower bound: "absent") or with
    a relative std above :data:`MAX_RELATIVE_STD` is flagged and halves it
    (:data:`FLAG_CONFIDENCE_FACTOR`); below :data:`LOW_CONFIDENCE` the verdict names the
-   runner-up it could not separate (``not_separated_from``).
+   runner-up it could not separate (``not_separated_from``). A winner at a bound where its
+   form becomes the runner-up's (``model.LIMIT_FORMS``: a rate law at its smallest exponent
+   is Coulomb friction) that the record cannot separate from it gives way to the runner-up.
 7. White noise is no rival: unless the verdict is ``none``, the candidates are scored again on
    the *systematic* gap (the white noise estimated on the calibration residual removed from
    each withheld variance); ``sensor_noise`` wins only when that gap is below what the record
@@ -79,6 +81,7 @@ from .scored import (
     MIN_SHRINK_PCT,
     PARSIMONY_PCT,
     both_matter,
+    limit_form,
     raw_before,
     systematic_floor,
     without_noise,
@@ -576,12 +579,11 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
                                + none_of_mine}
     others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)]
     runner = others[0] if others else None
+    confidence = _separation(best, runner, gap)
+    if runner is not None and confidence < LOW_CONFIDENCE and limit_form(best, runner):
+        best, runner = runner, best  # the form the winner tends to at its bound: named as such
+        confidence = _separation(best, runner, gap)
     after = best.after["total_pct"] or 0.0
-    if runner is None or runner.after["total_pct"] is None:
-        confidence = 1.0
-    else:
-        confidence = (runner.after["total_pct"] - after) / max(gap - after, 1e-12)
-    confidence = float(min(max(confidence, 0.0), 1.0))
     flags = best.flags
     confidence *= FLAG_CONFIDENCE_FACTOR ** len(flags)
     unsure = runner.name if runner is not None and confidence < LOW_CONFIDENCE else None
@@ -603,6 +605,15 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
         "not_separated_from": unsure, "flags": flags, "better_family": None,
         "explanation": text,
     }
+
+
+def _separation(best: _Scored, runner: _Scored | None, gap: float) -> float:
+    """The share of ``best``'s gap reduction that ``runner`` does not achieve, in [0, 1]."""
+    if runner is None or runner.after["total_pct"] is None:
+        return 1.0
+    after = best.after["total_pct"] or 0.0
+    return float(min(max((runner.after["total_pct"] - after) / max(gap - after, 1e-12), 0.0),
+                     1.0))
 
 
 def _pct_text(x: float | None) -> str:
