@@ -10,6 +10,7 @@ and that the bench runs the mode end to end; its accuracy is a benchmark (BENCHM
 from __future__ import annotations
 
 import json
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -20,12 +21,15 @@ from fresco_bridge import indicators as ind
 from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.bench import (
     MAGNITUDE_OF,
+    bench_items,
     credit,
     effect_magnitude,
     format_bench,
+    generate,
     summarise_bench,
 )
 from fresco_bridge.diagnosis.realism import realistic_record
+from fresco_bridge.diagnosis.synth import SyntheticRecord
 
 STEPS = 300
 
@@ -74,6 +78,20 @@ def test_an_undershoot_record_lists_its_servo_lag_as_a_delay() -> None:
 def test_other_realism_records_list_no_second_effect() -> None:
     for effect in ("actuator_delay", "sensor_bias", "pinching", "none"):
         assert realistic_record(effect, 7, steps=200).also_present == {}
+
+
+def test_a_record_cached_before_the_second_effects_were_listed_is_made_anew(
+        tmp_path: Path) -> None:
+    item = bench_items(2, 14, 200, True, str(tmp_path))[1]  # an amplitude record, gain < 1
+    fresh = generate(item)
+    (cached,) = tmp_path.iterdir()
+    old = pickle.loads(cached.read_bytes())
+    object.__delattr__(old, "also_present")  # as a pickle written by the earlier code
+    cached.write_bytes(pickle.dumps(old))
+    again = generate(item)
+    assert isinstance(again, SyntheticRecord) and isinstance(fresh, SyntheticRecord)
+    assert again.also_present == fresh.also_present != {}
+    assert "also_present" in vars(pickle.loads(cached.read_bytes()))
 
 
 def test_credit_counts_a_second_effect_only_when_the_record_lists_it() -> None:
