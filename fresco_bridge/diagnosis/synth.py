@@ -70,6 +70,10 @@ class SyntheticRecord:
     specimen: dict[str, float] = field(default_factory=dict)
     law: str = "bouc-wen"
     """The specimen's hysteresis law (a ``sim_actuator.models`` kind)."""
+    also_present: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Secondary effects the generator really added beside ``effect`` (effect name ->
+    parameters in the diagnosis' names and units): a verdict naming one of them beside the
+    primary effect is right (``bench.credit``). Empty on the plain bench."""
 
 
 def command_history(rng: np.random.Generator, steps: int, dt: float, peak: float) -> FloatArray:
@@ -169,14 +173,16 @@ def sensor_effect(effect: str, rng: np.random.Generator, fy: float, peak: float,
 def rig_record(bench: str, effect: str, seed: int, kind: str, specimen: dict[str, float],
                actuator: dict[str, Any], effects: dict[str, Any],
                sensors: dict[str, dict[str, Any]], truth: dict[str, float], cmd: FloatArray,
-               dt: float) -> SyntheticRecord:
-    """The generated record with what the generator put in it."""
+               dt: float, also_present: dict[str, dict[str, float]] | None = None,
+               ) -> SyntheticRecord:
+    """The generated record with what the generator put in it (``also_present``: secondary
+    effects beside ``effect``, see :class:`SyntheticRecord`)."""
     record = run_rig({
         "name": f"{bench}-{effect}-{seed}", "seed": seed % (2**32),
         "specimen": {"kind": kind, "params": specimen},
         "actuator": actuator, "effects": effects, "sensors": sensors,
     }, cmd, dt, f"{bench} record seed {seed} ({effect})")
-    return SyntheticRecord(record, effect, truth, specimen, kind)
+    return SyntheticRecord(record, effect, truth, specimen, kind, dict(also_present or {}))
 
 
 def run_rig(rig: dict[str, Any], cmd: FloatArray, dt: float, source: str) -> Record:
