@@ -23,7 +23,7 @@ from .load import Record
 from .model import LIMIT_FORMS, Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
-           "both_matter", "finite", "gap", "limit_form", "raw_before", "rms",
+           "both_matter", "effect_size", "finite", "gap", "limit_form", "raw_before", "rms",
            "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -63,6 +63,9 @@ class Scored:
     """Law parameters a family alternative has beyond the baseline's (counted in its score)."""
     role: str = "candidate"
     """``candidate``; for another law family's baseline ``alternative`` or ``reference``."""
+    size: float = math.inf
+    """How far the candidate moves the baseline's prediction on the withheld part, NRMS % in
+    the gap's units (:func:`effect_size`); inf when not measured (``sensor_noise``)."""
 
     @property
     def shrink(self) -> float:
@@ -143,6 +146,21 @@ def gap(record: Record, force: FloatArray, disp: FloatArray | None, part: slice,
     if not math.isfinite(total):
         total = math.inf
     return {"force_pct": finite(g_f), "disp_pct": finite(g_d), "total_pct": total}
+
+
+def effect_size(record: Record, s: Scored, base_force: FloatArray,
+                base_disp: FloatArray | None, part: slice) -> float:
+    """NRMS % (the gap's scales) of the candidate's prediction minus the baseline's on
+    ``part``: an effect smaller than the floor is below what the user asked to hear about,
+    however much of a small systematic gap it absorbs (a 0.4 % "offset" taking up a law's
+    misfit)."""
+    if s.force is None:
+        return math.inf
+    g_f = 100.0 * rms((s.force - base_force)[part]) / (rms(record.force) or 1.0)
+    g_d = 0.0
+    if s.disp is not None and base_disp is not None:
+        g_d = 100.0 * rms((s.disp - base_disp)[part]) / (rms(record.cmd) or 1.0)
+    return math.hypot(g_f, g_d)
 
 
 def without_noise(s: Scored, record: Record, part: slice, noise: tuple[float, float],

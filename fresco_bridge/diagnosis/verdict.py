@@ -15,18 +15,20 @@ Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for us
    cannot inflate it. Below :data:`NOISE_FLOOR_PCT` the verdict is ``none``.
 4. Each candidate: the baseline plus one effect, all refitted on the calibration part,
    predicting the withheld part; ``sensor_noise`` claims the white part of the baseline's gap
-   (its std estimated on the calibration residual, never on the withheld one).
-   ``shrink_pct`` = 100 (1 − after/before); ``score`` = shrink − :data:`PARSIMONY_PCT` per
-   parameter. A candidate that needs another law family (pinching or degradation under a
-   bilinear or Menegotto-Pinto baseline drive BWBN) is compared with the best baseline *of
-   that family* (Bouc-Wen, fitted on the calibration part), never credited with the family
-   change. With a named baseline (not ``auto``) the other families of ``AUTO_FAMILIES`` are
-   fitted too; when a family change alone beats every effect (it shrinks the gap by at least
-   :data:`MIN_SHRINK_PCT` and scores higher, the extra law parameters counted), the verdict is
-   ``baseline_misfit`` naming that family. The best score wins if it shrinks the gap by at least
-   :data:`MIN_SHRINK_PCT`; otherwise the verdict is ``baseline_misfit`` when the baseline
-   misses even its calibration part by more than the floor beyond the white noise (the law
-   family is the first suspect), else ``unexplained``.
+   (its std estimated on the calibration residual, never on the withheld one). ``shrink_pct`` =
+   100 (1 − after/before); ``score`` = shrink − :data:`PARSIMONY_PCT` per parameter. A
+   candidate is named only if it moves the baseline's prediction by at least the floor
+   (``scored.effect_size``: a 0.4 % "offset" absorbing a small law misfit is not an effect) and
+   leaves less than the baseline's gap. A candidate that needs another law family (pinching or
+   degradation under a bilinear or Menegotto-Pinto baseline drive BWBN) is compared with the
+   best baseline *of that family* (Bouc-Wen, fitted on the calibration part), never credited
+   with the family change. With a named baseline (not ``auto``) the other families of
+   ``AUTO_FAMILIES`` are fitted too; when a family change alone beats every effect (it shrinks
+   the gap by at least :data:`MIN_SHRINK_PCT` and scores higher, the extra law parameters
+   counted), the verdict is ``baseline_misfit`` naming that family. The best score wins if it
+   shrinks the gap by at least :data:`MIN_SHRINK_PCT`; otherwise the verdict is
+   ``baseline_misfit`` when the baseline misses even its calibration part by more than the
+   floor beyond the white noise (the law family is the first suspect), else ``unexplained``.
 5. Pairs: when the best single by the systematic gap (item 7) leaves more than the systematic
    floor (and more than the floor), pairs of the top three singles are fitted (and each top
    single with sensor noise).
@@ -81,6 +83,7 @@ from .scored import (
     MIN_SHRINK_PCT,
     PARSIMONY_PCT,
     both_matter,
+    effect_size,
     limit_form,
     raw_before,
     systematic_floor,
@@ -307,6 +310,9 @@ def diagnose(record: Record, options: Options | None = None,
                                      {**a.values, **noise.values}, {**a.std, **noise.std},
                                      a.before, after, a.force, a.disp, a.compared_with))
                 tick()
+    for s in [*singles, *pairs]:
+        if s.fit is not None:
+            s.size = effect_size(record, s, f0, d0, withheld)
     gap_cal = _gap(record, f0, d0, slice(0, stop))
     systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_only**2, 0.0)) if (
         gap_cal["total_pct"] is not None and math.isfinite(gap_cal["total_pct"])) else math.inf
@@ -536,10 +542,10 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
                 "better_family": None,
                 "explanation": f"withheld gap {gap:.2f} % is below the noise floor {floor:g} %"}
     ranked = sorted([*singles, *pairs, *families], key=lambda s: s.score, reverse=True)
-    best_single = singles[0]
+    best_single = next((s for s in singles if _nameable(s, gap, floor)), singles[0])
     best = best_single
     if pairs:
-        eligible = [p for p in pairs if both_matter(p, singles)]
+        eligible = [p for p in pairs if both_matter(p, singles) and _nameable(p, gap, floor)]
         best_pair = max(eligible, key=lambda s: s.score) if eligible else None
         if best_pair is not None and best_pair.score > best_single.score + PAIR_MARGIN_PCT:
             best = best_pair
@@ -557,10 +563,13 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
                                f"baseline shrinks the withheld gap from {gap:.2f} % to "
                                f"{after:.2f} %; the best effect on the {law} baseline, "
                                f"{best.name}, leaves {_pct_text(left)}"}
-    if best.shrink < MIN_SHRINK_PCT:
+    if best.shrink < MIN_SHRINK_PCT or not _nameable(best, gap, floor):
         better = family.name if family is not None and family.score > best.score else None
         none_of_mine = (f"no candidate shrinks it by {MIN_SHRINK_PCT:g} % (best: {best.name}, "
-                        f"{best.shrink:.1f} %)")
+                        f"{best.shrink:.1f} %)" if best.shrink < MIN_SHRINK_PCT else
+                        f"the best candidate, {best.name}, moves the prediction by "
+                        f"{best.size:.2f} % and leaves {_pct_text(best.after['total_pct'])} "
+                        f"(named: at least the floor {floor:.2f} %, less than {gap:.2f} %)")
         common: dict[str, Any] = {
             "confidence": 0.0, "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
             "gap_after_pct": best.after["total_pct"], "runner_up": best.name,
@@ -605,6 +614,12 @@ def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: lis
         "not_separated_from": unsure, "flags": flags, "better_family": None,
         "explanation": text,
     }
+
+
+def _nameable(s: _Scored, gap: float, floor: float) -> bool:
+    """Big enough to hear (it moves the prediction by the floor) and better than the sim."""
+    after = s.after["total_pct"]
+    return s.size >= floor and after is not None and after < gap
 
 
 def _separation(best: _Scored, runner: _Scored | None, gap: float) -> float:
