@@ -24,6 +24,7 @@ import pickle
 import time
 from collections import Counter
 from collections.abc import Collection, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -101,7 +102,9 @@ def generate(item: BenchItem) -> SyntheticRecord | IndependentRecord:
             loaded = pickle.loads(path.read_bytes())
             if isinstance(loaded, IndependentRecord) or (
                     isinstance(loaded, SyntheticRecord) and "also_present" in vars(loaded)):
-                return loaded  # (a record cached before ``also_present`` is generated anew)
+                # (a record cached before ``also_present`` is generated anew; the Record is
+                # rebuilt so fields added since are derived, e.g. ``velocity_scale``)
+                return replace(loaded, record=replace(loaded.record))
     synthetic: SyntheticRecord | IndependentRecord
     if generator == "independent":
         synthetic = independent_record(effect, record_seed, steps=steps)
