@@ -8,7 +8,9 @@ Layers (force gap = measured − sim, the sim driven by the command)::
              + [F − L(m)]      specimen + sensor: the law misses the specimen, or the sensors lie
 
 and the sensor layer is the part of F − L(m) a sensor explains: its offset (mean) and its
-white noise (``indicators.white_noise_std``). Shares are of the squared force gap.
+white noise (``indicators.white_noise_std``). Shares are of the sum of the three layers'
+squared gaps, so they add to 100 % (layers can partly cancel each other: their squares need
+not add to the total squared gap, and a share of the total could exceed 100 %).
 
 Loop phases of every sample, from the measured force and the command's motion: ``reversal``
 (within ±2 samples of a change of direction),
@@ -132,13 +134,14 @@ def localise(record: Record, sim_cmd: FloatArray, sim_meas: FloatArray | None,
     offset = float(np.mean(specimen_residual))
     noise = ind.white_noise_std(specimen_residual)
     structured = specimen_residual - offset
-    total2 = float(np.sum(residual * residual)) or 1.0
     n = residual.size
     sensor2 = n * (offset * offset + noise * noise)
     specimen2 = max(float(np.sum(structured * structured)) - n * noise * noise, 0.0)
+    interface2 = float(np.sum(interface_part**2))
+    total2 = (interface2 + specimen2 + sensor2) or 1.0
     out["layers"] = {
         "interface": {"nrms_pct": 100.0 * _rms(interface_part) / f_scale,
-                      "share_pct": 100.0 * float(np.sum(interface_part**2)) / total2,
+                      "share_pct": 100.0 * interface2 / total2,
                       **interface},
         "specimen": {"nrms_pct": 100.0 * math.sqrt(specimen2 / n) / f_scale,
                      "share_pct": 100.0 * specimen2 / total2},

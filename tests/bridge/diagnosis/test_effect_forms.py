@@ -83,3 +83,22 @@ def test_a_small_offset_absorbing_a_law_misfit_is_not_named() -> None:
         result["verdict"]["explanation"]
     bias = next(e for e in result["effects"] if e["name"] == "sensor_bias")
     assert bias["shrink_pct"] is not None and bias["shrink_pct"] > 0.0  # it did shrink the gap
+
+
+def test_layer_shares_add_to_100_when_layers_cancel() -> None:
+    """An interface error the specimen layer partly cancels: each share stays within 0-100 %
+    and they add to 100 % (shares of the total squared gap exceeded 100 % here)."""
+    from fresco_bridge.diagnosis.localise import localise
+
+    n = 400
+    t = np.arange(n) * 0.01
+    cmd = 5.0 * np.sin(2.0 * np.pi * 0.5 * t)
+    sim_cmd = 2.0 * cmd
+    sim_meas = 2.0 * (cmd + 0.5 * np.sin(2.0 * np.pi * 0.5 * t))  # the piston went 10 % further
+    force = sim_cmd + 0.05 * (sim_meas - sim_cmd)  # ... and the specimen gave most of it back
+    record = record_from_arrays(t, cmd, force, cmd * 1.1, source="cancel")
+    layers = localise(record, sim_cmd, sim_meas, 240)["layers"]
+    shares = [layers[k]["share_pct"] for k in ("interface", "specimen", "sensor")]
+    assert all(0.0 <= s <= 100.0 for s in shares), shares
+    assert abs(sum(shares) - 100.0) < 1e-6
+    assert shares[0] > shares[2]
