@@ -17,16 +17,20 @@ physics. ``diagnose A B C --same-device`` therefore:
    per record, so a magnitude may differ between tests. Holding the law at the joint baseline
    instead would not do: a law fitted to records that all carry the effect has absorbed what it
    can of it, and the effect alone on top no longer shrinks anything.
-3. **Consistent effects.** An effect *explains the device* when its joint candidate shrinks
-   the withheld gaps of the records above the noise floor by at least
+3. **Consistent effects.** An effect *explains the device* when its joint candidate shrinks the
+   withheld gaps of the records above the noise floor by at least
    :data:`~.verdict.MIN_SHRINK_PCT` on average and makes none worse by more than
    :data:`WORSE_PCT` (one effect may matter more in one test than in another: a pin gap is a
    larger share of a small-amplitude test); it is *consistent* when every record carries it
    (one of its per-record parameters more than three standard deviations from zero), else
    *partial*. They are ranked consistent first, then by their mean score (shrink −
    :data:`~.verdict.PARSIMONY_PCT` per parameter of one record); the first one is the device's
-   story. Its parameters are listed per record with a flag saying whether they agree (within
-   :data:`MAGNITUDE_SPREAD` of their median, or within three combined standard deviations).
+   story. Pinching and degradation on a law that is not Bouc-Wen are measured from the joint
+   Bouc-Wen law and must leave less than the device's own; with a named law, when another
+   family's shared law alone shrinks the gaps more than any effect, the story is
+   ``baseline_misfit`` naming it (the single-record rules). Its parameters are listed per
+   record with a flag saying whether they agree (within :data:`MAGNITUDE_SPREAD` of their
+   median, or within three combined standard deviations).
 4. **Departures.** Each record is then diagnosed on its own with the story's law and the story
    effect at that record's magnitude *held* (or the joint baseline, with no story): its verdict
    is what departs from the device's story in that test, and a ``baseline_misfit`` or
@@ -243,6 +247,37 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
                   {p.name: (p.lo, p.hi) for p in [*shared, *own]})
 
 
+def _better_family(alternatives: Mapping[str, list[float]], before: Sequence[float],
+                   story: _Joint | None, floor: float) -> tuple[str, float] | None:
+    """(family, mean shrink %) when another family's shared law alone shrinks the gaps of the
+    records above the floor by :data:`~.verdict.MIN_SHRINK_PCT` on average and leaves less
+    than the story's effect does (the single-record rule, on the device)."""
+    active = [i for i, b in enumerate(before) if b >= floor]
+    if not alternatives or not active:
+        return None
+
+    def mean(gaps: Sequence[float]) -> float:
+        return sum(gaps[i] for i in active) / len(active)
+
+    family = min(alternatives, key=lambda k: mean(alternatives[k]))
+    shrink = 100.0 * (1.0 - mean(alternatives[family]) / mean(before))
+    if shrink < MIN_SHRINK_PCT or (story is not None
+                                   and mean(story.after) <= mean(alternatives[family])):
+        return None
+    return family, shrink
+
+
+def _gaps(kind: str, law: Mapping[str, float], cals: Sequence[Context],
+          fulls: Sequence[Context], withheld: Sequence[slice]) -> list[float]:
+    """Each record's withheld gap (total NRMS %) under law ``kind`` with values ``law``."""
+    spec = make_spec(ref_ctx(cals), kind, [], law)
+    out = []
+    for full, part in zip(fulls, withheld, strict=True):
+        force, disp = predict(spec, full, law)
+        out.append(_total(full.record, force, disp, part))
+    return out
+
+
 def _total(record: Record, force: FloatArray, disp: FloatArray, part: slice) -> float:
     """The withheld gap's total NRMS in % (``verdict``'s measure, one home)."""
     total = _gap(record, force, disp, part)["total_pct"]
@@ -278,12 +313,17 @@ def _present(j: _Joint, i: int) -> bool:
 
 
 def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
-                units: Mapping[str, str]) -> list[dict[str, Any]]:
+                units: Mapping[str, str], device_before: Sequence[float]
+                ) -> list[dict[str, Any]]:
     """The joint candidates that explain the device (module docstring): the consistent ones
-    (present in every record) first, then the partial ones, each by its mean score."""
-    active = [i for i in range(len(sources)) if joints and joints[0].before[i] >= floor]
+    (present in every record) first, then the partial ones, each by its mean score. A
+    candidate measured from another family's baseline must also leave less, on average, than
+    the device's own law (a pinching that shrinks Bouc-Wen's gap but not steel02's is a
+    family change, not an effect)."""
+    active = [i for i in range(len(sources)) if device_before[i] >= floor]
     if not active:
         return []
+    device_mean = sum(device_before[i] for i in active) / len(active)
     out = []
     named = {j.effect for j in joints}
     for j in joints:
@@ -293,7 +333,8 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
             continue  # a rate law become Coulomb friction: the friction candidate says it
         shrinks = [j.shrink(i) for i in active]
         mean = sum(shrinks) / len(shrinks)
-        if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT:
+        if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT or (
+                sum(j.after[i] for i in active) / len(active) >= device_mean):
             continue
         names = [*(k for k in j.values[0] if k not in j.own and k in j.std[0]
                    and k in units), *j.own]
@@ -344,19 +385,26 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
             selection["criterion"] = ("BIC on the calibration force residual, all records "
                                       "together")
         law = fitted[kind][0]
-    base_spec = make_spec(ref_ctx(cals), kind, [], law)
-    before = []
-    for full, part in zip(fulls, withheld, strict=True):
-        force, disp = predict(base_spec, full, law)
-        before.append(_total(full.record, force, disp, part))
+    before = _gaps(kind, law, cals, fulls, withheld)
+    alternatives: dict[str, list[float]] = {}  # other families' gaps (a named baseline)
+    if opts.fit_baseline and opts.baseline != AUTO:
+        alternatives = {k: _gaps(k, fit_joint(k, cals)[0], cals, fulls, withheld)
+                        for k in AUTO_FAMILIES if k != kind}
+    family_before = before  # what a candidate driving Bouc-Wen is measured from
+    if kind in NOT_BOUC_WEN and {"pinching", "degradation"} & set(opts.effects):
+        family_before = alternatives.get("bouc-wen") or _gaps(
+            "bouc-wen", (fitted["bouc-wen"][0] if opts.fit_baseline and "bouc-wen" in fitted
+                         else fit_joint("bouc-wen", cals)[0]), cals, fulls, withheld)
     no_command = any(r.no_command for r in records)
     hidden = {e for r in records for e in hidden_effects(r, opts.effects)}
     joint_effects = [e for e in opts.effects if e != "sensor_noise" and e not in hidden]
-    joints = [fit_joint_candidate(kind, e, cals, fulls, law, withheld, before)
+    joints = [fit_joint_candidate(kind, e, cals, fulls, law, withheld,
+                                  family_before if e in ("pinching", "degradation")
+                                  else before)
               for e in joint_effects]
     units = {p.name: p.unit for ps in effect_parameters(ref_ctx(cals)).values() for p in ps}
     sources = [r.source for r in records]
-    explaining = _explaining(joints, sources, opts.noise_floor_pct, units)
+    explaining = _explaining(joints, sources, opts.noise_floor_pct, units, before)
     consistent = [c for c in explaining if c["consistent"]]
     top = explaining[0] if explaining else None
     story_joint = next((j for j in joints if top is not None and j.effect == top["effect"]),
@@ -387,6 +435,15 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
     if all(b < opts.noise_floor_pct for b in before):
         story = {"effect": "none", "explanation": "every record is within the noise floor of "
                                                   "the shared law"}
+    elif (better := _better_family(alternatives, before, story_joint,
+                                   opts.noise_floor_pct)) is not None:
+        family, shrink = better
+        story = {"effect": "baseline_misfit", "better_family": family,
+                 "explanation": f"only a change of law family closes the gaps: one shared "
+                                f"{family} law shrinks them by {shrink:.1f} % on average, more "
+                                f"than any effect on the {kind} law"
+                                + ("" if top is None else f" (best: {top['effect']}, "
+                                   f"{top['mean_shrink_pct']:.1f} %)")}
     elif top is not None and top["consistent"]:
         story = {"effect": top["effect"], "consistent": True,
                  "magnitudes_agree": top["magnitudes_agree"],
