@@ -68,6 +68,7 @@ __all__ = [
     "peak_errors",
     "peak_values",
     "rmseth",
+    "state_explained_share",
     "tracking_indicator",
     "white_noise_std",
     "xcorr_delay",
@@ -311,6 +312,21 @@ def white_noise_std(signal: Signal) -> float:
         raise IndicatorError("white_noise_std: needs a finite 1-D signal of >= 3 samples")
     dx = np.diff(x)
     return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
+
+
+def state_explained_share(residual: Signal, state: npt.NDArray[np.float64]) -> float | None:
+    """Share of ``residual``'s variance that a least-squares fit on the columns of ``state``
+    explains (R²): near 0 for noise that has nothing to do with the loop, large for a
+    residual the loop's state drives (a law's misfit, an interface error). None for a residual
+    without variance or too short for the fit."""
+    r = np.asarray(residual, dtype=np.float64)
+    if r.ndim != 1 or state.shape[0] != r.size or r.size <= 2 * state.shape[1]:
+        return None
+    variance = float(np.var(r))
+    if variance <= 0.0 or not math.isfinite(variance):
+        return None
+    rest = r - state @ np.linalg.lstsq(state, r, rcond=None)[0]
+    return float(1.0 - np.var(rest) / variance)
 
 
 def _pearson(c: FloatArray, m: FloatArray, k: int) -> float:

@@ -47,7 +47,8 @@ Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for us
 7. White noise is no rival: unless the verdict is ``none``, the candidates are scored again on
    the *systematic* gap (the white noise estimated on the calibration residual removed from
    each withheld variance); ``sensor_noise`` wins only when that gap is below what the record
-   resolves (:func:`systematic_floor`). See :func:`_systematic_verdict`.
+   resolves (:func:`systematic_floor`). Items 3-7 are applied in :mod:`.decision`
+   (:func:`.decision.systematic_verdict`).
 """
 
 from __future__ import annotations
@@ -63,6 +64,13 @@ import numpy.typing as npt
 
 from .. import indicators as ind
 from .baseline import choose_baseline, fit_baseline
+from .decision import (
+    FLAG_CONFIDENCE_FACTOR,
+    LOW_CONFIDENCE,
+    PAIR_MARGIN_PCT,
+    decide,
+    systematic_verdict,
+)
 from .fit import Fit, fit_spec, predict
 from .load import DiagnosisInputError, Record
 from .localise import localise
@@ -78,19 +86,16 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects, hidden_summary
+from .noise import estimate_noise
 from .scored import (
     MAX_RELATIVE_STD,
     MIN_SHRINK_PCT,
     PARSIMONY_PCT,
-    both_matter,
     effect_size,
-    limit_form,
-    raw_before,
     systematic_floor,
     without_noise,
 )
 from .scored import Scored as _Scored
-from .scored import finite as _finite
 from .scored import gap as _gap
 from .scored import rms as _rms
 
@@ -116,11 +121,6 @@ Progress = Callable[[int, int], None]
 SCHEMA = "fresco-bridge/diagnosis/1"
 CALIBRATION_FRACTION = 0.6
 NOISE_FLOOR_PCT = 1.0
-FLAG_CONFIDENCE_FACTOR = 0.5
-"""The confidence is multiplied by this for each flagged parameter of the winning effect."""
-LOW_CONFIDENCE = 0.5
-"""Below this confidence the verdict names the runner-up it could not separate."""
-PAIR_MARGIN_PCT = 5.0
 TOP_FOR_PAIRS = 3
 MAX_FIT_SAMPLES = 6000
 """Longer calibration parts are thinned for the fits (every k-th sample and every reversal of
@@ -250,13 +250,14 @@ def diagnose(record: Record, options: Options | None = None,
     f0, d0 = predict(spec0, full, values0)
     before = _gap(record, f0, d0, withheld)
     f_scale, d_scale = _rms(record.force) or 1.0, _rms(record.cmd) or 1.0
-    noise_f = ind.white_noise_std((record.force - f0)[:stop])
-    noise_d = (ind.white_noise_std((record.meas_disp - d0)[:stop])
-               if record.meas_disp is not None else 0.0)
+    estimate = estimate_noise(record, f0, d0, stop)
+    noise_f, noise_d = estimate.white
+    claim_f, claim_d = estimate.claim
     noise_only = math.hypot(100.0 * noise_f / f_scale, 100.0 * noise_d / d_scale
                             if record.meas_disp is not None else 0.0)
     noise_gap = {"force_noise_std": noise_f, "disp_noise_std": noise_d,
-                 "noise_only_gap_pct": noise_only}
+                 "noise_only_gap_pct": noise_only, "claimed_force_noise_std": claim_f,
+                 "claimed_disp_noise_std": claim_d}
     families = _families(record, cal, full, opts, requested, fixed, values0, spec0.law_kind,
                          effects, before, withheld)
     references = {f.name: f for f in families}
@@ -267,10 +268,10 @@ def diagnose(record: Record, options: Options | None = None,
             params = list(eff_params[effect])
             if record.meas_disp is None:
                 params = params[:1]
-            std_f = noise_f / math.sqrt(2.0 * (stop - 1))
-            values = {"force_noise_std": noise_f, "disp_noise_std": noise_d}
-            stds = {"force_noise_std": std_f, "disp_noise_std": noise_d / math.sqrt(2.0 * stop)}
-            after = _gap(record, f0, d0, withheld, (noise_f, noise_d))
+            std_f = claim_f / math.sqrt(2.0 * (stop - 1))
+            values = {"force_noise_std": claim_f, "disp_noise_std": claim_d}
+            stds = {"force_noise_std": std_f, "disp_noise_std": claim_d / math.sqrt(2.0 * stop)}
+            after = _gap(record, f0, d0, withheld, estimate.claim)
             scored.append(_Scored(effect, (effect,), params, None, values, stds, before, after,
                                   f0, d0))
             tick()
@@ -302,7 +303,7 @@ def diagnose(record: Record, options: Options | None = None,
                                             before, withheld, base_fit.cost, references))
                 tick()
             if "sensor_noise" in effects and a.force is not None:
-                after = _gap(record, a.force, a.disp, withheld, (noise_f, noise_d))
+                after = _gap(record, a.force, a.disp, withheld, estimate.claim)
                 noise = next(s for s in scored if s.name == "sensor_noise")
                 members = tuple(sorted((*a.effects, "sensor_noise")))
                 pairs.append(_Scored("+".join(members), members,
@@ -317,10 +318,10 @@ def diagnose(record: Record, options: Options | None = None,
     systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_only**2, 0.0)) if (
         gap_cal["total_pct"] is not None and math.isfinite(gap_cal["total_pct"])) else math.inf
     noise_gap["systematic_calibration_gap_pct"] = systematic_cal
-    verdict = _verdict(before, singles, pairs, families, opts.noise_floor_pct, systematic_cal,
+    verdict = decide(before, singles, pairs, families, opts.noise_floor_pct, systematic_cal,
                        spec0.baseline)
     if "sensor_noise" in effects and verdict["effect"] != "none":
-        verdict = _systematic_verdict(record, withheld, white, sys_before, sys_floor, verdict,
+        verdict = systematic_verdict(record, withheld, white, sys_before, sys_floor, verdict,
                                       singles, pairs, families, opts.noise_floor_pct,
                                       systematic_cal, spec0.baseline)
     verdict.setdefault("gap_basis", "raw")  # the gaps and shrink the verdict quotes
@@ -483,153 +484,3 @@ def _fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
                    {p.name: result.values[p.name] for p in params},
                    {p.name: result.std.get(p.name, math.nan) for p in params},
                    before, after, force, disp, compared_with)
-
-
-def _systematic_verdict(record: Record, withheld: slice, noise: tuple[float, float],
-                        sys_before: dict[str, float | None], sys_floor: float,
-                        raw: dict[str, Any], singles: list[_Scored], pairs: list[_Scored],
-                        families: list[_Scored], floor: float, systematic_cal: float,
-                        law: str) -> dict[str, Any]:
-    """The verdict on the systematic gap: every candidate scored with the white noise (std
-    from the calibration residual) removed from its withheld gap.
-
-    White measurement noise is in every record and no systematic candidate predicts it; on the
-    raw gap it dilutes a real effect's shrink (a friction that removes 47 % of the systematic
-    gap removes 6 % of a noisy raw one) while ``sensor_noise`` claims all of it, so on a noisy
-    record the noise won over the effect. Here ``sensor_noise`` is the verdict only when the
-    systematic gap is below what the record resolves (:func:`systematic_floor`), i.e. the noise
-    is all there is above the floor; otherwise the systematic candidates compete alone (pairs
-    with noise are not named: the white noise's level is reported in ``noise_floor``). When no
-    systematic candidate explains the systematic gap and the raw verdict named the noise (noise
-    that is not white, which the white estimate only partly removes), the raw verdict stands."""
-    noise_single = [s for s in singles if s.name == "sensor_noise"]
-    if (sys_before["total_pct"] or 0.0) < sys_floor:
-        verdict = _verdict(raw_before(noise_single, raw), noise_single, [], [], floor,
-                           systematic_cal, law) if noise_single else raw
-        verdict["explanation"] += (f"; without the white noise the withheld gap is "
-                                   f"{sys_before['total_pct'] or 0.0:.2f} %, below the "
-                                   f"{sys_floor:.2f} % the record resolves: nothing systematic")
-        return verdict
-    refs = {f.name: _gap(record, f.force, f.disp, withheld, noise)
-            for f in families if f.force is not None}
-    sys_families = [without_noise(f, record, withheld, noise, sys_before, {}) for f in families]
-    sys_singles = sorted((without_noise(s, record, withheld, noise, sys_before, refs)
-                          for s in singles if "sensor_noise" not in s.effects),
-                         key=lambda s: s.score, reverse=True)
-    sys_pairs = [without_noise(p, record, withheld, noise, sys_before, refs)
-                 for p in pairs if "sensor_noise" not in p.effects]
-    if not sys_singles:
-        return raw
-    verdict = _verdict(sys_before, sys_singles, sys_pairs, sys_families, sys_floor,
-                       systematic_cal, law)
-    if verdict["effect"] in ("none", "baseline_misfit", "unexplained") and (
-            "sensor_noise" in raw["effect"].split("+")):
-        return raw
-    verdict["explanation"] = ("scored without the white noise (std from the calibration "
-                              "residual): " + verdict["explanation"])
-    verdict["gap_basis"] = "systematic"
-    return verdict
-
-
-def _verdict(before: dict[str, float | None], singles: list[_Scored], pairs: list[_Scored],
-             families: list[_Scored], floor: float, systematic_cal: float,
-             law: str) -> dict[str, Any]:
-    gap = before["total_pct"] or 0.0
-    if gap < floor:
-        return {"effect": "none", "confidence": max(0.0, 1.0 - gap / floor),
-                "shrink_pct": 0.0, "gap_before_pct": gap, "gap_after_pct": gap,
-                "runner_up": None, "not_separated_from": None, "flags": {},
-                "better_family": None,
-                "explanation": f"withheld gap {gap:.2f} % is below the noise floor {floor:g} %"}
-    ranked = sorted([*singles, *pairs, *families], key=lambda s: s.score, reverse=True)
-    best_single = next((s for s in singles if _nameable(s, gap, floor)), singles[0])
-    best = best_single
-    if pairs:
-        eligible = [p for p in pairs if both_matter(p, singles) and _nameable(p, gap, floor)]
-        best_pair = max(eligible, key=lambda s: s.score) if eligible else None
-        if best_pair is not None and best_pair.score > best_single.score + PAIR_MARGIN_PCT:
-            best = best_pair
-    family = max(families, key=lambda s: s.score) if families else None
-    if family is not None and family.shrink >= MIN_SHRINK_PCT and family.score > best.score:
-        after = family.after["total_pct"] or 0.0
-        left = best.after["total_pct"]
-        return {"effect": "baseline_misfit",
-                "confidence": 0.0 if left is None else float(min(max(
-                    (left - after) / max(gap - after, 1e-12), 0.0), 1.0)),
-                "shrink_pct": _finite(family.shrink), "gap_before_pct": gap,
-                "gap_after_pct": after, "runner_up": best.name, "not_separated_from": None,
-                "flags": {}, "better_family": family.name,
-                "explanation": f"only a change of law family closes the gap: a {family.name} "
-                               f"baseline shrinks the withheld gap from {gap:.2f} % to "
-                               f"{after:.2f} %; the best effect on the {law} baseline, "
-                               f"{best.name}, leaves {_pct_text(left)}"}
-    if best.shrink < MIN_SHRINK_PCT or not _nameable(best, gap, floor):
-        better = family.name if family is not None and family.score > best.score else None
-        none_of_mine = (f"no candidate shrinks it by {MIN_SHRINK_PCT:g} % (best: {best.name}, "
-                        f"{best.shrink:.1f} %)" if best.shrink < MIN_SHRINK_PCT else
-                        f"the best candidate, {best.name}, moves the prediction by "
-                        f"{best.size:.2f} % and leaves {_pct_text(best.after['total_pct'])} "
-                        f"(named: at least the floor {floor:.2f} %, less than {gap:.2f} %)")
-        common: dict[str, Any] = {
-            "confidence": 0.0, "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
-            "gap_after_pct": best.after["total_pct"], "runner_up": best.name,
-            "not_separated_from": None, "flags": {}, "better_family": better}
-        if systematic_cal > floor:
-            return {"effect": "baseline_misfit", **common,
-                    "explanation": f"the {law} baseline misses the calibration part it was "
-                                   f"fitted to by {systematic_cal:.2f} % beyond the white noise "
-                                   f"(withheld gap {gap:.2f} %) and {none_of_mine}: the law "
-                                   "family does not represent this specimen"
-                                   + ("" if better is None else
-                                      f" (a {better} baseline does better)")}
-        return {"effect": "unexplained", **common,
-                "explanation": f"the baseline fits its calibration part to the noise, but the "
-                               f"withheld gap {gap:.2f} % is above the floor and "
-                               + none_of_mine}
-    others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)]
-    runner = others[0] if others else None
-    confidence = _separation(best, runner, gap)
-    if runner is not None and confidence < LOW_CONFIDENCE and limit_form(best, runner):
-        best, runner = runner, best  # the form the winner tends to at its bound: named as such
-        confidence = _separation(best, runner, gap)
-    after = best.after["total_pct"] or 0.0
-    flags = best.flags
-    confidence *= FLAG_CONFIDENCE_FACTOR ** len(flags)
-    unsure = runner.name if runner is not None and confidence < LOW_CONFIDENCE else None
-    text = (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} %"
-            + ("" if best.compared_with is None else
-               f" (on the {best.fit.spec.law_kind if best.fit else law} law; measured from the "
-               f"{best.compared_with}, which leaves {_pct_text(best.before['total_pct'])})")
-            + ("" if runner is None else
-               f"; the runner-up {runner.name} leaves {runner.after['total_pct']:.2f} %"))
-    if flags:
-        text += "; not measured by the record: " + ", ".join(
-            f"{k} {v}" for k, v in flags.items())
-    if unsure is not None:
-        text += f"; low confidence: not separated from {unsure}"
-    return {
-        "effect": best.name, "confidence": confidence,
-        "shrink_pct": _finite(best.shrink), "gap_before_pct": gap, "gap_after_pct": after,
-        "runner_up": None if runner is None else runner.name,
-        "not_separated_from": unsure, "flags": flags, "better_family": None,
-        "explanation": text,
-    }
-
-
-def _nameable(s: _Scored, gap: float, floor: float) -> bool:
-    """Big enough to hear (it moves the prediction by the floor) and better than the sim."""
-    after = s.after["total_pct"]
-    return s.size >= floor and after is not None and after < gap
-
-
-def _separation(best: _Scored, runner: _Scored | None, gap: float) -> float:
-    """The share of ``best``'s gap reduction that ``runner`` does not achieve, in [0, 1]."""
-    if runner is None or runner.after["total_pct"] is None:
-        return 1.0
-    after = best.after["total_pct"] or 0.0
-    return float(min(max((runner.after["total_pct"] - after) / max(gap - after, 1e-12), 0.0),
-                     1.0))
-
-
-def _pct_text(x: float | None) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x:.2f} %"
