@@ -8,6 +8,8 @@ it; these records, from ``sim_actuator``'s rig with white noise added, were name
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fresco_bridge.diagnosis.bench import SYSTEMATIC
@@ -81,3 +83,34 @@ def test_the_loop_state_explains_a_misfit_not_noise() -> None:
     assert low is not None and low < 0.02
     assert high is not None and high > 0.9
     assert ind.state_explained_share(np.zeros(t.size), state) is None
+
+
+def test_a_residual_smoother_than_conditioning_noise_is_not_claimed() -> None:
+    """Noise low-passed at 5 Hz (sampled at 100 Hz) is claimed whole; the same level
+    low-passed at 0.05 Hz (0.05 % of the sampling rate: the test's own band, not a sensor's
+    conditioning) keeps the white claim, however little the loop state explains of it."""
+    from fresco_bridge.diagnosis.noise import MAX_COLOUR_RATIO, estimate_noise
+
+    rng = np.random.default_rng(11)
+    dt, n = 0.01, 4000
+    t = np.arange(n) * dt
+    cmd = 5.0 * np.sin(2.0 * np.pi * 0.7 * t)
+    law = 3.0 * cmd
+
+    def low_passed(corner: float) -> np.ndarray:
+        a = math.exp(-2.0 * math.pi * corner * dt)
+        x = np.zeros(n)
+        e = rng.normal(0.0, 1.0, n)
+        for k in range(1, n):
+            x[k] = a * x[k - 1] + e[k]
+        return np.asarray(x / np.std(x), dtype=np.float64)
+
+    for corner, claimed in ((5.0, True), (0.05, False)):
+        force = law + 0.5 * low_passed(corner) + rng.normal(0.0, 0.02, n)
+        record = record_from_arrays(t, cmd, force, cmd.copy(), source=f"corner {corner}")
+        est = estimate_noise(record, law, cmd, 2400)
+        if claimed:
+            assert est.claim_force > 1.5 * est.white_force
+            assert est.claim_force <= MAX_COLOUR_RATIO * est.white_force
+        else:
+            assert est.claim_force == est.white_force
