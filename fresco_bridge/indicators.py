@@ -68,7 +68,7 @@ __all__ = [
     "peak_errors",
     "peak_values",
     "rmseth",
-    "state_explained_share",
+    "state_unexplained",
     "tracking_indicator",
     "white_noise_std",
     "xcorr_delay",
@@ -314,19 +314,20 @@ def white_noise_std(signal: Signal) -> float:
     return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
 
 
-def state_explained_share(residual: Signal, state: npt.NDArray[np.float64]) -> float | None:
-    """Share of ``residual``'s variance that a least-squares fit on the columns of ``state``
-    explains (R²): near 0 for noise that has nothing to do with the loop, large for a
-    residual the loop's state drives (a law's misfit, an interface error). None for a residual
-    without variance or too short for the fit."""
+def state_unexplained(residual: Signal, state: npt.NDArray[np.float64]
+                      ) -> tuple[float, npt.NDArray[np.float64]] | None:
+    """(R², the part left) of ``residual`` after a least-squares fit on the columns of
+    ``state``: R² is near 0 for noise that has nothing to do with the loop, large for a residual
+    the loop's state drives (a law's misfit, an interface error). None for a residual without
+    variance or too short for the fit."""
     r = np.asarray(residual, dtype=np.float64)
     if r.ndim != 1 or state.shape[0] != r.size or r.size <= 2 * state.shape[1]:
         return None
     variance = float(np.var(r))
     if variance <= 0.0 or not math.isfinite(variance):
         return None
-    rest = r - state @ np.linalg.lstsq(state, r, rcond=None)[0]
-    return float(1.0 - np.var(rest) / variance)
+    rest: npt.NDArray[np.float64] = r - state @ np.linalg.lstsq(state, r, rcond=None)[0]
+    return float(1.0 - np.var(rest) / variance), rest
 
 
 def _pearson(c: FloatArray, m: FloatArray, k: int) -> float:

@@ -67,7 +67,7 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
-from .scored import BOUND_TOLERANCE
+from .scored import at_bound
 from .scored import gap as _gap
 from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, diagnose, stop_of
 
@@ -151,11 +151,8 @@ class _Joint:
     """(lower, upper) of every parameter (the first record's context: the flags' tolerance)."""
 
     def at_bound(self, name: str, side: str, i: int) -> bool:
-        """Record ``i``'s ``name`` within :data:`BOUND_TOLERANCE` of its range from ``side``."""
-        lo, hi = self.bounds[name]
-        tol = BOUND_TOLERANCE * (hi - lo if math.isfinite(hi) else abs(self.values[i][name]))
-        value = self.values[i][name]
-        return value <= lo + tol if side == "lower" else value >= hi - tol
+        """Record ``i``'s ``name`` at its ``side`` bound (:func:`.scored.at_bound`)."""
+        return at_bound(self.values[i][name], *self.bounds[name], side)
 
     def shrink(self, i: int) -> float:
         b, a = self.before[i], self.after[i]

@@ -68,10 +68,10 @@ def loop_state(cmd: FloatArray, force: FloatArray) -> FloatArray:
 
 
 def _claim(residual: FloatArray, state: FloatArray, white: float) -> float:
-    explained = ind.state_explained_share(residual, state)
-    if explained is None or explained >= RANDOM_SHARE:
+    fitted = ind.state_unexplained(residual, state)
+    if fitted is None or fitted[0] >= RANDOM_SHARE:
         return white
-    rest = float(np.std(residual - state @ np.linalg.lstsq(state, residual, rcond=None)[0]))
+    rest = float(np.std(fitted[1]))
     return rest if white < rest <= MAX_COLOUR_RATIO * white else white
 
 

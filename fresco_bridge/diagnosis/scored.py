@@ -23,8 +23,8 @@ from .load import Record
 from .model import LIMIT_FORMS, Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
-           "both_matter", "effect_size", "finite", "gap", "limit_form", "raw_before", "rms",
-           "systematic_floor", "without_noise"]
+           "at_bound", "both_matter", "effect_size", "finite", "gap", "limit_form", "raw_before",
+           "rms", "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -87,12 +87,11 @@ class Scored:
             if p.role == "noise" or value is None:
                 continue
             span = p.hi - p.lo if math.isfinite(p.hi) else abs(value) or 1.0
-            tol = BOUND_TOLERANCE * span
-            if p.lo != 0.0 and value <= p.lo + tol:
+            if p.lo != 0.0 and at_bound(value, p.lo, p.hi, "lower"):
                 out[p.name] = f"at its lower bound {p.lo:.4g}"
-            elif math.isfinite(p.hi) and value >= p.hi - tol:
+            elif math.isfinite(p.hi) and at_bound(value, p.lo, p.hi, "upper"):
                 out[p.name] = f"at its upper bound {p.hi:.4g}"
-            elif p.lo == 0.0 and value <= p.lo + tol:
+            elif p.lo == 0.0 and at_bound(value, p.lo, p.hi, "lower"):
                 continue  # absent, not unsure
             elif std is None or not math.isfinite(std):
                 out[p.name] = "no uncertainty estimate"
@@ -221,12 +220,21 @@ def both_matter(pair: Scored, singles: Sequence[Scored]) -> bool:
     return True
 
 
+def at_bound(value: float, lo: float, hi: float, side: str) -> bool:
+    """``value`` within :data:`BOUND_TOLERANCE` of its range (of itself, for an unbounded
+    range) from its ``side`` (``lower`` or ``upper``) bound: the one test of "at a bound"."""
+    span = hi - lo if math.isfinite(hi) else abs(value) or 1.0
+    tol = BOUND_TOLERANCE * span
+    return value <= lo + tol if side == "lower" else value >= hi - tol
+
+
 def limit_form(best: Scored, runner: Scored | None) -> bool:
     """``best`` sits at a bound where its form becomes ``runner``'s (:data:`LIMIT_FORMS`): the
     record measured the runner-up's form, reached from the edge of the winner's."""
     if runner is None or len(best.effects) != 1:
         return False
-    flags = best.flags
-    return any(effect == best.name and form == runner.name
-               and flags.get(param, "").startswith(f"at its {side} bound")
+    params = {p.name: p for p in best.params}
+    return any(effect == best.name and form == runner.name and param in params
+               and param in best.values
+               and at_bound(best.values[param], params[param].lo, params[param].hi, side)
                for (effect, param, side), form in LIMIT_FORMS.items())

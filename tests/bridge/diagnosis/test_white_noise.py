@@ -67,7 +67,7 @@ def test_coloured_noise_is_claimed_by_sensor_noise() -> None:
 
 
 def test_the_loop_state_explains_a_misfit_not_noise() -> None:
-    """``indicators.state_explained_share``: near 0 for noise, near 1 for a residual that is a
+    """``indicators.state_unexplained``'s R²: near 0 for noise, near 1 for a residual that is a
     function of the loop (a friction-like sign(v) term)."""
     from fresco_bridge import indicators as ind
     from fresco_bridge.diagnosis.noise import loop_state
@@ -78,11 +78,12 @@ def test_the_loop_state_explains_a_misfit_not_noise() -> None:
     state = loop_state(cmd, 3.0 * cmd)
     noise = rng.normal(0.0, 1.0, t.size)
     misfit = 0.8 * np.sign(np.gradient(cmd)) + 0.1 * noise
-    low = ind.state_explained_share(noise, state)
-    high = ind.state_explained_share(misfit, state)
-    assert low is not None and low < 0.02
-    assert high is not None and high > 0.9
-    assert ind.state_explained_share(np.zeros(t.size), state) is None
+    low = ind.state_unexplained(noise, state)
+    high = ind.state_unexplained(misfit, state)
+    assert low is not None and low[0] < 0.02
+    assert high is not None and high[0] > 0.9
+    assert np.std(high[1]) < 0.2  # what is left of the misfit is its noise
+    assert ind.state_unexplained(np.zeros(t.size), state) is None
 
 
 def test_a_residual_smoother_than_conditioning_noise_is_not_claimed() -> None:
