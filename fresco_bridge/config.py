@@ -24,7 +24,7 @@ from .controls.kind import ControllerConfigBase
 from .controls.registry import CONTROLLER_KINDS, controller_kind, known_kinds
 from .controls.sim import SimControllerConfig
 from .safety import ControlPointLimitsConfig
-from .setups import SetupError, make_setup
+from .setups import SetupError, SetupSpec, make_setup
 
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
 
@@ -65,7 +65,9 @@ class SiteConfig(_Strict):
     """``element``: OpenSees genericClient / OpenFresco EE* clients; ``site``: ShadowExpSite."""
     dofs: int = Field(default=1, ge=1, le=64)
     """Number of basic DOFs of the element served (the -dof entries of genericClient)."""
-    setup: Literal["NoTransformation", "OneActuator"] = "NoTransformation"
+    setup: SetupSpec = "NoTransformation"
+    """A name (``NoTransformation``, ``OneActuator``) or a ``[sites.setup]`` table: OpenFresco's
+    setup as ``kind`` with its parameters (docs/openfresco-setups.md)."""
     controller: ControllerConfig = Field(default_factory=SimControllerConfig)
     """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
     ``modbus``, ``mts``."""

@@ -41,7 +41,7 @@ from ..safety import (
     all_finite,
     next_state,
 )
-from ..setups import LinearSetup, make_setup
+from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
@@ -80,8 +80,8 @@ class ExperimentalSite(CommandGate):
         self.cfg = cfg
         self.name = cfg.name
         self.controller = controller
-        self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
-        self._plain = self.setup.kind == "NoTransformation"
+        self.setup: Setup = make_setup(cfg.setup, cfg.dofs)
+        self._plain = self.setup.identity
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
         setup's calls."""
         if self.setup.n_actuators != controller.n_actuators:
@@ -640,7 +640,8 @@ class ExperimentalSite(CommandGate):
             if sizes.disp else (),
             trial.vel if sizes.vel else (),
             trial.accel if sizes.accel else (),
-            (daq.force if plain else setup.basic_force(daq.force)) if sizes.force else (),
+            (daq.force if plain else setup.basic_force(daq.force, daq.disp))
+            if sizes.force else (),
             (self.time,) if sizes.time else (),
         )
 
