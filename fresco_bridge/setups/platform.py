@@ -59,6 +59,7 @@ class Platform:
     _p: Vec = field(init=False, repr=False, compare=False)
     _g: Vec = field(init=False, repr=False, compare=False)
     _la: Vec = field(init=False, repr=False, compare=False)
+    _reach: float = field(init=False, repr=False, compare=False)
     _j0: Vec = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -71,6 +72,7 @@ class Platform:
         if not np.all(la > 0):
             raise GeometryError("an actuator of zero length (ground point = platform point)")
         object.__setattr__(self, "_la", la)
+        object.__setattr__(self, "_reach", 0.1 * float(la.min()))
         j0 = self.jacobian(np.zeros(3))
         if abs(np.linalg.det(j0)) < 1e-12 * max(1.0, float(np.abs(j0).max())) ** 3:
             raise GeometryError("the actuators cannot hold the platform at rest (their "
@@ -125,24 +127,48 @@ class Platform:
     # -- the inverse --------------------------------------------------------------------------
     def state(self, strokes: Vec, start: Vec | None = None) -> Vec:
         """The platform state (x, y, θ) whose exact strokes are ``strokes`` (Newton's method
-        from ``start``, or from the linear-geometry state)."""
+        from ``start``, or from the linear-geometry state).
+
+        Several poses can have the same strokes (assembly modes); the platform's is the one
+        reached from rest without passing a singular pose, so ``det J`` keeps its sign at rest.
+        A solution of another mode is refused and sought again from the linear estimate.
+        """
+        for begin in (start, None) if start is not None else (None,):
+            q = self._newton(strokes, begin)
+            if np.linalg.det(self.jacobian(q)) * np.linalg.det(self._j0) > 0:
+                return q
+        raise GeometryError(f"the measured strokes {strokes.tolist()} put the platform in "
+                            "another assembly mode (past a singular pose)")
+
+    def _newton(self, strokes: Vec, start: Vec | None) -> Vec:
         d = list(self.driven)
         q = np.zeros(3)
         q[d] = np.linalg.solve(self._j0, strokes) if start is None else start[d]
-        scale = 1.0 + float(np.abs(strokes).max(initial=0.0))
+        near = q[2]
+        # the strokes are lengths La + s: their rounding is a few ulps of the longest length
+        floor = 8 * np.finfo(float).eps * (float(self._la.max()) + float(np.abs(strokes).max()))
+        previous = math.inf
         for _ in range(NEWTON_MAX_ITERATIONS):
             residual = self.strokes(q) - strokes
-            if float(np.abs(residual).max()) <= 1e-15 * scale:
+            size = float(np.abs(residual).max())
+            if size <= floor or (size >= previous and size <= 1e3 * floor):
+                # at the rounding floor (or no longer improving just above it); of the
+                # rotations 2π apart, the one nearest the start
+                q[2] -= 2 * math.pi * round((q[2] - near) / (2 * math.pi))
                 return q
+            previous = size
             try:
                 step = np.linalg.solve(self.jacobian(q), residual)
             except np.linalg.LinAlgError:
                 raise GeometryError(f"singular platform pose at {q.tolist()}") from None
-            q[d] -= step
+            full = np.zeros(3)
+            full[d] = step
+            # damped: at most a tenth of a radian and a tenth of the shortest actuator per
+            # iteration, so Newton stays in the basin of the pose it starts from
+            reach = max(abs(full[2]) / 0.1, float(np.abs(full[:2]).max()) / self._reach, 1.0)
+            q -= full / reach
             if not np.all(np.isfinite(q)):
                 break
-            if float(np.abs(step).max()) <= 4e-16 * (1.0 + float(np.abs(q).max())):
-                return q
         raise GeometryError(f"no platform state has the measured strokes {strokes.tolist()} "
                             f"(Newton's method did not converge in {NEWTON_MAX_ITERATIONS} "
                             "iterations)")
