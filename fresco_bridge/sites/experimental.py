@@ -43,6 +43,7 @@ from ..safety import (
 )
 from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
+from ..tangent import TangentEstimate
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
@@ -144,6 +145,7 @@ class ExperimentalSite(CommandGate):
         """The controller read in flight (network controllers): one read per trial, whoever
         asks (the site's own force request, or a same-step twin learning from it)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
+        self._estimate = TangentEstimate(self.cfg.tangent, na)  # per session
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
 
@@ -592,6 +594,8 @@ class ExperimentalSite(CommandGate):
         self.step += 1
         self._uncommitted = False
         commit_time, self._commit_time = self._commit_time, self.time
+        if (refused := self._estimate.committed(self.ctrl, self.daq.force)) is not None:
+            self.event("tangent-fallback", refused)
         lean = self._step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
@@ -672,7 +676,7 @@ class ExperimentalSite(CommandGate):
 
     def _tangent_from(self, k: tuple[float, ...] | None) -> tuple[float, ...]:
         if k is not None:
-            self._k_tangent = self.setup.basic_matrix(k)
+            self._k_tangent = self.setup.basic_matrix(self._estimate.answer(k))
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
