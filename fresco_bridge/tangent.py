@@ -8,7 +8,15 @@ Newton needs more moves; a secant estimate from the committed steps follows the 
 The estimators work in actuator space on (Δctrl, Δdaq force) of consecutive committed steps;
 the site maps the estimate to basic DOFs through its setup.
 
-An update that would give the integrator a matrix it cannot use — not finite, singular, or
+Within a step the estimate must still make Newton contract: OpenSees' Newton with a tangent K
+converges for specimen slopes between 0 and 2K only, and a secant below half the elastic
+stiffness (the post-yield slope) makes it cycle once an iteration re-enters the elastic
+branch. So the trials of the step are watched: when a correction is no smaller than the one
+before it, the rest of the step is answered with the initial stiffness, under which a
+hardening specimen always contracts (BENCHMARKS.md, "Measured tangent").
+
+An update that would give the integrator a matrix
+it cannot use — not finite, singular, or
 with a symmetric part that is not positive definite (a step whose force increment opposes its
 displacement: noise, a reversal inside a step) — is refused: the previous estimate stays and
 the caller raises an event. Pure numerics: no I/O, no clock.
@@ -49,6 +57,10 @@ class TangentEstimate:
         self._history: deque[tuple[Matrix, Matrix]] = deque(maxlen=self.columns)
         self.updates = 0
         self.refusals = 0
+        self.fallbacks = 0
+        """Steps answered with the initial stiffness because Newton stopped contracting."""
+        self._step: list[Matrix] = []
+        self._initial_for_step = False
 
     def answer(self, controller_k: tuple[float, ...]) -> tuple[float, ...]:
         """The tangent to answer (column-major) given the controller's; the first answer
@@ -58,13 +70,34 @@ class TangentEstimate:
         if self.k is None:
             k0 = np.array(controller_k, dtype=np.float64).reshape(self.n, self.n, order="F")
             self.k, self.k_initial = k0.copy(), k0.copy()
-        return tuple(self.k.ravel(order="F").tolist())
+        k = self.k_initial if self._initial_for_step else self.k
+        assert k is not None
+        return tuple(k.ravel(order="F").tolist())
+
+    def trial(self, disp: tuple[float, ...]) -> str | None:
+        """A trial of the current step (actuator displacements); returns why the rest of the
+        step is answered with the initial stiffness, once, or None."""
+        if self.method == "controller" or self.method == "initial" or self._initial_for_step:
+            return None
+        self._step.append(np.asarray(disp, dtype=np.float64))
+        if len(self._step) < 3:
+            return None
+        a, b, c = self._step[-3:]
+        if float(np.linalg.norm(c - b)) < float(np.linalg.norm(b - a)):
+            return None
+        self._initial_for_step = True
+        self.fallbacks += 1
+        return (f"Newton stopped contracting under the {self.method} tangent (correction "
+                f"{float(np.linalg.norm(c - b)):.3g} after {float(np.linalg.norm(b - a)):.3g}); "
+                "the initial stiffness answers for the rest of this step")
 
     def committed(self, disp: tuple[float, ...], force: tuple[float, ...]) -> str | None:
         """A committed step's actuator displacements and forces; returns why an update was
         refused (the estimate is unchanged then), or None."""
         if self.method == "controller" or self.method == "initial":
             return None  # nothing to learn (the step path pays one comparison)
+        self._step.clear()
+        self._initial_for_step = False
         d, f = np.asarray(disp, dtype=np.float64), np.asarray(force, dtype=np.float64)
         if not (np.all(np.isfinite(d)) and np.all(np.isfinite(f))):
             return self._refuse("a non-finite measurement")  # and it is no new base either

@@ -455,6 +455,8 @@ class ExperimentalSite(CommandGate):
                                 f"non-finite ctrl {list(target)}; not forwarded")
             return None
         self.target = target
+        if (stalled := self._estimate.trial(target)) is not None:
+            self.event("tangent-fallback", stalled)
         if self.state is HOLD:
             return None
         self._daq_valid = False

@@ -115,3 +115,19 @@ def test_the_site_answers_action_13_with_the_estimate(
             link.commit()
             secant = (f - last[1]) / (d - last[0])
             last = (d, f)
+
+
+def test_a_step_whose_newton_stops_contracting_is_answered_with_the_initial_stiffness() -> None:
+    est = TangentEstimate("broyden", 1)
+    est.answer((K0,))
+    est.committed((0.0,), (0.0,))
+    est.committed((1.0,), (1.0,))  # a soft secant: 1.0
+    assert est.answer((K0,)) == (1.0,)
+    assert est.trial((2.0,)) is None and est.trial((1.5,)) is None  # a predictor, a correction
+    why = est.trial((2.0,))  # the correction did not shrink: a cycle
+    assert why is not None and "stopped contracting" in why
+    assert est.answer((K0,)) == (K0,) and est.trial((1.5,)) is None  # once per step
+    est.committed((1.6,), (1.6,))  # the next step starts from the estimate again
+    assert est.answer((K0,)) == (1.0,) and est.fallbacks == 1
+    assert est.trial((1.7,)) is None and est.trial((1.65,)) is None \
+        and est.trial((1.64,)) is None  # contracting: no fallback
