@@ -6,6 +6,11 @@ is exact for displacement, velocity and acceleration, and daq → out is exact f
 and force (the platform state from the measured strokes by Newton's method, forces by virtual
 work). OpenFresco has no exact daq → out velocity or acceleration: it warns and uses linear
 geometry; so do we (one warning per setup, in the log).
+
+The step path asks the same things several times (a force and a displacement of one
+measurement, the stiffness of one controller answer), so each answer is kept for its input;
+measured strokes equal to the last command put the platform where it was commanded, and
+other strokes start Newton's method there (a tracking error away: one or two iterations).
 """
 
 from __future__ import annotations
@@ -13,12 +18,12 @@ from __future__ import annotations
 import logging
 import math
 
-import numpy as np
-
 from .base import SetupError, Values
-from .platform import GeometryError, Platform, Vec
+from .platform import GeometryError, Platform, Rows, Vec
 
 log = logging.getLogger(__name__)
+
+NAN3 = (math.nan, math.nan, math.nan)
 
 
 class PlanarSetup:
@@ -40,70 +45,85 @@ class PlanarSetup:
         self.nl_geom = nl_geom
         phi = math.radians(phi_loc_x)
         self._c, self._s = math.cos(phi), math.sin(phi)
-        self._driven = list(platform.driven)
-        self._j0 = platform.linear
-        # trial (n_basic) → local platform DOFs (3): select, rotate, drop the undriven ones
-        select = np.zeros((3, n_basic))
-        for row, col in enumerate(dofs):
-            select[row, col] = 1.0
-        rot = np.array([[self._c, -self._s, 0.0], [self._s, self._c, 0.0], [0.0, 0.0, 1.0]])
-        held = np.diag([1.0 if i in self._driven else 0.0 for i in range(3)])
-        self._to_local = held @ rot @ select
-        self._t = self._j0 @ self._to_local[self._driven]
-        """The linear transformation, trial → ctrl (n_actuators × n_basic)."""
-        self._back = select.T @ rot.T
-        """Local platform vector (3) → out vector (n_basic): rotate back, place."""
-        self._j0_inv = np.linalg.inv(self._j0)
-        self._last: tuple[Values, Vec] | None = None
+        self._driven = platform.driven
+        self._held = tuple(i not in platform.driven for i in range(3))
+        # the linear transformation trial → ctrl: J(0) · (drop undriven) · R(phi) · select
+        columns = []
+        for k in range(n_basic):
+            unit = [0.0] * n_basic
+            unit[k] = 1.0
+            q = self._local(unit)
+            columns.append(tuple(sum(r * q[i] for r, i in zip(row, self._driven, strict=True))
+                                 for row in platform.linear))
+        self.t: Rows = tuple(tuple(col[a] for col in columns) for a in range(self.n_actuators))
+        """The linear transformation, row by row (trial → ctrl)."""
+        self._commanded: tuple[Values, Vec] | None = None  # (ctrl, platform state) of a trial
+        self._measured: tuple[Values, Vec] | None = None  # (daq, platform state)
+        self._jacobian: tuple[Values, Rows] | None = None
+        self._matrix: tuple[Values, Values] | None = None
         self._warned = False
 
     # -- trial → ctrl -------------------------------------------------------------------------
-    def _local(self, trial: Values) -> Vec:
-        out: Vec = self._to_local @ np.asarray(trial, dtype=np.float64)
-        return out
+    def _local(self, trial: Values | list[float]) -> Vec:
+        """The platform's local (x, y, θ) of a trial vector (undriven DOFs zero)."""
+        d0, d1, d2 = self.dofs
+        x, y = trial[d0], trial[d1]
+        q = (self._c * x - self._s * y, self._s * x + self._c * y, trial[d2])
+        held = self._held
+        return (0.0 if held[0] else q[0], 0.0 if held[1] else q[1], 0.0 if held[2] else q[2])
+
+    def _linear(self, trial: Values) -> Values:
+        return tuple(sum(a * b for a, b in zip(row, trial, strict=True)) for row in self.t)
 
     def ctrl_disp(self, trial_disp: Values) -> Values:
         if not self.nl_geom:
-            return tuple((self._t @ np.asarray(trial_disp, dtype=np.float64)).tolist())
-        return tuple(self.platform.strokes(self._local(trial_disp)).tolist())
+            return self._linear(trial_disp)
+        q = self._local(trial_disp)
+        ctrl = self.platform.strokes(q)
+        self._commanded = (ctrl, q)
+        return ctrl
 
     def ctrl_vel(self, trial_disp: Values, trial_vel: Values) -> Values:
         if not self.nl_geom:
-            return self.ctrl_disp(trial_vel)
-        q, qd = self._local(trial_disp), self._local(trial_vel)
-        return tuple(self.platform.rates(q, qd, np.zeros(3))[0].tolist())
+            return self._linear(trial_vel)
+        zero = (0.0, 0.0, 0.0)
+        return self.platform.rates(self._local(trial_disp), self._local(trial_vel), zero)[0]
 
     def ctrl_accel(self, trial_disp: Values, trial_vel: Values, trial_accel: Values) -> Values:
         if not self.nl_geom:
-            return self.ctrl_disp(trial_accel)
-        q, qd, qdd = self._local(trial_disp), self._local(trial_vel), self._local(trial_accel)
-        return tuple(self.platform.rates(q, qd, qdd)[1].tolist())
+            return self._linear(trial_accel)
+        return self.platform.rates(self._local(trial_disp), self._local(trial_vel),
+                                   self._local(trial_accel))[1]
 
     # -- daq → out ----------------------------------------------------------------------------
     def _state(self, daq_disp: Values) -> Vec:
-        """The platform's local state behind measured strokes (cached: disp and force ask
-        for the same one each step; Newton starts from the previous state)."""
-        last = self._last
-        if last is not None and last[0] == daq_disp:
-            return last[1]
-        s = np.asarray(daq_disp, dtype=np.float64)
-        if self.nl_geom:
-            try:
-                q = self.platform.state(s, None if last is None else last[1])
-            except GeometryError:
-                try:
-                    q = self.platform.state(s)  # from the linear estimate (a far jump)
-                except GeometryError as exc:
-                    log.warning("%s: %s; the answer is NaN", self.kind, exc)
-                    q = np.full(3, np.nan)
+        """The platform's local state behind measured strokes."""
+        measured = self._measured
+        if measured is not None and measured[0] == daq_disp:
+            return measured[1]
+        if not self.nl_geom:
+            q: Vec = tuple(self.platform.linear_state(daq_disp))
+        elif self._commanded is not None and self._commanded[0] == daq_disp:
+            q = self._commanded[1]  # the strokes commanded: the platform where commanded
         else:
-            q = np.zeros(3)
-            q[self._driven] = self._j0_inv @ s
-        self._last = (daq_disp, q)
+            start = (self._commanded or measured or (None, None))[1]
+            try:
+                q = self.platform.state(daq_disp, start)
+            except GeometryError as exc:
+                log.warning("%s: %s; the answer is NaN", self.kind, exc)
+                q = NAN3
+        self._measured = (daq_disp, q)
         return q
 
-    def _out(self, local: Vec) -> Values:
-        return tuple((self._back @ local).tolist())
+    def _out(self, local: Vec | list[float]) -> Values:
+        """A local platform vector as the element's out vector: rotated back, placed."""
+        c, s = self._c, self._s
+        out = [0.0] * self.n_basic
+        d0, d1, d2 = self.dofs
+        out[d0] = c * local[0] + s * local[1]
+        out[d1] = -s * local[0] + c * local[1]
+        out[d2] = local[2]
+        return tuple(out)
 
     def out_disp(self, trial_disp: Values, ctrl: Values, daq_disp: Values) -> Values:
         return self._out(self._state(daq_disp))
@@ -113,9 +133,7 @@ class PlanarSetup:
             self._warned = True
             log.warning("%s: daq %s under nonlinear geometry uses linear geometry (as "
                         "OpenFresco does)", self.kind, what)
-        q = np.zeros(3)
-        q[self._driven] = self._j0_inv @ np.asarray(daq, dtype=np.float64)
-        return self._out(q)
+        return self._out(self.platform.linear_state(daq))
 
     def out_vel(self, daq_vel: Values) -> Values:
         return self._linear_out(daq_vel, "velocity")
@@ -126,20 +144,28 @@ class PlanarSetup:
     def basic_force(self, daq_force: Values, daq_disp: Values | None = None) -> Values:
         """Platform forces by virtual work, ``Jᵀ f`` at the measured state (linear: J(0))."""
         if self.nl_geom and daq_disp is not None:
-            j = self.platform.jacobian(self._state(daq_disp))
+            cached = self._jacobian
+            if cached is not None and cached[0] == daq_disp:
+                j = cached[1]
+            else:
+                j = self.platform.jacobian(self._state(daq_disp))
+                self._jacobian = (daq_disp, j)
         else:
-            j = self._j0
-        local = np.zeros(3)
-        local[self._driven] = j.T @ np.asarray(daq_force, dtype=np.float64)
+            j = self.platform.linear
+        local = [0.0, 0.0, 0.0]
+        for col, i in enumerate(self._driven):
+            local[i] = sum(row[col] * f for row, f in zip(j, daq_force, strict=True))
         return self._out(local)
 
     def basic_matrix(self, k_act: Values) -> Values:
         """Tᵀ k T with the linear transformation (the tangent at rest), column-major."""
-        na = self.n_actuators
-        k = np.array(k_act, dtype=np.float64).reshape(na, na, order="F")
-        return tuple((self._t.T @ k @ self._t).ravel(order="F").tolist())
-
-    @property
-    def t(self) -> tuple[tuple[float, ...], ...]:
-        """The linear transformation, row by row (trial → ctrl)."""
-        return tuple(tuple(row) for row in self._t.tolist())
+        cached = self._matrix
+        if cached is not None and cached[0] == k_act:
+            return cached[1]
+        na, nb, t = self.n_actuators, self.n_basic, self.t
+        kt = [[sum(k_act[b * na + a] * t[b][c] for b in range(na)) for c in range(nb)]
+              for a in range(na)]  # k T
+        out = tuple(sum(t[a][r] * kt[a][c] for a in range(na))
+                    for c in range(nb) for r in range(nb))
+        self._matrix = (k_act, out)
+        return out

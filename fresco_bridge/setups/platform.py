@@ -13,6 +13,9 @@ velocity is ``J(q) q̇``, the acceleration ``J q̈ + q̇ᵀ H_i q̇``, the platf
 strokes is found by Newton's method on ``s(q) = s_meas``. Linear geometry is the same map
 linearised at rest (``s = J(0) q``). Degrees of freedom the actuators do not drive (the
 vertical one of ``TwoActuators2d``) are held at zero, as OpenFresco does.
+
+Plain Python on tuples: with two or three actuators that is several times faster than numpy's
+per-call overhead, and the site calls this on every trial and answer.
 """
 
 from __future__ import annotations
@@ -21,15 +24,14 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import numpy as np
-import numpy.typing as npt
-
-Vec = npt.NDArray[np.float64]
+Vec = tuple[float, ...]
+Rows = tuple[tuple[float, ...], ...]
 
 NEWTON_MAX_ITERATIONS = 50
-"""Newton's method on the strokes converges quadratically; a well-posed platform needs 3 to 6
+"""Newton's method on the strokes converges quadratically; a well-posed platform needs 2 to 6
 iterations. More than this means the measured strokes have no platform state (an actuator
 beyond its reach) or the platform is at a singular pose."""
+EPS = 2.220446049250313e-16
 
 
 class GeometryError(ValueError):
@@ -49,6 +51,29 @@ class Link:
         return math.dist(self.ground, self.platform)
 
 
+def solve(a: Rows, b: Vec) -> tuple[Vec, float]:
+    """``(x, det a)`` with ``a x = b`` (Gaussian elimination, partial pivoting; n ≤ 3)."""
+    n = len(b)
+    m = [[*row, rhs] for row, rhs in zip(a, b, strict=True)]
+    det = 1.0
+    for col in range(n):
+        pivot = max(range(col, n), key=lambda r: abs(m[r][col]))
+        if m[pivot][col] == 0.0:
+            raise GeometryError("singular platform pose (the actuators are aligned)")
+        if pivot != col:
+            m[col], m[pivot] = m[pivot], m[col]
+            det = -det
+        det *= m[col][col]
+        for r in range(col + 1, n):
+            factor = m[r][col] / m[col][col]
+            if factor:
+                m[r] = [x - factor * y for x, y in zip(m[r], m[col], strict=True)]
+    x = [0.0] * n
+    for r in range(n - 1, -1, -1):
+        x[r] = (m[r][n] - sum(m[r][c] * x[c] for c in range(r + 1, n))) / m[r][r]
+    return tuple(x), det
+
+
 @dataclass(frozen=True)
 class Platform:
     """A planar rigid platform on ``links``, moving in the DOFs ``driven`` of (x, y, θ)."""
@@ -56,76 +81,95 @@ class Platform:
     links: tuple[Link, ...]
     driven: tuple[int, ...] = (0, 1, 2)
     """Which of (x, y, θ) the actuators drive (in order); the others stay zero."""
-    _p: Vec = field(init=False, repr=False, compare=False)
-    _g: Vec = field(init=False, repr=False, compare=False)
     _la: Vec = field(init=False, repr=False, compare=False)
+    _j0: Rows = field(init=False, repr=False, compare=False)
+    _det0: float = field(init=False, repr=False, compare=False)
     _reach: float = field(init=False, repr=False, compare=False)
-    _j0: Vec = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if len(self.links) != len(self.driven):
             raise GeometryError(f"{len(self.links)} actuators cannot drive "
                                 f"{len(self.driven)} platform DOF(s) one to one")
-        object.__setattr__(self, "_p", np.array([lk.platform for lk in self.links], float))
-        object.__setattr__(self, "_g", np.array([lk.ground for lk in self.links], float))
-        la = np.array([lk.length for lk in self.links], float)
-        if not np.all(la > 0):
+        la = tuple(lk.length for lk in self.links)
+        if min(la) <= 0:
             raise GeometryError("an actuator of zero length (ground point = platform point)")
         object.__setattr__(self, "_la", la)
-        object.__setattr__(self, "_reach", 0.1 * float(la.min()))
-        j0 = self.jacobian(np.zeros(3))
-        if abs(np.linalg.det(j0)) < 1e-12 * max(1.0, float(np.abs(j0).max())) ** 3:
+        object.__setattr__(self, "_reach", 0.1 * min(la))
+        j0 = self.jacobian((0.0, 0.0, 0.0))
+        scale = max(abs(x) for row in j0 for x in row)
+        try:
+            det = solve(j0, (0.0,) * len(j0))[1]
+        except GeometryError:
+            det = 0.0
+        if abs(det) < 1e-12 * max(1.0, scale) ** len(j0):
             raise GeometryError("the actuators cannot hold the platform at rest (their "
                                 "linearised map is singular: check the lengths)")
         object.__setattr__(self, "_j0", j0)
+        object.__setattr__(self, "_det0", det)
 
     @property
     def n_actuators(self) -> int:
         return len(self.links)
 
     # -- the map and its derivatives ----------------------------------------------------------
-    def _arms(self, q: Vec) -> tuple[Vec, Vec]:
-        """(w, r): the platform points rotated (``R(θ) p``) and the actuator vectors."""
+    def _arms(self, q: Sequence[float]) -> list[tuple[float, float, float, float]]:
+        """Per actuator (wx, wy, rx, ry): the platform point rotated (``R(θ) p``) and the
+        actuator vector."""
         c, s = math.cos(q[2]), math.sin(q[2])
-        p = self._p
-        w = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]))
-        r = w + q[:2] - self._g
-        return w, r
+        x, y = q[0], q[1]
+        out = []
+        for lk in self.links:
+            (px, py), (gx, gy) = lk.platform, lk.ground
+            wx, wy = c * px - s * py, s * px + c * py
+            out.append((wx, wy, x + wx - gx, y + wy - gy))
+        return out
 
-    def strokes(self, q: Vec) -> Vec:
+    def strokes(self, q: Sequence[float]) -> Vec:
         """Exact strokes at platform state ``q`` (x, y, θ)."""
-        _, r = self._arms(q)
-        out: Vec = np.hypot(r[:, 0], r[:, 1]) - self._la
-        return out
+        return tuple(math.hypot(rx, ry) - la
+                     for (_, _, rx, ry), la in zip(self._arms(q), self._la, strict=True))
 
-    def jacobian(self, q: Vec) -> Vec:
-        """∂s/∂q for the driven DOFs (n_actuators × n_driven)."""
-        w, r = self._arms(q)
-        e = r / np.hypot(r[:, 0], r[:, 1])[:, None]
-        full = np.column_stack((e[:, 0], e[:, 1], -e[:, 0] * w[:, 1] + e[:, 1] * w[:, 0]))
-        out: Vec = full[:, list(self.driven)]
-        return out
+    def jacobian(self, q: Sequence[float]) -> Rows:
+        """∂s/∂q for the driven DOFs (n_actuators rows)."""
+        rows = []
+        for wx, wy, rx, ry in self._arms(q):
+            length = math.hypot(rx, ry)
+            ex, ey = rx / length, ry / length
+            full = (ex, ey, ex * -wy + ey * wx)
+            rows.append(tuple(full[i] for i in self.driven))
+        return tuple(rows)
 
-    def rates(self, q: Vec, qd: Vec, qdd: Vec) -> tuple[Vec, Vec]:
+    def rates(self, q: Sequence[float], qd: Sequence[float],
+              qdd: Sequence[float]) -> tuple[Vec, Vec]:
         """(ṡ, s̈) at state ``q`` with platform velocity ``qd`` and acceleration ``qdd``."""
-        w, r = self._arms(q)
-        length = np.hypot(r[:, 0], r[:, 1])
-        e = r / length[:, None]
-        perp = np.column_stack((-w[:, 1], w[:, 0]))  # d(R p)/dθ
-        rd = qd[:2] + qd[2] * perp
-        rdd = qdd[:2] + qdd[2] * perp - qd[2] ** 2 * w
-        sd = np.einsum("ij,ij->i", e, rd)
-        sdd = np.einsum("ij,ij->i", e, rdd) + (np.einsum("ij,ij->i", rd, rd) - sd**2) / length
-        return sd, sdd
+        sd, sdd = [], []
+        for wx, wy, rx, ry in self._arms(q):
+            length = math.hypot(rx, ry)
+            ex, ey = rx / length, ry / length
+            # d(R p)/dθ = (−wy, wx); d²(R p)/dθ² = −(wx, wy)
+            rdx, rdy = qd[0] - qd[2] * wy, qd[1] + qd[2] * wx
+            rddx = qdd[0] - qdd[2] * wy - qd[2] ** 2 * wx
+            rddy = qdd[1] + qdd[2] * wx - qd[2] ** 2 * wy
+            v = ex * rdx + ey * rdy
+            sd.append(v)
+            sdd.append(ex * rddx + ey * rddy + (rdx * rdx + rdy * rdy - v * v) / length)
+        return tuple(sd), tuple(sdd)
 
     # -- the linearised map -------------------------------------------------------------------
     @property
-    def linear(self) -> Vec:
+    def linear(self) -> Rows:
         """J(0): strokes per unit platform motion at rest (linear geometry)."""
         return self._j0
 
+    def linear_state(self, strokes: Vec) -> list[float]:
+        """The platform state of ``strokes`` under linear geometry."""
+        q = [0.0, 0.0, 0.0]
+        for i, v in zip(self.driven, solve(self._j0, strokes)[0], strict=True):
+            q[i] = v
+        return q
+
     # -- the inverse --------------------------------------------------------------------------
-    def state(self, strokes: Vec, start: Vec | None = None) -> Vec:
+    def state(self, strokes: Vec, start: Sequence[float] | None = None) -> Vec:
         """The platform state (x, y, θ) whose exact strokes are ``strokes`` (Newton's method
         from ``start``, or from the linear-geometry state).
 
@@ -134,46 +178,39 @@ class Platform:
         A solution of another mode is refused and sought again from the linear estimate.
         """
         for begin in (start, None) if start is not None else (None,):
-            q = self._newton(strokes, begin)
-            if np.linalg.det(self.jacobian(q)) * np.linalg.det(self._j0) > 0:
+            q, det = self._newton(strokes, begin)
+            if det * self._det0 > 0:
                 return q
-        raise GeometryError(f"the measured strokes {strokes.tolist()} put the platform in "
+        raise GeometryError(f"the measured strokes {list(strokes)} put the platform in "
                             "another assembly mode (past a singular pose)")
 
-    def _newton(self, strokes: Vec, start: Vec | None) -> Vec:
-        d = list(self.driven)
-        q = np.zeros(3)
-        q[d] = np.linalg.solve(self._j0, strokes) if start is None else start[d]
+    def _newton(self, strokes: Vec, start: Sequence[float] | None) -> tuple[Vec, float]:
+        q = self.linear_state(strokes) if start is None else list(start)
         near = q[2]
         # the strokes are lengths La + s: their rounding is a few ulps of the longest length
-        floor = 8 * np.finfo(float).eps * (float(self._la.max()) + float(np.abs(strokes).max()))
+        floor = 8 * EPS * (max(self._la) + max(abs(v) for v in strokes))
         previous = math.inf
         for _ in range(NEWTON_MAX_ITERATIONS):
-            residual = self.strokes(q) - strokes
-            size = float(np.abs(residual).max())
+            residual = tuple(a - b for a, b in zip(self.strokes(q), strokes, strict=True))
+            size = max(abs(v) for v in residual)
+            j = self.jacobian(q)
             if size <= floor or (size >= previous and size <= 1e3 * floor):
                 # at the rounding floor (or no longer improving just above it); of the
                 # rotations 2π apart, the one nearest the start
                 q[2] -= 2 * math.pi * round((q[2] - near) / (2 * math.pi))
-                return q
+                return tuple(q), solve(j, residual)[1]
             previous = size
-            try:
-                step = np.linalg.solve(self.jacobian(q), residual)
-            except np.linalg.LinAlgError:
-                raise GeometryError(f"singular platform pose at {q.tolist()}") from None
-            full = np.zeros(3)
-            full[d] = step
+            step, _ = solve(j, residual)
+            full = [0.0, 0.0, 0.0]
+            for i, v in zip(self.driven, step, strict=True):
+                full[i] = v
             # damped: at most a tenth of a radian and a tenth of the shortest actuator per
             # iteration, so Newton stays in the basin of the pose it starts from
-            reach = max(abs(full[2]) / 0.1, float(np.abs(full[:2]).max()) / self._reach, 1.0)
-            q -= full / reach
-            if not np.all(np.isfinite(q)):
+            reach = max(abs(full[2]) / 0.1, max(abs(full[0]), abs(full[1])) / self._reach, 1.0)
+            q = [a - b / reach for a, b in zip(q, full, strict=True)]
+            if not all(math.isfinite(v) for v in q):
                 break
-        raise GeometryError(f"no platform state has the measured strokes {strokes.tolist()} "
+        raise GeometryError(f"no platform state has the measured strokes {list(strokes)} "
                             f"(Newton's method did not converge in {NEWTON_MAX_ITERATIONS} "
                             "iterations)")
 
-
-def links(pairs: Sequence[tuple[tuple[float, float], tuple[float, float]]]) -> tuple[Link, ...]:
-    """``((ground, platform), …)`` as links."""
-    return tuple(Link(g, p) for g, p in pairs)

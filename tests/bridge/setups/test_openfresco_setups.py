@@ -137,7 +137,8 @@ def test_trial_ctrl_daq_out_returns_the_trial_at_large_rotations(kind: str, side
         extra = {"phiLocX": phi} if kind not in ("ThreeActuators", "ThreeActuatorsJntOff") \
             else {}
         setup = build(kind, side, nlGeom=True, **extra)
-        for trial in random_trials(40, seed=len(kind)):
+        inverse = build(kind, side, nlGeom=True, **extra)  # never saw the trials: Newton
+        for trial in random_trials(200, seed=len(kind)):
             rotated = trial
             if phi and kind == "TwoActuators2d":  # its undriven DOF is the local y
                 c, s = math.cos(math.radians(phi)), math.sin(math.radians(phi))
@@ -145,7 +146,7 @@ def test_trial_ctrl_daq_out_returns_the_trial_at_large_rotations(kind: str, side
                 rotated = (c * x, -s * x, trial[2])  # Rᵀ (x, 0)
             want = driven(kind, trial) if not phi else rotated
             ctrl = setup.ctrl_disp(trial)
-            out = setup.out_disp(trial, ctrl, ctrl)
+            out = inverse.out_disp(trial, ctrl, ctrl)
             # relative to the trial's size, θ counted as the arc at 1 m (θ up to 0.6 rad)
             err = max(abs(o - w) * s for o, w, s in zip(out, want, (1, 1, 1000), strict=True))
             assert err <= 1e-12 * max(abs(w) * s for w, s in zip(want, (1, 1, 1000),
@@ -192,6 +193,16 @@ def test_velocity_and_acceleration_are_the_strokes_derivatives(kind: str) -> Non
         acc = setup.ctrl_accel(trial, tuple(v.tolist()), tuple(a.tolist()))
         assert vel == pytest.approx(fd_vel.tolist(), rel=1e-6, abs=1e-6)
         assert acc == pytest.approx(fd_acc.tolist(), rel=1e-3, abs=5e-2)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_measured_strokes_off_the_command_are_solved_from_the_commanded_pose(kind: str) -> None:
+    setup = build(kind, "right", nlGeom=True)
+    for trial in random_trials(50, seed=9):
+        ctrl = setup.ctrl_disp(trial)
+        daq = tuple(c + 0.05 * (i - 1) for i, c in enumerate(ctrl))  # a tracking error
+        out = setup.out_disp(trial, ctrl, daq)
+        assert setup.ctrl_disp(out) == pytest.approx(daq, rel=1e-12, abs=1e-12)
 
 
 def test_daq_velocity_under_nonlinear_geometry_falls_back_to_linear_with_a_warning(

@@ -1,0 +1,130 @@
+"""Step cost of a three-actuator site against a one-actuator site, and a three-actuator column
+through the bridge against the same column with the transformation done by hand in OpenSees.
+
+Why: a multi-actuator setup must not make the bridge the bottleneck (target: a
+``ThreeActuators2d`` site under nonlinear geometry costs ≤ 1.3× a one-actuator site per step,
+same run, pinned), and its geometry must be the physical one (target: the OpenSees analysis
+through the bridge equals the hand-transformed model to 1e-9 relative).
+
+Step cost: the server's whole per-step Python work (``bench_step_path``: protocol → site →
+setup → safety → controller → record → reply, fed in process), the one-actuator site
+(``OneActuator``, a bilinear specimen) and the three-actuator site (``ThreeActuators2d``,
+``nlGeom``, three bilinear actuators) alternating, the order reversed every round; run it under
+``taskset -c 1``. Reported: µs of CPU per step, min and median over rounds, and the ratio of
+medians.
+
+Column: ``benchmarks/_tangent_peer.py column3`` — a platform with mass and inertia under a
+horizontal sine load and gravity, Newmark + Newton; (a) a 3-DOF ``genericClient`` served by a
+``ThreeActuators2d`` ``nlGeom`` site on the ``sim`` controller with elastic actuators, (b)
+the same three actuators as ``corotTruss`` elements from the ground to the platform's joints
+in OpenSees. Reported: the largest difference of the displacement histories relative to
+their largest value.
+
+    python -m benchmarks.bench_setups [--steps 3000] [--rounds 5] [--column-steps 400]
+
+Feeds BENCHMARKS.md, "Multi-actuator setups".
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import tempfile
+import textwrap
+from pathlib import Path
+
+from .bench_step_path import run as step_path
+from .bench_tangent import run_peer
+
+ONE = """
+[[sites]]
+name = "spec"
+port = 0
+dofs = 1
+setup = "OneActuator"
+[sites.controller]
+kind = "sim"
+model = "bilinear"
+params = { k0 = 100.0, fy = 20.0, alpha = 0.02 }
+"""
+GEOMETRY = "La1 = 1000.0\nLa2 = 900.0\nLa3 = 800.0\nL1 = 500.0\nL2 = 400.0\n"
+THREE = f"""
+[[sites]]
+name = "spec"
+port = 0
+dofs = 3
+[sites.setup]
+kind = "ThreeActuators2d"
+{GEOMETRY}nlGeom = true
+[sites.controller]
+kind = "sim"
+model = "bilinear"
+params = {{ k0 = 100.0, fy = 20.0, alpha = 0.02 }}
+"""
+TARGET_RATIO = 1.3
+TARGET_AGREEMENT = 1e-9
+
+
+def step_cost(steps: int, rounds: int) -> None:
+    cost: dict[str, list[float]] = {"one": [], "three": []}
+    for r in range(rounds):
+        order = [("one", ONE, 1), ("three", THREE, 3)]
+        for name, site, dofs in order if r % 2 == 0 else order[::-1]:
+            cost[name] += asyncio.run(step_path(dofs, steps, True, False, 1, None, site=site))
+    one, three = statistics.median(cost["one"]), statistics.median(cost["three"])
+    print(f"step cost, {steps} steps × {rounds} rounds, record on: one-actuator "
+          f"{min(cost['one']):.1f} / {one:.1f} µs CPU/step (min / median), ThreeActuators2d "
+          f"nlGeom {min(cost['three']):.1f} / {three:.1f}; ratio of medians {three / one:.2f} "
+          f"(target ≤ {TARGET_RATIO}: {'met' if three / one <= TARGET_RATIO else 'NOT met'})")
+
+
+def column(steps: int) -> None:
+    from tests.support.bridge import RunningBridge
+
+    k = 20.0
+    params = {"mass": 0.05, "inertia": 0.05 * 450.0**2, "k": k, "dt": 0.01, "nsteps": steps,
+              "period": 0.8, "load": 60.0,
+              "links": [[[-500.0, 0.0], [-1500.0, 0.0]], [[-500.0, 0.0], [-500.0, -900.0]],
+                        [[400.0, 0.0], [400.0, -800.0]]]}
+    config = textwrap.dedent(f"""
+        [record]
+        enabled = false
+        [[sites]]
+        name = "column"
+        port = 0
+        dofs = 3
+        [sites.setup]
+        kind = "ThreeActuators2d"
+        nlGeom = true
+        [sites.controller]
+        kind = "sim"
+        model = "elastic"
+        params = {{ k = {k} }}
+        """).replace("nlGeom = true\n", GEOMETRY + "nlGeom = true\n")
+    with tempfile.TemporaryDirectory() as tmp, RunningBridge(config, Path(tmp)) as bridge:
+        through = run_peer("column3", {**params, "port": bridge.ports["column"]})["u"]
+    by_hand = run_peer("column3", {**params, "port": None})["u"]
+    scale = [max(abs(u[i]) for u in by_hand) for i in range(3)]
+    worst = [max(abs(a[i] - b[i]) for a, b in zip(through, by_hand, strict=True)) / scale[i]
+             for i in range(3)]
+    print(f"column, {steps} steps: peak x {scale[0]:.1f} mm, y {scale[1]:.2f} mm, θ "
+          f"{scale[2]:.4f} rad; largest difference relative to the peak: x {worst[0]:.1e}, "
+          f"y {worst[1]:.1e}, θ {worst[2]:.1e} (target ≤ {TARGET_AGREEMENT:g}: "
+          f"{'met' if max(worst) <= TARGET_AGREEMENT else 'NOT met'})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--column-steps", type=int, default=400)
+    ap.add_argument("--no-column", action="store_true")
+    args = ap.parse_args()
+    step_cost(args.steps, args.rounds)
+    if not args.no_column:
+        column(args.column_steps)
+
+
+if __name__ == "__main__":
+    main()
