@@ -62,21 +62,29 @@ kind = "sim"
 model = "bilinear"
 params = {{ k0 = 100.0, fy = 20.0, alpha = 0.02 }}
 """
+PLAIN3 = THREE.replace(f"[sites.setup]\nkind = \"ThreeActuators2d\"\n{GEOMETRY}nlGeom = true\n",
+                       'setup = "NoTransformation"\n')
+"""Three actuators without geometry: what three DOFs cost the protocol, record and specimen."""
 TARGET_RATIO = 1.3
 TARGET_AGREEMENT = 1e-9
 
 
-def step_cost(steps: int, rounds: int) -> None:
-    cost: dict[str, list[float]] = {"one": [], "three": []}
+def step_cost(steps: int, rounds: int, record: bool) -> None:
+    cost: dict[str, list[float]] = {"one": [], "plain3": [], "three": []}
+    assert "ThreeActuators2d" not in PLAIN3
     for r in range(rounds):
-        order = [("one", ONE, 1), ("three", THREE, 3)]
+        order = [("one", ONE, 1), ("plain3", PLAIN3, 3), ("three", THREE, 3)]
         for name, site, dofs in order if r % 2 == 0 else order[::-1]:
-            cost[name] += asyncio.run(step_path(dofs, steps, True, False, 1, None, site=site))
-    one, three = statistics.median(cost["one"]), statistics.median(cost["three"])
-    print(f"step cost, {steps} steps × {rounds} rounds, record on: one-actuator "
-          f"{min(cost['one']):.1f} / {one:.1f} µs CPU/step (min / median), ThreeActuators2d "
-          f"nlGeom {min(cost['three']):.1f} / {three:.1f}; ratio of medians {three / one:.2f} "
-          f"(target ≤ {TARGET_RATIO}: {'met' if three / one <= TARGET_RATIO else 'NOT met'})")
+            cost[name] += asyncio.run(step_path(dofs, steps, record, False, 1, None, site=site))
+    one, plain, three = (statistics.median(cost[k]) for k in ("one", "plain3", "three"))
+    print(f"step cost, {steps} steps × {rounds} rounds, record {'on' if record else 'off'}, "
+          "µs CPU/step (min / median):")
+    print(f"  OneActuator, 1 DOF            {min(cost['one']):6.1f} / {one:6.1f}")
+    print(f"  NoTransformation, 3 DOF       {min(cost['plain3']):6.1f} / {plain:6.1f}  "
+          f"({plain / one:.2f}× one)")
+    print(f"  ThreeActuators2d nlGeom, 3    {min(cost['three']):6.1f} / {three:6.1f}  "
+          f"({three / one:.2f}× one, {three / plain:.2f}× three without geometry)")
+    print(f"  target ≤ {TARGET_RATIO}× one: {'met' if three / one <= TARGET_RATIO else 'NOT met'}")
 
 
 def column(steps: int) -> None:
@@ -121,7 +129,8 @@ def main() -> None:
     ap.add_argument("--column-steps", type=int, default=400)
     ap.add_argument("--no-column", action="store_true")
     args = ap.parse_args()
-    step_cost(args.steps, args.rounds)
+    step_cost(args.steps, args.rounds, record=True)
+    step_cost(args.steps, args.rounds, record=False)
     if not args.no_column:
         column(args.column_steps)
 

@@ -47,6 +47,9 @@ class PlanarSetup:
         self._c, self._s = math.cos(phi), math.sin(phi)
         self._driven = platform.driven
         self._held = tuple(i not in platform.driven for i in range(3))
+        self._direct = dofs == (0, 1, 2) and n_basic == 3 and phi == 0.0 \
+            and not any(self._held)
+        """The trial is the platform's local state as it is (the usual column)."""
         # the linear transformation trial → ctrl: J(0) · (drop undriven) · R(phi) · select
         columns = []
         for k in range(n_basic):
@@ -55,17 +58,23 @@ class PlanarSetup:
             q = self._local(unit)
             columns.append(tuple(sum(r * q[i] for r, i in zip(row, self._driven, strict=True))
                                  for row in platform.linear))
+        self._linear_rows = platform.pose((0.0, 0.0, 0.0))[1]
         self.t: Rows = tuple(tuple(col[a] for col in columns) for a in range(self.n_actuators))
         """The linear transformation, row by row (trial → ctrl)."""
-        self._commanded: tuple[Values, Vec] | None = None  # (ctrl, platform state) of a trial
+        self._commanded: tuple[Values, Vec, Rows] | None = None
+        """(ctrl, platform state, Jacobian rows) of the last trial."""
+        self._trial: tuple[Values, Values] | None = None  # (trial, ctrl)
+        self._force: tuple[Values, Values | None, Values] | None = None  # (f, daq, out)
         self._measured: tuple[Values, Vec] | None = None  # (daq, platform state)
-        self._jacobian: tuple[Values, Rows] | None = None
+        self._jacobian: tuple[Values, Rows] | None = None  # (daq, Jacobian rows)
         self._matrix: tuple[Values, Values] | None = None
         self._warned = False
 
     # -- trial → ctrl -------------------------------------------------------------------------
     def _local(self, trial: Values | list[float]) -> Vec:
         """The platform's local (x, y, θ) of a trial vector (undriven DOFs zero)."""
+        if self._direct:
+            return tuple(trial)
         d0, d1, d2 = self.dofs
         x, y = trial[d0], trial[d1]
         q = (self._c * x - self._s * y, self._s * x + self._c * y, trial[d2])
@@ -76,11 +85,17 @@ class PlanarSetup:
         return tuple(sum(a * b for a, b in zip(row, trial, strict=True)) for row in self.t)
 
     def ctrl_disp(self, trial_disp: Values) -> Values:
+        last = self._trial
+        if last is not None and last[0] == trial_disp:
+            return last[1]  # Newton's iterations often send a trial again
         if not self.nl_geom:
-            return self._linear(trial_disp)
-        q = self._local(trial_disp)
-        ctrl = self.platform.strokes(q)
-        self._commanded = (ctrl, q)
+            ctrl = self._linear(trial_disp)
+            self._trial = (trial_disp, ctrl)
+            return ctrl
+        q = trial_disp if self._direct else self._local(trial_disp)
+        ctrl, rows = self.platform.pose(q)
+        self._commanded = (ctrl, q, rows)
+        self._trial = (trial_disp, ctrl)
         return ctrl
 
     def ctrl_vel(self, trial_disp: Values, trial_vel: Values) -> Values:
@@ -117,6 +132,8 @@ class PlanarSetup:
 
     def _out(self, local: Vec | list[float]) -> Values:
         """A local platform vector as the element's out vector: rotated back, placed."""
+        if self._direct:
+            return tuple(local)
         c, s = self._c, self._s
         out = [0.0] * self.n_basic
         d0, d1, d2 = self.dofs
@@ -143,19 +160,28 @@ class PlanarSetup:
 
     def basic_force(self, daq_force: Values, daq_disp: Values | None = None) -> Values:
         """Platform forces by virtual work, ``Jᵀ f`` at the measured state (linear: J(0))."""
-        if self.nl_geom and daq_disp is not None:
-            cached = self._jacobian
-            if cached is not None and cached[0] == daq_disp:
-                j = cached[1]
-            else:
-                j = self.platform.jacobian(self._state(daq_disp))
-                self._jacobian = (daq_disp, j)
+        last = self._force
+        if last is not None and last[0] == daq_force and last[1] == daq_disp:
+            return last[2]
+        if not self.nl_geom or daq_disp is None:
+            rows = self._linear_rows
+        elif self._commanded is not None and self._commanded[0] == daq_disp:
+            rows = self._commanded[2]
+        elif self._jacobian is not None and self._jacobian[0] == daq_disp:
+            rows = self._jacobian[1]
         else:
-            j = self.platform.linear
-        local = [0.0, 0.0, 0.0]
-        for col, i in enumerate(self._driven):
-            local[i] = sum(row[col] * f for row, f in zip(j, daq_force, strict=True))
-        return self._out(local)
+            rows = self.platform.pose(self._state(daq_disp))[1]
+            self._jacobian = (daq_disp, rows)
+        fx = fy = m = 0.0
+        for (ex, ey, em), f in zip(rows, daq_force, strict=True):
+            fx += f * ex
+            fy += f * ey
+            m += f * em
+        held = self._held
+        out = self._out((0.0 if held[0] else fx, 0.0 if held[1] else fy,
+                         0.0 if held[2] else m))
+        self._force = (daq_force, daq_disp, out)
+        return out
 
     def basic_matrix(self, k_act: Values) -> Values:
         """Tᵀ k T with the linear transformation (the tangent at rest), column-major."""

@@ -32,6 +32,7 @@ NEWTON_MAX_ITERATIONS = 50
 iterations. More than this means the measured strokes have no platform state (an actuator
 beyond its reach) or the platform is at a singular pose."""
 EPS = 2.220446049250313e-16
+_cos, _sin, _hypot = math.cos, math.sin, math.hypot
 
 
 class GeometryError(ValueError):
@@ -85,6 +86,9 @@ class Platform:
     _j0: Rows = field(init=False, repr=False, compare=False)
     _det0: float = field(init=False, repr=False, compare=False)
     _reach: float = field(init=False, repr=False, compare=False)
+    _geometry: tuple[tuple[float, float, float, float, float], ...] = field(
+        init=False, repr=False, compare=False)
+    """Per actuator (px, py, gx, gy, La), flat for the step path."""
 
     def __post_init__(self) -> None:
         if len(self.links) != len(self.driven):
@@ -94,6 +98,8 @@ class Platform:
         if min(la) <= 0:
             raise GeometryError("an actuator of zero length (ground point = platform point)")
         object.__setattr__(self, "_la", la)
+        object.__setattr__(self, "_geometry", tuple(
+            (*lk.platform, *lk.ground, length) for lk, length in zip(self.links, la, strict=True)))
         object.__setattr__(self, "_reach", 0.1 * min(la))
         j0 = self.jacobian((0.0, 0.0, 0.0))
         scale = max(abs(x) for row in j0 for x in row)
@@ -117,27 +123,38 @@ class Platform:
         actuator vector."""
         c, s = math.cos(q[2]), math.sin(q[2])
         x, y = q[0], q[1]
-        out = []
-        for lk in self.links:
-            (px, py), (gx, gy) = lk.platform, lk.ground
-            wx, wy = c * px - s * py, s * px + c * py
-            out.append((wx, wy, x + wx - gx, y + wy - gy))
-        return out
+        return [(c * px - s * py, s * px + c * py, x + c * px - s * py - gx,
+                 y + s * px + c * py - gy) for px, py, gx, gy, _ in self._geometry]
+
+    def pose(self, q: Sequence[float]) -> tuple[Vec, Rows]:
+        """(strokes, full Jacobian rows ∂s/∂(x, y, θ)) at ``q``, in one pass."""
+        c, s = _cos(q[2]), _sin(q[2])
+        x, y = q[0], q[1]
+        strokes = []
+        rows = []
+        for px, py, gx, gy, la in self._geometry:
+            wx = c * px - s * py
+            wy = s * px + c * py
+            rx = x + wx - gx
+            ry = y + wy - gy
+            length = _hypot(rx, ry)
+            strokes.append(length - la)
+            ex = rx / length
+            ey = ry / length
+            rows.append((ex, ey, ey * wx - ex * wy))
+        return tuple(strokes), tuple(rows)
 
     def strokes(self, q: Sequence[float]) -> Vec:
         """Exact strokes at platform state ``q`` (x, y, θ)."""
-        return tuple(math.hypot(rx, ry) - la
-                     for (_, _, rx, ry), la in zip(self._arms(q), self._la, strict=True))
+        c, s = math.cos(q[2]), math.sin(q[2])
+        x, y = q[0], q[1]
+        return tuple(math.hypot(x + c * px - s * py - gx, y + s * px + c * py - gy) - la
+                     for px, py, gx, gy, la in self._geometry)
 
     def jacobian(self, q: Sequence[float]) -> Rows:
         """∂s/∂q for the driven DOFs (n_actuators rows)."""
-        rows = []
-        for wx, wy, rx, ry in self._arms(q):
-            length = math.hypot(rx, ry)
-            ex, ey = rx / length, ry / length
-            full = (ex, ey, ex * -wy + ey * wx)
-            rows.append(tuple(full[i] for i in self.driven))
-        return tuple(rows)
+        driven = self.driven
+        return tuple(tuple(row[i] for i in driven) for row in self.pose(q)[1])
 
     def rates(self, q: Sequence[float], qd: Sequence[float],
               qdd: Sequence[float]) -> tuple[Vec, Vec]:
