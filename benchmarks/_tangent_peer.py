@@ -52,7 +52,7 @@ def column3(p: dict[str, Any]) -> dict[str, Any]:
     ops.node(1, 0.0, 0.0)
     ops.mass(1, p["mass"], p["mass"], p["inertia"])
     if p.get("port") is not None:
-        ops.element("genericClient", 1, "-node", 1, "-dof", 1, "-dof", 2, "-dof", 3,
+        ops.element("genericClient", 1, "-node", 1, "-dof", 1, 2, 3,
                     "-server", p["port"], "127.0.0.1")
     else:
         ops.uniaxialMaterial("Elastic", 1, p["k"])  # truss: EA/L → k·La with A = 1
@@ -63,16 +63,21 @@ def column3(p: dict[str, Any]) -> dict[str, Any]:
             ops.node(joint, px, py)
             ops.node(ground, gx, gy)
             ops.fix(ground, 1, 1, 1)
-            ops.rigidLink("beam", 1, joint)
+            # the platform: an exactly rigid link would be a nonlinear constraint, which
+            # OpenSees' rigidLink (a constant, small-rotation matrix) is not; a corotational
+            # beam ``stiff`` times the actuators' stiffness is exact in its rigid-body motion
+            # and deforms by force / stiffness
+            big = p["stiff"] * p["k"] * math.hypot(px, py)
+            ops.element("elasticBeamColumn", 200 + i, 1, joint, 1.0, big, big * 1e6, 1)
             length = math.hypot(px - gx, py - gy)
             ops.uniaxialMaterial("Elastic", 100 + i, p["k"] * length)
             ops.element("corotTruss", 100 + i, ground, joint, 1.0, 100 + i)
     ops.timeSeries("Trig", 1, 0.0, p["dt"] * p["nsteps"], p["period"], "-factor", p["load"])
     ops.pattern("Plain", 1, 1)
-    ops.load(1, 1.0, -0.3, 0.0)
+    ops.load(1, 1.0, -0.3, 300.0)
     ops.system("FullGeneral")
     ops.numberer("Plain")
-    ops.constraints("Transformation")
+    ops.constraints("Plain")
     ops.test("NormDispIncr", 1e-12, 50)
     ops.algorithm("Newton")
     ops.integrator("Newmark", 0.5, 0.25)
