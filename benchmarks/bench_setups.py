@@ -20,7 +20,7 @@ the same three actuators as ``corotTruss`` elements from the ground to the platf
 in OpenSees. Reported: the largest difference of the displacement histories relative to
 their largest value.
 
-    python -m benchmarks.bench_setups [--steps 3000] [--rounds 5] [--column-steps 400]
+    python -m benchmarks.bench_setups [--steps 3000] [--rounds 5] [--column-steps 400] [--quick]
 
 Feeds BENCHMARKS.md, "Multi-actuator setups".
 """
@@ -180,13 +180,16 @@ def by_hand(p: dict[str, Any], k: float, links: list[tuple[tuple[float, float],
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="benchmarks.bench_setups")
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--column-steps", type=int, default=400)
     ap.add_argument("--no-column", action="store_true")
-    args = ap.parse_args()
+    ap.add_argument("--quick", action="store_true", help="300 steps, one round, 50 column steps")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.steps, args.rounds, args.column_steps = 300, 1, 50
     step_cost(args.steps, args.rounds, record=True)
     step_cost(args.steps, args.rounds, record=False)
     if not args.no_column:

@@ -349,6 +349,17 @@ NOT_COVERED = ("FourActuators3d",)
 """OpenFresco setups the bridge does not build (docs/openfresco-setups.md says why)."""
 
 
+def setup_kinds_markdown() -> str:
+    """docs/configuration.md's table cell for ``[sites.setup] kind``: each kind and its keys
+    (beside ``kind`` and the twenty scale factors every kind has)."""
+    common = set(SetupTable.model_fields)
+    parts = []
+    for name, table in SETUP_TABLES.items():
+        keys = ", ".join(f"`{k}`" for k in table.model_fields if k not in common)
+        parts.append(f"`{name}`" + (f": {keys}" if keys else ""))
+    return "<br>".join(parts)
+
+
 def parse_setup_table(value: Any, where: str = "") -> SetupTable:
     """A ``[sites.setup]`` table as its kind's model; ValueError naming the key and reason."""
     at = f"{where}." if where else ""

@@ -303,3 +303,19 @@ def test_a_three_actuator_column_is_served_end_to_end(
                 want += force * np.array([ex, ey, wx * ey - wy * ex])
             assert link.force() == pytest.approx(want.tolist(), rel=1e-12)
             link.commit()
+
+
+def test_forces_equal_openfrescos_resolved_actuator_forces() -> None:
+    """OpenFresco 2.8's ESThreeActuators2d::transfDaqForce (-nlGeom, left), evaluated with
+    La 1000/900/800, L 500/400 at the strokes of (50, −20, 0.3) and forces (10, 20, 30)."""
+    setup = make_setup(parse_setup_table({
+        "kind": "ThreeActuators2d", "La1": 1000.0, "La2": 900.0, "La3": 800.0, "L1": 500.0,
+        "L2": 400.0, "nlGeom": True}), 3)
+    inverse = make_setup(setup_table := parse_setup_table({
+        "kind": "ThreeActuators2d", "La1": 1000.0, "La2": 900.0, "La3": 800.0, "L1": 500.0,
+        "L2": 400.0, "nlGeom": True}), 3)
+    assert str(setup_table) == "ThreeActuators2d"
+    ctrl = setup.ctrl_disp((50.0, -20.0, 0.3))
+    got = inverse.basic_force((10.0, 20.0, 30.0), ctrl)  # through Newton, not the command
+    assert got == pytest.approx((12.918492485389818, 48.33830782941259, 4311.478135525502),
+                                rel=1e-13)
