@@ -84,3 +84,13 @@ def test_a_factor_list_of_the_wrong_length(tmp_path: Path) -> None:
     message = error(tmp_path, SITE + "dofs = 3\n" + COLUMN.replace(
         "daqForceFact = [1.0, -1.0, -1.0]", "daqForceFact = [1.0, -1.0]"))
     assert "sites[0]: daqForceFact: 2 factors for a signal of 3 components" in message
+
+
+def test_the_configuration_table_is_the_setup_registry() -> None:
+    from fresco_bridge.setups.kinds import SETUP_TABLES, setup_kinds_markdown
+    from tests.support.paths import REPO
+
+    reference = (REPO / "docs" / "configuration.md").read_text(encoding="utf-8")
+    assert f"| `[sites.setup] kind` | — | {setup_kinds_markdown()};" in reference
+    mapping = (REPO / "docs" / "openfresco-setups.md").read_text(encoding="utf-8")
+    assert all(f"`{name}`" in mapping for name in SETUP_TABLES)
