@@ -131,3 +131,53 @@ def test_a_step_whose_newton_stops_contracting_is_answered_with_the_initial_stif
     assert est.answer((K0,)) == (1.0,) and est.fallbacks == 1
     assert est.trial((1.7,)) is None and est.trial((1.65,)) is None \
         and est.trial((1.64,)) is None  # contracting: no fallback
+
+
+def test_a_three_actuator_site_answers_a_secant_of_its_last_committed_step(
+        run_bridge: Callable[[str], BridgeThread]) -> None:
+    """Broyden in actuator space, mapped through the setup: the answered basic tangent maps
+    the last committed trial increment onto the last out-force increment — or, when that
+    update was refused (a rank-one update need not stay positive definite), it is the
+    previous answer."""
+    config = textwrap.dedent(f"""
+        [record]
+        enabled = false
+        [[sites]]
+        name = "column"
+        port = 0
+        dofs = 3
+        tangent = "broyden"
+        [sites.setup]
+        kind = "ThreeActuators2d"
+        La1 = 1000.0
+        La2 = 900.0
+        La3 = 800.0
+        L1 = 500.0
+        L2 = 400.0
+        [sites.controller]
+        kind = "sim"
+        model = "bilinear"
+        params = {{ k0 = {K0}, fy = {FY}, alpha = {ALPHA} }}
+        """)
+    bridge = run_bridge(config)
+    rng = np.random.default_rng(4)
+    with GenericClientLink("127.0.0.1", bridge.ports["column"], 3, timeout=20.0) as link:
+        u = np.zeros(3)
+        history: list[tuple[np.ndarray, np.ndarray]] = []
+        previous, updated, refused = np.zeros((3, 3)), 0, 0
+        for step in range(1, 16):
+            u = u + rng.uniform(-0.3, 0.6, 3) * np.array([1.0, 1.0, 0.002])
+            link.set_trial(tuple(u.tolist()), time=0.01 * step)
+            q = np.array(link.force())
+            k = np.array(link.matrix(Action.GET_TANGENT_STIFF))
+            if len(history) >= 2:  # the estimate during this step: from the last two commits
+                (u1, q1), (u2, q2) = history[-2:]
+                if np.allclose(k @ (u2 - u1), q2 - q1, rtol=1e-9, atol=1e-9):
+                    updated += 1
+                else:
+                    assert np.array_equal(k, previous)
+                    refused += 1
+            previous = k
+            link.commit()
+            history.append((u.copy(), q))
+    assert updated >= 8, (updated, refused)  # most updates keep a positive definite matrix
