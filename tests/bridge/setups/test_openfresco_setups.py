@@ -17,6 +17,7 @@ from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.setups import Setup, make_setup
 from fresco_bridge.setups.kinds import parse_setup_table
+from protocol import Action
 
 LA3 = {"La1": 1000.0, "La2": 900.0, "La3": 800.0}
 GEOMETRY: dict[str, dict[str, Any]] = {
@@ -319,3 +320,32 @@ def test_forces_equal_openfrescos_resolved_actuator_forces() -> None:
     got = inverse.basic_force((10.0, 20.0, 30.0), ctrl)  # through Newton, not the command
     assert got == pytest.approx((12.918492485389818, 48.33830782941259, 4311.478135525502),
                                 rel=1e-13)
+
+
+def test_scale_factors_convert_units_end_to_end(
+        run_bridge: Callable[[str], BridgeThread]) -> None:
+    """An OpenSees model in m and N on a lab in mm and kN, as OpenFresco users write it:
+    ``-trialDispFact 1000 -outDispFact 0.001 -outForceFact 1000``."""
+    config = textwrap.dedent("""
+        [record]
+        enabled = false
+        [[sites]]
+        name = "spring"
+        port = 0
+        [sites.setup]
+        kind = "OneActuator"
+        trialDispFact = 1000.0
+        outDispFact = 0.001
+        outForceFact = 1000.0
+        [sites.controller]
+        kind = "sim"
+        model = "elastic"
+        params = { k = 5.0 }
+        """)
+    bridge = run_bridge(config)
+    with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, timeout=20.0) as link:
+        link.set_trial((0.002,), time=0.01)  # 2 mm
+        assert link.force() == pytest.approx((10_000.0,))  # 10 kN in N
+        k = link.matrix(Action.GET_TANGENT_STIFF)[0][0]
+        assert k == pytest.approx(5.0e6)  # 5 kN/mm in N/m
+        link.commit()
