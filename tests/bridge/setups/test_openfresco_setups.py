@@ -121,8 +121,12 @@ def test_linear_geometry_is_openfrescos_matrix(kind: str) -> None:
         got = setup.ctrl_disp(tuple(e))
         want = np.array(OPENFRESCO_LINEAR[kind], dtype=float) @ e
         assert got == pytest.approx(want.tolist(), abs=1e-12)
-    right = build(kind, "right").ctrl_disp((1.0, 0.0, 0.0))
-    assert right[0] == -1.0  # the horizontal actuator pushes from the other side
+    # right: the horizontal actuators push from the other side (their rows change sign)
+    flip = np.diag([-1.0, -1.0] if kind == "TwoActuators2d" else [-1.0, 1.0, 1.0])
+    right = build(kind, "right")
+    for e in np.eye(3):
+        want = flip @ np.array(OPENFRESCO_LINEAR[kind], dtype=float) @ e
+        assert right.ctrl_disp(tuple(e)) == pytest.approx(want.tolist(), abs=1e-12)
 
 
 def random_trials(n: int, seed: int) -> list[tuple[float, float, float]]:
