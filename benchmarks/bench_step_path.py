@@ -39,7 +39,9 @@ from ._step_peers import DT, STEP_CODES
 
 
 def config_text(run_dir: Path, dofs: int, record: bool, limits: bool,
-                overrides: dict[str, dict[str, str]] | None = None) -> str:
+                overrides: dict[str, dict[str, str]] | None = None,
+                site: str | None = None) -> str:
+    """The bench's TOML; ``site`` replaces the ``[[sites]]`` table (named ``spec``)."""
     model = ('model = "elastic"\nparams = { k = 100.0 }' if dofs > 1
              else 'model = "bilinear"\nparams = { k0 = 100.0, fy = 20.0, alpha = 0.02 }')
     lim = "".join(f"\n[[sites.limits]]\nactuator = {a}\ndisp_min = -50.0\ndisp_max = 50.0\n"
@@ -60,7 +62,11 @@ enabled = {"true" if record else "false"}
 {section("record")}
 [telemetry]
 {section("telemetry")}
+{site or default_site(dofs, model, lim)}"""
 
+
+def default_site(dofs: int, model: str, lim: str) -> str:
+    return f"""
 [[sites]]
 name = "spec"
 port = 0
@@ -103,7 +109,8 @@ def session_bytes(dofs: int, steps: int, per_message: bool = False
 
 async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
               profile: Path | None, *, per_message: bool = True,
-              overrides: dict[str, dict[str, str]] | None = None) -> list[float]:
+              overrides: dict[str, dict[str, str]] | None = None,
+              site: str | None = None) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
     from fresco_bridge.server.connection import SessionPump, SiteListener
@@ -111,7 +118,7 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
 
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:
-        text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides)
+        text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides, site)
         bridge = Bridge(parse_config(text), text)
         await bridge.start()
         try:

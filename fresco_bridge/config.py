@@ -24,7 +24,8 @@ from .controls.kind import ControllerConfigBase
 from .controls.registry import CONTROLLER_KINDS, controller_kind, known_kinds
 from .controls.sim import SimControllerConfig
 from .safety import ControlPointLimitsConfig
-from .setups import SetupError, make_setup
+from .setups import SetupError, SetupSpec, make_setup
+from .tangent import TangentMethod
 
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
 
@@ -65,7 +66,13 @@ class SiteConfig(_Strict):
     """``element``: OpenSees genericClient / OpenFresco EE* clients; ``site``: ShadowExpSite."""
     dofs: int = Field(default=1, ge=1, le=64)
     """Number of basic DOFs of the element served (the -dof entries of genericClient)."""
-    setup: Literal["NoTransformation", "OneActuator"] = "NoTransformation"
+    setup: SetupSpec = "NoTransformation"
+    """A name (``NoTransformation``, ``OneActuator``) or a ``[sites.setup]`` table: OpenFresco's
+    setup as ``kind`` with its parameters (docs/openfresco-setups.md)."""
+    tangent: TangentMethod = "controller"
+    """The tangent answered to action 13: the controller's (``controller``), its first answer
+    kept (``initial``), or estimated from the committed steps (``broyden``, ``bfgs``,
+    ``transpose``; docs/openfresco-setups.md)."""
     controller: ControllerConfig = Field(default_factory=SimControllerConfig)
     """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
     ``modbus``, ``mts``."""

@@ -41,8 +41,9 @@ from ..safety import (
     all_finite,
     next_state,
 )
-from ..setups import LinearSetup, make_setup
+from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
+from ..tangent import TangentEstimate
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
@@ -80,8 +81,8 @@ class ExperimentalSite(CommandGate):
         self.cfg = cfg
         self.name = cfg.name
         self.controller = controller
-        self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
-        self._plain = self.setup.kind == "NoTransformation"
+        self.setup: Setup = make_setup(cfg.setup, cfg.dofs)
+        self._plain = self.setup.identity
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
         setup's calls."""
         if self.setup.n_actuators != controller.n_actuators:
@@ -144,6 +145,7 @@ class ExperimentalSite(CommandGate):
         """The controller read in flight (network controllers): one read per trial, whoever
         asks (the site's own force request, or a same-step twin learning from it)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
+        self._estimate = TangentEstimate(self.cfg.tangent, na)  # per session
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
 
@@ -453,6 +455,8 @@ class ExperimentalSite(CommandGate):
                                 f"non-finite ctrl {list(target)}; not forwarded")
             return None
         self.target = target
+        if (stalled := self._estimate.trial(target)) is not None:
+            self.event("tangent-fallback", stalled)
         if self.state is HOLD:
             return None
         self._daq_valid = False
@@ -592,6 +596,8 @@ class ExperimentalSite(CommandGate):
         self.step += 1
         self._uncommitted = False
         commit_time, self._commit_time = self._commit_time, self.time
+        if (refused := self._estimate.committed(self.ctrl, self.daq.force)) is not None:
+            self.event("tangent-fallback", refused)
         lean = self._step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
@@ -640,7 +646,8 @@ class ExperimentalSite(CommandGate):
             if sizes.disp else (),
             trial.vel if sizes.vel else (),
             trial.accel if sizes.accel else (),
-            (daq.force if plain else setup.basic_force(daq.force)) if sizes.force else (),
+            (daq.force if plain else setup.basic_force(daq.force, daq.disp))
+            if sizes.force else (),
             (self.time,) if sizes.time else (),
         )
 
@@ -671,7 +678,7 @@ class ExperimentalSite(CommandGate):
 
     def _tangent_from(self, k: tuple[float, ...] | None) -> tuple[float, ...]:
         if k is not None:
-            self._k_tangent = self.setup.basic_matrix(k)
+            self._k_tangent = self.setup.basic_matrix(self._estimate.answer(k))
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
