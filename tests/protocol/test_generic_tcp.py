@@ -9,6 +9,7 @@ answers the captured replies exactly; and any segmentation of the stream decodes
 
 from __future__ import annotations
 
+import itertools
 import json
 import struct
 from typing import Any
@@ -69,7 +70,7 @@ def server_events(stream: bytes, replies: list[bytes],
     sent = b""
     pending = iter(replies)
     bounds = [0, *sorted(set(cuts or [])), len(stream)]
-    for start, end in zip(bounds, bounds[1:], strict=False):
+    for start, end in itertools.pairwise(bounds):
         if end > start:
             session.receive_data(stream[start:end])
         while (event := session.next_event()) is not NEED_DATA:
@@ -150,7 +151,7 @@ def test_lines_only_between_the_id_and_the_first_vector() -> None:
 def test_a_parameter_file_splits_as_getline_does_and_bad_lines_are_named() -> None:
     assert parameter_file_lines(b"a\r\nb\n\nc") == [b"a\r", b"b", b"", b"c"]
     assert parameter_file_lines(b"a\n") == [b"a"]
-    with pytest.raises(LocalProtocolError, match="line 2 has 16384 bytes; .* at most 16383"):
+    with pytest.raises(LocalProtocolError, match=r"line 2 has 16384 bytes; .* at most 16383"):
         parameter_file_lines(b"ok\n" + b"x" * 16384)
     with pytest.raises(LocalProtocolError, match="line 1 holds a NUL byte at column 3"):
         parameter_file_lines(b"ab\0c")
