@@ -17,7 +17,14 @@ import ssl
 import sys
 from collections.abc import Sequence
 
-from sim_actuator.config import PRESETS, RigConfig, RigConfigError, build_rig, load_rig_config
+from sim_actuator.config import (
+    PRESETS,
+    RigConfig,
+    RigConfigError,
+    build_rig,
+    channel_config,
+    load_rig_config,
+)
 from sim_actuator.config import preset as get_preset
 from sim_actuator.servers.controller import RigController
 from sim_actuator.servers.generic_tcp import GenericTcpRigServer
@@ -84,8 +91,8 @@ def _tls(args: argparse.Namespace) -> ssl.SSLContext | None:
 
 
 async def _serve(args: argparse.Namespace, config: RigConfig) -> int:
-    controllers = [RigController(build_rig(config), time_scale=args.time_scale)
-                   for _ in range(args.channels)]
+    controllers = [RigController(build_rig(channel_config(config, c)),
+                                 time_scale=args.time_scale) for c in range(args.channels)]
     controller = controllers[0]
     port = DEFAULT_PORTS[args.protocol] if args.port is None else args.port
     server: ModbusRigServer | MtsStubServer | GenericTcpRigServer

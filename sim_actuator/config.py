@@ -36,6 +36,7 @@ __all__ = [
     "SensorsConfig",
     "SpecimenConfig",
     "build_rig",
+    "channel_config",
     "load_rig_config",
     "parse_rig_config",
     "preset",
@@ -253,6 +254,15 @@ def _servo(config: ActuatorConfig, dt: float) -> ServoStage:
     if isinstance(servo, SecondOrderServoConfig):
         return SecondOrderServo(servo.natural_frequency, servo.damping, dt)
     return IdealServo()
+
+
+def channel_config(config: RigConfig, channel: int) -> RigConfig:
+    """The rig of channel ``channel`` (0-based) of a multi-actuator rig built from ``config``:
+    the same description with its own noise streams (seed + channel), so channel 0 is the
+    one-actuator rig itself and no two channels share a noise sample."""
+    if channel < 0:
+        raise ValueError(f"channel must be >= 0, got {channel}")
+    return config if channel == 0 else config.model_copy(update={"seed": config.seed + channel})
 
 
 def build_rig(config: RigConfig) -> Rig:

@@ -54,7 +54,7 @@ def controller_kinds_markdown() -> str:
     parts = []
     for kind in CONTROLLER_KINDS.values():
         keys = ", ".join(f"`{k}`" for k in kind.config.model_fields if k != "kind")
-        actuators = {None: "one model per actuator", 1: "one actuator"}.get(
+        actuators = {None: "any number of actuators", 1: "one actuator"}.get(
             kind.max_actuators, f"up to {kind.max_actuators} actuators")
         parts.append(f"`{kind.name}`: {kind.summary}; {actuators}; keys {keys}")
     return "<br>".join(parts)

@@ -130,6 +130,7 @@ KIND = ControllerKind(
     factory=lambda config, n: SimController.from_params(
         n, config.model, dict(config.params), load_cell_noise=config.load_cell_noise,
         noise_seed=config.noise_seed),
-    summary="in-process specimen model (`controller.model`), material semantics = OpenSees",
+    summary="in-process specimen model (`controller.model`) per actuator, material semantics = "
+    "OpenSees",
     max_actuators=None,
 )

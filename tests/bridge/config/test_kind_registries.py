@@ -29,8 +29,9 @@ def test_the_configuration_table_is_the_registries() -> None:
 def test_an_unknown_kind_names_every_registered_kind() -> None:
     with pytest.raises(ConfigError) as err:
         parse_config(SITE + '[sites.controller]\nkind = "rg"\n')
-    assert "unknown controller kind 'rg'; expected sim, rig, modbus or mts" in str(err.value)
-    with pytest.raises(ValueError, match="expected sim, rig, modbus or mts"):
+    assert "unknown controller kind 'rg'; expected sim, rig, modbus, mts or generic-tcp" in str(
+        err.value)
+    with pytest.raises(ValueError, match="expected sim, rig, modbus, mts or generic-tcp"):
         controller_kind("servo")
 
 

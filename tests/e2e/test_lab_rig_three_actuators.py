@@ -1,0 +1,101 @@
+"""A three-actuator ``rig`` site driven by a real OpenSeesPy process for a few hundred steps.
+
+The column top's three DOFs (u, v, theta) are one genericClient element; the site's setup is
+``NoTransformation`` (one actuator per DOF: the linear stand-in for ``ThreeActuators2d``), and
+each actuator is its own simulated rig — its own servo, effects, sensors and specimen. Every
+measured value equals an independent rig of that channel driven with the commands the bridge
+recorded (exact: same models, same noise streams). A displacement limit on actuator 2 trips
+at a step of the run: the site HOLDs, OpenSees is answered NaN, and no actuator moves again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fresco_bridge.config import ConfigError, parse_config
+from fresco_bridge.record import read_record
+from sim_actuator.config import build_rig, channel_config, preset
+from tests.support.bridge import RunningBridge, run_opensees
+
+PRESETS = ("servo-hydraulic", "lab-realistic", "ideal-elastic")
+RAMP = 0.02
+LIMIT = 0.5  # mm, actuator 2 (the vertical one): reached after about 240 steps
+
+
+def toml(limit: float | None = LIMIT) -> str:
+    channels = "".join(f'[[sites.controller.channels]]\npreset = "{p}"\n' for p in PRESETS)
+    limits = "" if limit is None else f"""
+[[sites.limits]]
+actuator = 2
+disp_min = -{limit}
+disp_max = {limit}
+policy = "reject"
+"""
+    return f"""
+[[sites]]
+name = "col"
+port = 0
+dofs = 3
+setup = "NoTransformation"
+[sites.controller]
+kind = "rig"
+ramp_time = {RAMP}
+stiffness = 68.0
+{channels}{limits}"""
+
+
+def test_three_rigs_under_opensees_until_a_limit_on_one_holds_all_three(tmp_path: Path) -> None:
+    with RunningBridge(toml(), tmp_path) as b:
+        result = run_opensees(
+            "column3", timeout=300, port=b.ports["col"], nsteps=400, dt=0.01,
+            masses=[0.05, 0.05, 0.05],
+            excitation=[[2000.0, 1.5, 0.0], [150.0, 2.0, 1.0], [2.0, 1.0, 0.0]])
+        site = b.bridge.sites["col"]
+        rigs = b.call(lambda: list(site.controller.rigs))  # type: ignore[attr-defined]
+        run_dir = b.run_dir
+    failed_at = result["failed_at"]
+    assert failed_at is not None and 150 <= failed_at <= 400, failed_at  # a few hundred steps
+    records = list(read_record(run_dir))
+    # each measurement with the command it answers; the site moves only for a new command
+    answered: list[tuple[tuple[float, ...], dict[str, list[float]]]] = []
+    last_ctrl: tuple[float, ...] = ()
+    for r in records:
+        if r["kind"] == "trial":
+            last_ctrl = tuple(r["ctrl"])
+        elif r["kind"] == "daq":
+            answered.append((last_ctrl, r))
+    moves = [c for i, (c, _) in enumerate(answered) if i == 0 or c != answered[i - 1][0]]
+    assert len(moves) >= failed_at - 2
+    # every measurement is its channel's own rig (effects and noise included) at the command
+    for channel, name in enumerate(PRESETS):
+        reference = build_rig(channel_config(preset(name), channel))
+        latest = None
+        for i, (ctrl, daq) in enumerate(answered):
+            if i == 0 or ctrl != answered[i - 1][0]:
+                latest = reference.execute(ctrl[channel], RAMP)
+            assert latest is not None
+            assert (daq["disp"][channel], daq["force"][channel]) == \
+                (latest.displacement, latest.force)
+        assert rigs[channel].command == moves[-1][channel]  # held: nothing moved after
+    commands = moves
+    daqs = [d for _, d in answered]
+    assert max(abs(c[1]) for c in commands) <= LIMIT  # the tripping command was never sent
+    assert any(abs(d["disp"][0] - c[0]) > 1e-3 for d, c in zip(daqs, commands, strict=True))
+    holds = [r for r in records if r["kind"] == "event" and r.get("event") == "hold"]
+    assert len(holds) == 1 and "ctrl disp[2]" in str(holds[0]["reason"])  # actuator 2
+    commits = [r for r in records if r["kind"] == "commit"]
+    assert holds[0]["step"] == len(commits) >= 150  # a few hundred steps, then held
+
+
+def test_a_channel_table_per_actuator_or_a_config_error() -> None:
+    two = toml(limit=None).replace('[[sites.controller.channels]]\npreset = "ideal-elastic"\n',
+                                   "")
+    with pytest.raises(ConfigError, match=r"sites\[0\]: .*controller rig has 2 "
+                                          r"\[\[sites.controller.channels\]\] table\(s\); this "
+                                          r"site needs one per actuator: 3"):
+        parse_config(two)
+    both = toml(limit=None).replace('kind = "rig"\n', 'kind = "rig"\npreset = "ideal"\n')
+    with pytest.raises(ConfigError, match="not both"):
+        parse_config(both)
