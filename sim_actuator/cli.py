@@ -49,7 +49,8 @@ def _parser() -> argparse.ArgumentParser:
         help="port (default 5020 modbus, 5021 mts, 8092 generic-tcp; 0 = any free port)",
     )
     serve.add_argument("--channels", type=int, default=1,
-                       help="actuators served, one rig each (generic-tcp; default 1)")
+                       help="actuators served, one rig each (modbus: a register block each; "
+                       "generic-tcp; default 1)")
     serve.add_argument("--transport", choices=["tcp", "udp"], default="tcp",
                        help="generic-tcp: tcp (default) or udp (OpenFresco -udp)")
     serve.add_argument("--tls-cert", metavar="FILE",
@@ -100,7 +101,7 @@ async def _serve(args: argparse.Namespace, config: RigConfig) -> int:
         server = GenericTcpRigServer(controllers, host=args.host, port=port,
                                      transport=args.transport, tls=args.tls)
     elif args.protocol == "modbus":
-        server = ModbusRigServer(controller, host=args.host, port=port)
+        server = ModbusRigServer(controllers, host=args.host, port=port)
     else:
         server = MtsStubServer(controller, host=args.host, port=port)
     stop = asyncio.Event()
@@ -146,9 +147,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("sim-actuator: error: --time-scale must be >= 0 and --heartbeat-hz > 0",
               file=sys.stderr)
         return 2
-    if args.channels < 1 or (args.channels != 1 and args.protocol != "generic-tcp"):
+    if args.channels < 1 or (args.channels != 1 and args.protocol == "mts"):
         print("sim-actuator: error: --channels must be >= 1 (more than 1: --protocol "
-              "generic-tcp)", file=sys.stderr)
+              "modbus or generic-tcp)", file=sys.stderr)
         return 2
     if args.protocol != "generic-tcp" and (args.transport != "tcp" or args.tls_cert):
         print("sim-actuator: error: --transport and --tls-* are options of --protocol "

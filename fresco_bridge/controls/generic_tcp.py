@@ -44,7 +44,7 @@ from protocol.wire import SIGNAL_NAMES, Signals
 
 from ..backoff import Backoff
 from ..config_model import ConfigPath
-from .base import ControllerError, ControllerLinkError, Daq, PhysicalController
+from .base import ControllerError, ControllerLinkError, Daq, PhysicalController, wrong_count
 from .kind import ControllerConfigBase, ControllerKind
 
 __all__ = ["GenericTcpController", "GenericTcpControllerConfig"]
@@ -275,8 +275,7 @@ class GenericTcpController(PhysicalController):
     # -- the controller interface ---------------------------------------------------------------
     def _command(self, disp: tuple[float, ...]) -> tuple[float, ...]:
         if len(disp) != self.n_actuators:
-            raise ControllerError(f"{self.where}: drives {self.n_actuators} actuator(s), got "
-                                  f"{len(disp)} ctrl values {list(disp)}")
+            raise wrong_count(self.where, self.n_actuators, disp)
         if not all(math.isfinite(d) for d in disp):
             raise ControllerError(f"{self.where}: ctrl displacement {list(disp)} is not finite; "
                                   "not sent")
@@ -345,20 +344,8 @@ class GenericTcpController(PhysicalController):
     async def hold(self) -> None:
         """Nothing to send: the server moves only on a ctrl vector, the last one holds."""
 
-    async def tangent_stiffness(self) -> tuple[float, ...]:
-        return _diagonal(self.stiffness, self.n_actuators)
-
-    async def initial_stiffness(self) -> tuple[float, ...]:
-        return _diagonal(self.stiffness, self.n_actuators)
-
     def status_fields(self) -> dict[str, object]:
         return {"controller_links": self.links_opened}
-
-
-def _diagonal(value: float, n: int) -> tuple[float, ...]:
-    out = [0.0] * (n * n)
-    out[:: n + 1] = [value] * n
-    return tuple(out)
 
 
 KIND = ControllerKind(

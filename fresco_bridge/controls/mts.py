@@ -102,7 +102,7 @@ class MtsController(NetworkController):
                 raise ControllerError(f"{self.where}: has {info.get('dofs')} dofs, expected 1")
             await self._ask(["OPEN", f"SET_RAMP_TIME {cfg.ramp_time!r}"])
             self._ramp = None  # a restarted controller forgot the old link's ramp ids
-            self._heartbeat.observe(int(_float(await self._ask(["STATUS"]), "heartbeat",
+            self._heartbeats[0].observe(int(_float(await self._ask(["STATUS"]), "heartbeat",
                                                self.where)))
         except Refused as exc:
             self._drop(failed=False)
@@ -159,12 +159,13 @@ class MtsController(NetworkController):
             status = await self._ask(["STATUS"])
         except Refused as exc:
             raise ControllerError(f"{self.where}: STATUS refused: {exc}") from None
-        self._heartbeat.observe(int(_float(status, "heartbeat", self.where)))
+        self._heartbeats[0].observe(int(_float(status, "heartbeat", self.where)))
         return status
 
     # -- the wire of the controller interface -------------------------------------------------
 
-    async def _move(self, target: float) -> None:
+    async def _move(self, targets: tuple[float, ...]) -> None:
+        (target,) = targets
         status = await self._status()
         if status.get("state") == "INTERLOCK" and self._interlock_ours:
             await self._ask_control(["INTERLOCK OFF"])
@@ -196,14 +197,15 @@ class MtsController(NetworkController):
             raise ControllerError(f"{self.where}: ramp {self._ramp} ran to "
                                   f"{reply.get('command')} mm, commanded {target!r} mm")
 
-    async def _measure(self) -> tuple[float, float]:
+    async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         ramp = -1 if self._ramp is None else self._ramp
         try:
             status, reply = await self._ask_all(["STATUS", f"ACQUIRE {ramp}"])
         except Refused as exc:
             raise ControllerError(f"{self.where}: ACQUIRE {ramp} refused: {exc}") from None
-        self._heartbeat.observe(int(_float(status, "heartbeat", self.where)))
-        return (_float(reply, "displacement", self.where), _float(reply, "force", self.where))
+        self._heartbeats[0].observe(int(_float(status, "heartbeat", self.where)))
+        return ((_float(reply, "displacement", self.where),),
+                (_float(reply, "force", self.where),))
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         await self._ask_control(["INTERLOCK ON"] if on

@@ -28,7 +28,7 @@ from sim_actuator.config import (
 from sim_actuator.rig import Measurement, Rig, RigError
 
 from ..config_model import ConfigPath, StrictConfig
-from .base import ControllerError, Daq, InlineController, PhysicalController
+from .base import ControllerError, Daq, InlineController, PhysicalController, diagonal, wrong_count
 from .kind import ControllerConfigBase, ControllerKind
 
 
@@ -122,8 +122,7 @@ class RigController(InlineController, PhysicalController):
 
     def set_ctrl_now(self, disp: tuple[float, ...]) -> None:
         if len(disp) != self.n_actuators:
-            raise ControllerError(f"simulated rig: drives {self.n_actuators} actuator(s), got "
-                                  f"{len(disp)} ctrl values {list(disp)}")
+            raise wrong_count("simulated rig", self.n_actuators, disp)
         for channel, (rig, target) in enumerate(zip(self.rigs, disp, strict=True)):
             try:
                 self._last[channel] = rig.execute(target, self.config.ramp_time)
@@ -159,10 +158,7 @@ class RigController(InlineController, PhysicalController):
         """Fresh rigs: virgin specimens, actuators at rest, noise streams from their seeds."""
         self.rigs = [build_rig(c) for c in self._rig_configs]
         self._last = [rig.measure(noisy=False) for rig in self.rigs]
-        n = self.n_actuators
-        diagonal = [0.0] * (n * n)
-        diagonal[:: n + 1] = [self.stiffness] * n
-        self._diagonal = tuple(diagonal)
+        self._diagonal = diagonal((self.stiffness,) * self.n_actuators)
 
 
 KIND = ControllerKind(
