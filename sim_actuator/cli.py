@@ -33,7 +33,7 @@ from sim_actuator.servers.mts_stub import MtsStubServer
 
 __all__ = ["main"]
 
-DEFAULT_PORTS = {"modbus": 5020, "mts": 5021, "generic-tcp": 8092}
+DEFAULT_PORTS = {"modbus": 5020, "mts": 5021, "generic-tcp": 5022}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -46,7 +46,7 @@ def _parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s)")
     serve.add_argument(
         "--port", type=int, default=None,
-        help="port (default 5020 modbus, 5021 mts, 8092 generic-tcp; 0 = any free port)",
+        help="port (default 5020 modbus, 5021 mts, 5022 generic-tcp; 0 = any free port)",
     )
     serve.add_argument("--channels", type=int, default=1,
                        help="actuators served, one rig each (modbus: a register block each; "

@@ -50,7 +50,8 @@ from .kind import ControllerConfigBase, ControllerKind
 __all__ = ["GenericTcpController", "GenericTcpControllerConfig"]
 
 Mode = Annotated[int, Field(ge=0, le=1)]
-Modes = tuple[Mode, Mode, Mode, Mode, Mode]
+Modes = Annotated[tuple[Mode, Mode, Mode, Mode, Mode], Field(strict=False)]
+"""Five 0/1 flags in OpenFresco's order disp, vel, accel, force, time (a TOML array)."""
 
 
 class GenericTcpControllerConfig(ControllerConfigBase):
@@ -59,7 +60,7 @@ class GenericTcpControllerConfig(ControllerConfigBase):
 
     kind: Literal["generic-tcp"] = "generic-tcp"
     host: str = "127.0.0.1"
-    port: int = Field(8092, ge=1, le=65535)
+    port: int = Field(5022, ge=1, le=65535)
     transport: Literal["tcp", "udp", "ssl"] = "tcp"
     """``tcp``, ``udp`` (OpenFresco ``-udp``) or ``ssl`` (``-ssl``: mutual TLS)."""
     ctrl_modes: Modes = (1, 0, 0, 0, 0)

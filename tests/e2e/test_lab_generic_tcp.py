@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import signal
 import subprocess
-import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,30 +23,18 @@ from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record.export import committed_steps
 from tests.support.bridge import RunningBridge
+from tests.support.controller import sim_actuator
 from tests.support.net import free_ports
 
 K = 68.0  # preset ideal-elastic, kN/mm
 N = 3
 
 
-@contextlib.contextmanager
 def generic_tcp_server(port: int, transport: str,
-                       *extra: str) -> Iterator[subprocess.Popen[str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sim_actuator.cli", "serve", "--protocol", "generic-tcp",
-         "--port", str(port), "--transport", transport, "--channels", str(N),
-         "--preset", "ideal-elastic", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        assert line.startswith("sim-actuator ready"), line + (proc.stderr.read()
-                                                               if proc.stderr else "")
-        yield proc
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGTERM)
-        proc.wait(10)
+                       *extra: str) -> contextlib.AbstractContextManager[subprocess.Popen[str]]:
+    """``sim-actuator serve --protocol generic-tcp`` with three ideal-elastic channels."""
+    return sim_actuator("generic-tcp", port, "--transport", transport, "--channels", str(N),
+                        *extra)
 
 
 def bridge_toml(port: int, transport: str, recovery: float) -> str:
