@@ -49,8 +49,7 @@ def _parser() -> argparse.ArgumentParser:
         help="port (default 5020 modbus, 5021 mts, 5022 generic-tcp; 0 = any free port)",
     )
     serve.add_argument("--channels", type=int, default=1,
-                       help="actuators served, one rig each (modbus: a register block each; "
-                       "generic-tcp; default 1)")
+                       help="actuators served, one rig each (default 1)")
     serve.add_argument("--transport", choices=["tcp", "udp"], default="tcp",
                        help="generic-tcp: tcp (default) or udp (OpenFresco -udp)")
     serve.add_argument("--tls-cert", metavar="FILE",
@@ -94,7 +93,6 @@ def _tls(args: argparse.Namespace) -> ssl.SSLContext | None:
 async def _serve(args: argparse.Namespace, config: RigConfig) -> int:
     controllers = [RigController(build_rig(channel_config(config, c)),
                                  time_scale=args.time_scale) for c in range(args.channels)]
-    controller = controllers[0]
     port = DEFAULT_PORTS[args.protocol] if args.port is None else args.port
     server: ModbusRigServer | MtsStubServer | GenericTcpRigServer
     if args.protocol == "generic-tcp":
@@ -103,7 +101,7 @@ async def _serve(args: argparse.Namespace, config: RigConfig) -> int:
     elif args.protocol == "modbus":
         server = ModbusRigServer(controllers, host=args.host, port=port)
     else:
-        server = MtsStubServer(controller, host=args.host, port=port)
+        server = MtsStubServer(controllers, host=args.host, port=port)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for signum in (signal.SIGTERM, signal.SIGINT):
@@ -147,9 +145,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("sim-actuator: error: --time-scale must be >= 0 and --heartbeat-hz > 0",
               file=sys.stderr)
         return 2
-    if args.channels < 1 or (args.channels != 1 and args.protocol == "mts"):
-        print("sim-actuator: error: --channels must be >= 1 (more than 1: --protocol "
-              "modbus or generic-tcp)", file=sys.stderr)
+    if args.channels < 1:
+        print("sim-actuator: error: --channels must be >= 1", file=sys.stderr)
         return 2
     if args.protocol != "generic-tcp" and (args.transport != "tcp" or args.tls_cert):
         print("sim-actuator: error: --transport and --tls-* are options of --protocol "

@@ -45,12 +45,15 @@ def test_a_typo_inside_a_kinds_table_is_reported_under_its_own_key(kind: str) ->
 
 def test_the_actuator_count_comes_from_the_setup() -> None:
     two_dofs = SITE + "dofs = 2\n"
-    with pytest.raises(ConfigError, match=r"controller mts drives 1 actuator.*needs 2"):
-        parse_config(two_dofs + '[sites.controller]\nkind = "mts"\n')
+    with pytest.raises(ConfigError, match=r"controller rig has 1 \[\[sites.controller.channels"
+                                          r"\]\] table\(s\); this site needs one per actuator: "
+                                          r"2 \(setup NoTransformation with 2 DOF\(s\)\)"):
+        parse_config(two_dofs + '[sites.controller]\nkind = "rig"\n'
+                     '[[sites.controller.channels]]\npreset = "ideal-elastic"\n')
     one_actuator = parse_config(two_dofs + 'setup = "OneActuator"\n[sites.controller]\n'
                                 'kind = "modbus"\n').sites[0]
     assert make_controller(one_actuator).n_actuators == 1
-    for kind in ("modbus", "generic-tcp"):  # a register block / a vector entry per actuator
+    for kind in ("modbus", "mts", "generic-tcp"):  # a channel per actuator
         site = parse_config(two_dofs + f'[sites.controller]\nkind = "{kind}"\n').sites[0]
         assert make_controller(site).n_actuators == 2
     sim = parse_config(two_dofs + '[sites.controller]\nmodel = "elastic"\n'

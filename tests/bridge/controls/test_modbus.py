@@ -334,7 +334,7 @@ def test_three_channels_each_its_own_rig_to_float32() -> None:
             assert not any(r.interlock for r in rigs) and [r.target for r in rigs] == \
                 [f32(0.1)] * 3
             rigs[1].set_interlock(True)  # an operator's interlock on one channel: no move at all
-            with pytest.raises(ControllerError, match="channel 2: cannot move .* not by this"):
+            with pytest.raises(ControllerError, match=r"channel 2: cannot move .* not by this"):
                 await ctl.set_ctrl((0.2, 0.2, 0.2))
             assert [r.target for r in rigs] == [f32(0.1)] * 3
 
@@ -344,11 +344,11 @@ def test_three_channels_each_its_own_rig_to_float32() -> None:
 def test_a_server_with_fewer_channels_than_the_site_is_refused_before_any_move() -> None:
     async def scenario() -> None:
         async with serving_channels(["ideal-elastic"] * 2, 3) as (rigs, ctl):
-            with pytest.raises(ControllerError, match="serves 2 channel.*drives 3 actuators"):
+            with pytest.raises(ControllerError, match=r"serves 2 channel.*drives 3 actuators"):
                 await ctl.set_ctrl((1.0, 1.0, 1.0))
             assert [r.sequence for r in rigs] == [0, 0]
         async with serving_channels(["ideal-elastic"], 2) as (rigs, ctl):
-            with pytest.raises(ControllerError, match="serves 1 channel.*drives 2 actuators"):
+            with pytest.raises(ControllerError, match=r"serves 1 channel.*drives 2 actuators"):
                 await ctl.connect()
 
     run(scenario)
