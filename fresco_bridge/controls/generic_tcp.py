@@ -209,6 +209,8 @@ class GenericTcpController(PhysicalController):
         self._session: GenericTcpClientSession | None = None
         self._lost = False
         """A link was lost and no daq reply has come over a new one yet: no motion command."""
+        self._answered = False
+        """A daq reply came over the current link."""
         self._sent: tuple[float, ...] = (0.0,) * n_actuators
         self.links_opened = 0
         self.last_daq: Signals | None = None
@@ -262,6 +264,7 @@ class GenericTcpController(PhysicalController):
             raise ControllerLinkError(f"{self.where}: link lost while sending the size ID and "
                                       f"the parameter file: {exc}") from None
         self._link, self._session = link, session
+        self._answered = False
         self.links_opened += 1
         self._backoff.succeeded()
 
@@ -326,9 +329,15 @@ class GenericTcpController(PhysicalController):
                 while True:
                     event = session.next_event()
                     if isinstance(event, DaqReplyReceived):
+                        self._answered = True
                         return event.daq
                     if isinstance(event, ConnectionClosed):
-                        raise ConnectionError("connection closed by the server")
+                        raise ConnectionError(
+                            "connection closed by the server" if self._answered else
+                            "connection closed by the server before any reply on this link: a "
+                            "server that refuses the size ID (this site's "
+                            f"{self._size_id.ctrl.disp} actuator(s), daq_modes "
+                            f"{list(self.config.daq_modes)}) closes it; its log says why")
                     session.receive_data(await link.receive())
         except asyncio.CancelledError:
             self._drop()  # a reply may still be in flight: the stream is out of step

@@ -200,3 +200,40 @@ def test_mutual_tls_as_openfresco_ssl(tmp_path: Path) -> None:
             await server.stop()
 
     run(scenario)
+
+
+def test_a_server_refusing_the_sites_sizes_is_named_as_the_likely_cause() -> None:
+    async def scenario() -> None:
+        server = GenericTcpRigServer(channels(1))  # one channel; the site drives two
+        _, port = await server.start()
+        ctl = GenericTcpController(config(port), 2)
+        try:
+            await ctl.set_ctrl((1.0, 1.0))  # sent before the server's refusal arrives
+            with pytest.raises(ControllerLinkError, match=r"before any reply on this link.*"
+                                                          r"2 actuator\(s\).*its log says why"):
+                await ctl.get_daq()
+            assert server.channels.controllers[0].rig.command == 0.0  # nothing moved
+        finally:
+            await ctl.close()
+            await server.stop()
+
+    run(scenario)
+
+
+def test_the_parameter_file_over_udp_is_chunked_as_openfresco_does(tmp_path: Path) -> None:
+    init = tmp_path / "lab.par"
+    init.write_text("ramp_time 0.5\n" + "# " + "x" * 12000 + "\n")  # a line over 9126 bytes
+
+    async def scenario() -> None:
+        server = GenericTcpRigServer(channels(2), transport="udp")
+        _, port = await server.start()
+        ctl = GenericTcpController(config(port, transport="udp", init_file=init), 2)
+        try:
+            await ctl.set_ctrl((0.5, -0.5))
+            assert (await ctl.get_daq()).force == pytest.approx((K * 0.5, -K * 0.5))
+            assert server.channels.ramp_time == 0.5
+        finally:
+            await ctl.close()
+            await server.stop()
+
+    run(scenario)
