@@ -22,7 +22,7 @@ from pydantic import (
 )
 
 from sim_actuator.actuator import Actuator, FirstOrderLag, IdealServo, SecondOrderServo, ServoStage
-from sim_actuator.effects import LoadPath, Sensor
+from sim_actuator.effects import LoadPath, Sensor, SpecimenModel
 from sim_actuator.models import MODEL_KINDS, ModelParameterError, make_model
 from sim_actuator.rig import Rig
 
@@ -265,10 +265,12 @@ def channel_config(config: RigConfig, channel: int) -> RigConfig:
     return config if channel == 0 else config.model_copy(update={"seed": config.seed + channel})
 
 
-def build_rig(config: RigConfig) -> Rig:
-    """A fresh rig (virgin specimen, clock at zero) from a validated description."""
+def build_rig(config: RigConfig, specimen: SpecimenModel | None = None) -> Rig:
+    """A fresh rig (virgin specimen, clock at zero) from a validated description; ``specimen``
+    replaces the described one (an actuator of a platform several rigs load together)."""
     dt = 1.0 / config.substep_rate
-    specimen = make_model(config.specimen.kind, **config.specimen.params)
+    if specimen is None:
+        specimen = make_model(config.specimen.kind, **config.specimen.params)
     act = config.actuator
     actuator = Actuator(
         dt=dt,

@@ -20,11 +20,14 @@ from pydantic import Field, model_validator
 from sim_actuator.config import (
     RigConfig,
     RigConfigError,
+    SpecimenConfig,
     build_rig,
     channel_config,
     load_rig_config,
     preset,
 )
+from sim_actuator.models import make_model
+from sim_actuator.platform import Platform, PlatformError
 from sim_actuator.rig import Measurement, Rig, RigError
 
 from ..config_model import ConfigPath, StrictConfig
@@ -56,6 +59,29 @@ def _rig_config(preset_name: str | None, file: Path | None) -> RigConfig:
         raise ValueError(str(exc)) from None
 
 
+class PlatformConfig(StrictConfig):
+    """The specimen several actuators load together (``[sites.controller.platform]``): a rigid
+    platform with linear geometry, one law per basic DOF (``sim_actuator/platform.py``)."""
+
+    geometry: list[list[float]]
+    """Strokes from platform DOFs, one row per actuator (e.g. ThreeActuators2d, linear:
+    ``[[1, 0, 0], [0, 1, -L1], [0, 1, L2]]``)."""
+    specimen: list[SpecimenConfig]
+    """One law per platform DOF, ``{ kind = "elastic", params = { k = 10.0 } }``."""
+
+    @model_validator(mode="after")
+    def _fits(self) -> PlatformConfig:
+        self.build()  # a singular or misshapen geometry is a config error, now
+        return self
+
+    def build(self) -> Platform:
+        try:
+            return Platform(self.geometry, [make_model(s.kind, **s.params)
+                                            for s in self.specimen])
+        except PlatformError as exc:
+            raise ValueError(str(exc)) from None
+
+
 class RigControllerConfig(ControllerConfigBase):
     """``kind = "rig"``: ``sim_actuator`` rigs in process, one per actuator (a preset or a rig
     TOML file for all of them, or one ``[[sites.controller.channels]]`` table each)."""
@@ -67,6 +93,10 @@ class RigControllerConfig(ControllerConfigBase):
     """A rig description (TOML, the format of ``sim-actuator serve --rig``; every actuator)."""
     channels: list[RigChannelConfig] | None = None
     """One rig per actuator, in control-point order (instead of ``preset``/``file``)."""
+    platform: PlatformConfig | None = None
+    """The actuators load one platform specimen (coupled) instead of a specimen each; their
+    rigs' own specimens are then not used, and load-path effects (friction, backlash, frame
+    compliance) are not simulated through a platform: a config error."""
     ramp_time: float | None = Field(None, ge=0.0, le=3600.0, allow_inf_nan=False)
     """Ramp time of every move, s (default: each rig's ``default_ramp_time``)."""
     stiffness: float = Field(68.0, gt=0.0, allow_inf_nan=False)
@@ -83,6 +113,20 @@ class RigControllerConfig(ControllerConfigBase):
                              "table per actuator), not both")
         elif not self.channels:
             raise ValueError("channels: at least one [[sites.controller.channels]] table")
+        if self.platform is not None:
+            n = len(self.platform.geometry)
+            if self.channels is not None and len(self.channels) != n:
+                raise ValueError(f"platform: {n} actuators, {len(self.channels)} channel "
+                                 "table(s)")
+            for c, rig in enumerate(self.rig_configs(n), 1):
+                fx = rig.effects
+                if fx.friction.coulomb or fx.friction.viscous or fx.backlash.gap or \
+                        fx.frame.stiffness is not None:
+                    raise ValueError(f"platform: the rig of actuator {c} ({rig.name}) has "
+                                     "load-path effects (friction, backlash or frame "
+                                     "compliance), which a shared platform does not simulate; "
+                                     "use a rig without them (servo and sensor effects are "
+                                     "fine)")
         return self
 
     def rig_configs(self, n_actuators: int) -> list[RigConfig]:
@@ -102,6 +146,8 @@ class RigController(InlineController, PhysicalController):
     servo, effects, sensors and specimen); answers at once (called synchronously by the site).
     The actuators move one after the other inside one ``set_ctrl``; a refused move of one
     raises after the ones before it moved (the site HOLDs every actuator)."""
+
+    platform: Platform | None
 
     def __init__(self, config: RigControllerConfig, n_actuators: int = 1) -> None:
         self.config = config
@@ -130,6 +176,10 @@ class RigController(InlineController, PhysicalController):
                 which = "" if self.n_actuators == 1 else f"actuator {channel + 1}: "
                 raise ControllerError(f"simulated rig: {which}move to {target!r} mm failed: "
                                       f"{exc}") from exc
+        if self.platform is not None:  # every actuator feels the others' moves: read them all
+            for channel, rig in enumerate(self.rigs):
+                rig.load_path.impose(rig.position)
+                self._last[channel] = rig.measure()
 
     def get_daq_now(self) -> Daq:
         return Daq(tuple(m.displacement for m in self._last),
@@ -156,9 +206,22 @@ class RigController(InlineController, PhysicalController):
 
     def reset(self) -> None:
         """Fresh rigs: virgin specimens, actuators at rest, noise streams from their seeds."""
-        self.rigs = [build_rig(c) for c in self._rig_configs]
+        platform = None if self.config.platform is None else self.config.platform.build()
+        self.platform = platform
+        self.rigs = [build_rig(c, None if platform is None else platform.channel(i))
+                     for i, c in enumerate(self._rig_configs)]
         self._last = [rig.measure(noisy=False) for rig in self.rigs]
         self._diagonal = diagonal((self.stiffness,) * self.n_actuators)
+
+
+def _fits(config: RigControllerConfig, n: int) -> str | None:
+    if config.channels is not None and len(config.channels) != n:
+        return (f"controller rig has {len(config.channels)} [[sites.controller.channels]] "
+                f"table(s); this site needs one per actuator: {n}")
+    if config.platform is not None and len(config.platform.geometry) != n:
+        return (f"controller rig: the platform has {len(config.platform.geometry)} actuators; "
+                f"this site drives {n}")
+    return None
 
 
 KIND = ControllerKind(
@@ -168,7 +231,5 @@ KIND = ControllerKind(
     summary="the whole simulated lab of `sim-actuator` in process, one rig per actuator — servo "
     "delay/lag, friction, backlash, compliance, sensor noise",
     max_actuators=None,
-    fits=lambda config, n: None if config.channels is None or len(config.channels) == n else (
-        f"controller rig has {len(config.channels)} [[sites.controller.channels]] table(s); "
-        f"this site needs one per actuator: {n}"),
+    fits=lambda config, n: _fits(config, n),
 )
