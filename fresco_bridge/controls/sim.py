@@ -126,3 +126,7 @@ KIND = ControllerKind(
     "OpenSees",
     max_actuators=None,
 )
+
+_diagonal = diagonal
+"""The helper's old name here (``tests/bridge/setups/test_transforms.py`` imports it); the one
+definition is ``controls/base.py``'s ``diagonal``."""
