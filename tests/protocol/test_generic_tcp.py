@@ -165,3 +165,53 @@ def test_eof_inside_a_line_message_is_an_unclean_close() -> None:
     assert session.next_event() is NEED_DATA
     session.receive_data(b"")
     assert session.next_event() == ConnectionClosed(clean=False, pending_bytes=100)
+
+
+LINE = st.binary(max_size=300).map(lambda b: b.replace(b"\n", b" ").replace(b"\0", b" "))
+FINITE = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 6), lines=st.lists(LINE, max_size=4),
+       steps=st.lists(st.lists(FINITE, min_size=6, max_size=6), min_size=1, max_size=5),
+       cuts=st.lists(st.integers(0, 10**6), max_size=4))
+def test_what_the_client_sends_the_server_reads_back(
+        n: int, lines: list[bytes], steps: list[list[float]], cuts: list[int]) -> None:
+    """Any sizes, lines, ctrl vectors and segmentation: the server's events are the client's
+    messages, and the client decodes the server's daq replies exactly."""
+    sid = SizeID(SignalSizes(disp=n), SignalSizes(disp=n, force=n, time=1), 256)
+    client, server = GenericTcpClientSession(sid), GenericTcpServerSession()
+    events: list[object] = []
+
+    def deliver(data: bytes) -> bytes:
+        """``data`` to the server cut at ``cuts``; the server's reply (b"" if none)."""
+        bounds = [0, *sorted({c % (len(data) + 1) for c in cuts}), len(data)]
+        reply = b""
+        for start, end in itertools.pairwise(bounds):
+            if end > start:
+                server.receive_data(data[start:end])
+            while (event := server.next_event()) is not NEED_DATA:
+                events.append(event)
+                if isinstance(event, ReplyRequested):
+                    ctrl = events[-2].trial.disp  # type: ignore[attr-defined]
+                    reply += server.send_daq(Signals(disp=ctrl, force=tuple(-v for v in ctrl),
+                                                     time=(1.5,)))
+                if isinstance(event, DieReceived):
+                    return reply
+        return reply
+
+    assert deliver(client.start() + b"".join(client.send_setup_line(x) for x in lines)) == b""
+    sent = []
+    for values in steps:
+        ctrl = tuple(values[:n])
+        sent.append(ctrl)
+        reply = deliver(client.send_ctrl(Signals(disp=ctrl)) + client.send_daq_request())
+        client.receive_data(reply)
+        event = client.next_event()
+        assert isinstance(event, DaqReplyReceived)
+        assert event.daq == Signals(disp=ctrl, force=tuple(-v for v in ctrl), time=(1.5,))
+    deliver(client.send_die())
+    assert isinstance(events[0], SizeReceived) and events[0].size_id == sid
+    assert [e.line for e in events if isinstance(e, SetupLineReceived)] == lines
+    assert [e.trial.disp for e in events if isinstance(e, TrialReceived)] == sent
+    assert isinstance(events[-1], DieReceived)
