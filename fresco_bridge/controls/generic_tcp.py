@@ -335,9 +335,10 @@ class GenericTcpController(PhysicalController):
                         raise ConnectionError(
                             "connection closed by the server" if self._answered else
                             "connection closed by the server before any reply on this link: a "
-                            "server that refuses the size ID (this site's "
-                            f"{self._size_id.ctrl.disp} actuator(s), daq_modes "
-                            f"{list(self.config.daq_modes)}) closes it; its log says why")
+                            "server closes it when it refuses the client (busy with another "
+                            f"master, or the size ID: this site's {self._size_id.ctrl.disp} "
+                            f"actuator(s), daq_modes {list(self.config.daq_modes)}); its log "
+                            "says why")
                     session.receive_data(await link.receive())
         except asyncio.CancelledError:
             self._drop()  # a reply may still be in flight: the stream is out of step

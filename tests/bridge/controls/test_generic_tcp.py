@@ -237,3 +237,27 @@ def test_the_parameter_file_over_udp_is_chunked_as_openfresco_does(tmp_path: Pat
             await server.stop()
 
     run(scenario)
+
+
+def test_one_master_at_a_time() -> None:
+    async def scenario() -> None:
+        rigs = channels(1)
+        server = GenericTcpRigServer(rigs)
+        _, port = await server.start()
+        first = GenericTcpController(config(port), 1)
+        second = GenericTcpController(config(port), 1)
+        try:
+            await first.set_ctrl((1.0,))
+            await first.get_daq()
+            with pytest.raises(ControllerLinkError, match=r"link lost"):  # closed at once
+                await second.set_ctrl((5.0,))
+                await second.get_daq()
+            assert rigs[0].rig.command == 1.0  # the second master moved nothing
+            await first.set_ctrl((1.5,))
+            assert (await first.get_daq()).disp == pytest.approx((1.5,))
+        finally:
+            await first.close()
+            await second.close()
+            await server.stop()
+
+    run(scenario)
