@@ -143,12 +143,9 @@ class SiteConfig(_Strict):
             n_act = make_setup(self.setup, self.dofs).n_actuators  # setups.py owns the count
         except SetupError as exc:
             raise ValueError(str(exc)) from None
-        most = controller_kind(self.controller.kind).max_actuators
-        if most is not None and n_act > most:
-            raise ValueError(
-                f"controller {self.controller.kind} drives {most} actuator(s); this site needs "
-                f"{n_act} (use setup OneActuator or dofs = 1)"
-            )
+        problem = controller_kind(self.controller.kind).actuators_problem(self.controller, n_act)
+        if problem is not None:
+            raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
         self._kind_keys_fit(n_act)
         actuators = [lim.actuator for lim in self.limits]
         if any(a > n_act for a in actuators):

@@ -44,8 +44,10 @@ def test_a_tcl_expsetup_line_is_one_table(tmp_path: Path) -> None:
 
 def test_an_actuator_count_the_controller_cannot_drive(tmp_path: Path) -> None:
     message = error(tmp_path, SITE + "dofs = 3\n" + COLUMN
-                    + '[sites.controller]\nkind = "mts"\n')
-    assert "  sites[0]: controller mts drives 1 actuator(s); this site needs 3" in message
+                    + '[sites.controller]\nkind = "rig"\n'
+                    + '[[sites.controller.channels]]\npreset = "ideal-elastic"\n' * 2)
+    assert ("  sites[0]: controller rig has 2 [[sites.controller.channels]] table(s); this site "
+            "needs one per actuator: 3") in message
 
 
 def test_limits_for_an_actuator_the_setup_does_not_have(tmp_path: Path) -> None:
