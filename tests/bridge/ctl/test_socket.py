@@ -4,6 +4,7 @@ mode 0600, stale and live sockets, and the short-path fallback for long run dire
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import stat
@@ -92,6 +93,29 @@ def test_requests_and_bad_requests_on_one_connection(bridge: BridgeThread,
     assert not resume["ok"]
     assert [(r["site"], r["ok"]) for r in resume["results"]] == [("a", True), ("b", False)]
     assert bridge.call(lambda: str(bridge.bridge.sites["a"].state)) == "IDLE"
+
+
+def test_deep_nesting_huge_numbers_and_bad_bytes_get_one_line_answers(
+        bridge: BridgeThread, short_dir: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """4,000 ``[`` under the size cap raised RecursionError out of the client's task (a
+    traceback, no reply): now every such line is answered, and the connection serves on."""
+    answers = _lines(
+        short_dir / "c.sock",
+        b"[" * 4000 + b"\n",
+        b'{"command": ' + b"[" * 17 + b"\n",
+        b"9" * 4090 + b"\n",
+        b'{"command": "status", "id": 1e999999}\n',
+        b"\xff\xfe\n",
+        b'{"command": "status", "id": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[["}\n',
+    )
+    assert [a["ok"] for a in answers] == [False, False, False, True, False, True]
+    assert answers[0]["error"] == ("request is not a JSON line: nested deeper than 16 levels at "
+                                   "character 16")
+    assert "nested deeper" in answers[1]["error"] and "JSON object" in answers[2]["error"]
+    assert answers[3]["id"] == math.inf  # a huge number is a number (inf), not an error
+    assert "not UTF-8 at byte 0" in answers[4]["error"]
+    assert "Traceback" not in caplog.text and "RecursionError" not in caplog.text
+    assert all("\n" not in r.getMessage() for r in caplog.records)
 
 
 def test_socket_is_private_to_the_bridge_user(bridge: BridgeThread, short_dir: Path) -> None:
