@@ -211,8 +211,9 @@ class ExperimentalSite(CommandGate):
             self.peer, self._end_session = "", None
             return False
         (log.warning if error else log.info)(
-            "site %s: session %d closed after %d step(s) (run at step %d): %s", self.name,
-            self.session, self.step - self._session_first_step, self.step, reason,
+            "site %s: session %d closed after %d step(s)%s: %s", self.name, self.session,
+            self.step - self._session_first_step, f" (steps {self._session_first_step + 1}-"
+            f"{self.step} of the resumed run)" if self._session_first_step else "", reason,
         )
         if self._uncommitted and self.state in (RUNNING, PAUSED):
             self._enter(Trigger.INTEGRATOR_LOST,

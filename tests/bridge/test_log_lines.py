@@ -45,8 +45,9 @@ def test_the_close_line_counts_the_sessions_steps_after_a_resume(
         site.close_session("the client said goodbye")
     closes = [r.getMessage() for r in caplog.records if "closed after" in r.getMessage()]
     assert closes == [
-        "site s: session 2 closed after 3 step(s) (run at step 70003): the client said goodbye",
-        "site s: session 3 closed after 2 step(s) (run at step 2): the client said goodbye"]
+        "site s: session 2 closed after 3 step(s) (steps 70001-70003 of the resumed run): the "
+        "client said goodbye",
+        "site s: session 3 closed after 2 step(s): the client said goodbye"]
 
 
 def test_a_second_hold_cause_within_the_interval_is_logged() -> None:
