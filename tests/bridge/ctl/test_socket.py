@@ -198,3 +198,10 @@ def test_the_shared_temp_fallback_directory_must_be_private(tmp_path: Path) -> N
         ctl._check_private(d)
     d.chmod(0o700)
     ctl._check_private(d)
+
+
+def test_ctl_prints_what_the_sites_quote_without_acting_on_the_terminal() -> None:
+    answer = {"ok": False, "results": [{"site": "a", "ok": False,
+                                        "message": "refused\x1b[2J\nfake: ok"}], "sites": []}
+    assert ctl.format_answer(answer) == "a: REFUSED: refused\\x1b[2J\\nfake: ok"
+    assert ctl.format_answer({"error": "no site 'x\u202e'"}) == "error: no site 'x\\u202e'"
