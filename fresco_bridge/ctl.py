@@ -296,7 +296,18 @@ def request(path: Path, command: str, site: str | None = None, *,
 def format_answer(answer: dict[str, Any]) -> str:
     """Human-readable lines for ``fresco-bridge ctl``; whatever the sites' texts quote (a
     client's name, a reason) cannot act on the operator's terminal."""
-    return "\n".join(printable(line) for line in _answer_lines(answer).split("\n"))
+    return _answer_lines(_printable(answer))
+
+
+def _printable(value: Any) -> Any:
+    """``value`` with every string in it ``printable``."""
+    if isinstance(value, str):
+        return printable(value)
+    if isinstance(value, dict):
+        return {k: _printable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_printable(v) for v in value]
+    return value
 
 
 def _answer_lines(answer: dict[str, Any]) -> str:
