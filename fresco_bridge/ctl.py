@@ -373,7 +373,8 @@ def add_ctl_parser(sub: Any) -> None:
     """``fresco-bridge ctl status|pause|resume|abort [--site S] [--socket P | --run-dir D]``."""
     p = sub.add_parser("ctl", help="operator control of a running bridge (status, pause, "
                                    "resume, abort)")
-    p.add_argument("action", choices=COMMANDS)
+    p.add_argument("action", metavar="{" + ",".join(COMMANDS) + "}",
+                   help="status (read only), pause, resume or abort")  # checked in ctl_command
     p.add_argument("--site", default=None, help="one site (default: every site)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--socket", type=Path, default=None, help="control socket path")
@@ -393,6 +394,9 @@ MAX_TIMEOUT = 3600.0
 def ctl_command(args: Any) -> int:
     """0: done; 1: refused by a site (or an error answer). Raises ControlError (no bridge, a
     bad argument: one line, exit code 2)."""
+    if args.action not in COMMANDS:
+        raise ControlError(f"ctl {printable(str(args.action))}: not an action; expected one of "
+                           f"{', '.join(COMMANDS)}")
     timeout = _timeout(args.timeout)
     _check_site(args.site)
     socket_path = _checked_socket(args.socket)

@@ -158,6 +158,7 @@ def test_ctl_against_a_running_fresco_bridge_serve(tmp_path: Path) -> None:
     (("--run-dir", "/etc/passwd"), "--run-dir /etc/passwd: is not a directory"),
     (("--site", "a\x1b[2J"), "--site a\\x1b[2J: not a site name"),
     (("--site", ""), "--site : not a site name"),
+    (("reboot",), "ctl reboot: not an action; expected one of status, pause, resume, abort"),
 ])
 def test_each_bad_argument_is_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...],
                                                   says: str) -> None:
@@ -170,7 +171,8 @@ def test_each_bad_argument_is_one_line_and_exit_2(tmp_path: Path, args: tuple[st
         server.bind(str(live))
         server.listen()
         where = () if "--socket" in args or "--run-dir" in args else ("--socket", str(live))
-        r = subprocess.run([FRESCO_BRIDGE, "ctl", "status", *where, *args],
+        action = () if args[0] == "reboot" else ("status",)
+        r = subprocess.run([FRESCO_BRIDGE, "ctl", *action, *where, *args],
                            capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert r.stdout == ""
