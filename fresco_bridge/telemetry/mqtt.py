@@ -64,7 +64,7 @@ __all__ = [  # the shared types are re-exported: importers of this module keep w
 ]
 
 log = logging.getLogger("fresco_bridge.telemetry")
-_paho_log = logging.getLogger("fresco_bridge.telemetry.paho")  # per-packet chatter at DEBUG
+_paho_log = logging.getLogger("paho.fresco_bridge")  # a library's: WARNING up, one line (logs.py)
 
 MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
