@@ -21,8 +21,9 @@ characters, line and paragraph separators, bidirectional overrides and lone surr
 are in (an MQTT request id, a peer's name, a config string cannot forge a line or clear the
 operator's screen). Libraries log in their own words: ``OutsideLineFilter`` keeps the first line
 of a library's message (pymodbus appends its last 20 frames as hex to an error) and turns its
-traceback into one line (type, message, where), unless the log is verbose; ``configure`` sets
-the libraries' loggers to WARNING and routes Python warnings (numpy's) into the log.
+traceback into one line (type, message, where) unless the log is verbose; ``configure`` sets
+the libraries' loggers to WARNING, verbose or not, and routes Python warnings (numpy's) into
+the log.
 """
 
 from __future__ import annotations
@@ -148,12 +149,14 @@ class OneLineFormatter(logging.Formatter):
 
 
 class OutsideLineFilter(logging.Filter):
-    """A library's line in the bridge's words: its message's first line, its traceback as one
-    line (``ValueError: boom (streams.py:42)``). Lines of ``fresco_bridge`` pass untouched."""
+    """A library's line in the bridge's words: its message's first line (pymodbus appends hex
+    frames to an error), its traceback as one line (``ValueError: boom (streams.py:42)``) unless
+    ``tracebacks`` (a verbose log). Lines of ``fresco_bridge`` pass untouched."""
 
-    def __init__(self, own: str = "fresco_bridge") -> None:
+    def __init__(self, own: str = "fresco_bridge", *, tracebacks: bool = False) -> None:
         super().__init__()
         self.own = own
+        self.tracebacks = tracebacks
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.name == self.own or record.name.startswith(self.own + "."):
@@ -161,7 +164,7 @@ class OutsideLineFilter(logging.Filter):
         text = record.getMessage()
         first, newline, _ = text.partition("\n")
         exc = record.exc_info
-        if exc and exc[1] is not None:
+        if exc and exc[1] is not None and not self.tracebacks:
             tb = exc[2]
             while tb is not None and tb.tb_next is not None:
                 tb = tb.tb_next
@@ -182,8 +185,7 @@ def configure(verbose: bool, interval: float = LOG_INTERVAL) -> None:
     logging.raiseExceptions = False
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(OneLineFormatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
-    if not verbose:
-        handler.addFilter(OutsideLineFilter())
+    handler.addFilter(OutsideLineFilter(tracebacks=verbose))
     handler.addFilter(RateLimitFilter(interval))
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO, handlers=[handler])
     for name in OUTSIDE_LOGGERS:

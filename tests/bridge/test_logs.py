@@ -9,7 +9,14 @@ import logging
 
 import pytest
 
-from fresco_bridge.logs import MAX_CAUSES, RateLimitFilter, cause_of, configure, printable
+from fresco_bridge.logs import (
+    MAX_CAUSES,
+    OUTSIDE_LOGGERS,
+    RateLimitFilter,
+    cause_of,
+    configure,
+    printable,
+)
 
 
 class Clock:
@@ -118,7 +125,7 @@ def configured(monkeypatch: pytest.MonkeyPatch, verbose: bool = False) -> io.Str
     root = logging.getLogger()
     monkeypatch.setattr(root, "handlers", [])
     monkeypatch.setattr(root, "level", root.level)
-    for name in ("asyncio", "pymodbus"):
+    for name in OUTSIDE_LOGGERS:
         monkeypatch.setattr(logging.getLogger(name), "level", logging.getLogger(name).level)
     out = io.StringIO()
     monkeypatch.setattr("sys.stderr", out)
@@ -191,3 +198,17 @@ def test_one_line_per_cause_the_caller_names() -> None:
     for step, reason in enumerate(reasons):
         log.error("site %s: HOLD at step %d: %s", "a", step, reason, extra=cause_of(reason))
     assert [line.split(": ", 2)[2] for line in out.getvalue().splitlines()] == reasons[:2]
+
+
+def test_a_verbose_log_keeps_a_librarys_traceback_but_not_its_hex(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    out = configured(monkeypatch, verbose=True)
+    logging.getLogger("pymodbus.logging").error("No response received\n>>>>> recv: 0x17 0x5a")
+    logging.getLogger("pymodbus.logging").debug(">>>>> recv: 0x17 0x5a")
+    try:
+        raise ValueError("boom")
+    except ValueError:
+        logging.getLogger("asyncio").error("Exception in callback", exc_info=True)
+    text = out.getvalue()
+    assert "0x" not in text and "No response received\n" in text
+    assert "Traceback (most recent call last)" in text  # -v: the developer's detail
