@@ -101,3 +101,43 @@ def test_the_trackers_report_of_a_killed_bridge_is_its_own_clean_up(tmp_path: Pa
         assert not Path("/dev/shm", "sem." + name.lstrip("/")).exists()
     leaked = "leaked semaphore objects to clean up at shutdown" in r.stderr
     assert leaked is not quiet, r.stderr
+
+
+def test_a_learners_worker_warning_reaches_the_log_under_its_sites_name(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The real path: a twin's updater overflows in its worker (numpy warns there); the line
+    arrives through the learner's reply channel as a line of the bridge's log."""
+    pytest.importorskip("filterpy")
+    import asyncio
+    import contextlib
+
+    from fresco_bridge.site_output import CommittedStep
+    from fresco_bridge.twins.learner import Learner, LearnerError
+    from fresco_bridge.twins.worker import LearnerSpec, TwinSpec
+
+    spec = LearnerSpec("damper", (TwinSpec("t", "online_ukf",
+                                           {"k0": 1e308, "fy": 1e308, "alpha": 0.05}),))
+
+    async def run() -> int | None:
+        learner = Learner("damper", spec, deadline=30.0)
+        await learner.start()
+        try:
+            for n in (1, 2, 3):
+                with contextlib.suppress(LearnerError):  # the twin's answer is not finite
+                    await learner.trial("t", 1e300)
+                learner.commit("t")
+                learner.step_committed(CommittedStep("damper", 1, n, 0.01 * n, (1e300,),
+                                                     (1e300,), (1e300,), (1e308,), "RUNNING"))
+            deadline = asyncio.get_running_loop().time() + 30.0
+            while not any("worker of damper" in r.getMessage() for r in caplog.records):
+                assert asyncio.get_running_loop().time() < deadline, caplog.text
+                await asyncio.sleep(0.05)
+            return learner.pid
+        finally:
+            await learner.close()
+
+    with caplog.at_level(logging.WARNING, logger="fresco_bridge.worker"):
+        pid = asyncio.run(run())
+    lines = [r.getMessage() for r in caplog.records if r.name == "fresco_bridge.worker"]
+    assert any(line.startswith(f"worker of damper (pid {pid}) py.warnings: ")
+               and "RuntimeWarning" in line for line in lines), lines
