@@ -418,7 +418,8 @@ def _timeout(text: object) -> float:
         raise ControlError(f"--timeout {printable(str(text))}: not a number of seconds"
                            ) from None
     if not math.isfinite(value) or not 0.0 < value <= MAX_TIMEOUT:
-        raise ControlError(f"--timeout {text}: must be a finite number of seconds above 0 and "
+        raise ControlError(f"--timeout {printable(str(text))}: must be a finite number of "
+                           "seconds above 0 and "
                            f"at most {MAX_TIMEOUT:g}")
     return value
 
