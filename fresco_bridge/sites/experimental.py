@@ -31,6 +31,7 @@ from protocol import Signals, SignalSizes
 
 from ..config import SiteConfig
 from ..controls.base import Controller, Daq, InlineController
+from ..logs import cause_of
 from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
@@ -131,7 +132,7 @@ class ExperimentalSite(CommandGate):
     # -- sessions ------------------------------------------------------------------------------
     def _reset_signals(self) -> None:
         n, na = self.cfg.dofs, self.setup.n_actuators
-        self.step = 0
+        self.step = self._session_first_step = 0
         self.time = 0.0
         self._commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
@@ -196,6 +197,7 @@ class ExperimentalSite(CommandGate):
             self.step, self.time = self._resume_at
             self._commit_time = self.time
             self._resume_at = None
+        self._session_first_step = self.step  # the close line counts the session's own steps
         reset = getattr(self.controller, "reset", None)
         if reset is not None and getattr(self.cfg.controller, "reset_on_new_session", False):
             reset()
@@ -211,8 +213,9 @@ class ExperimentalSite(CommandGate):
             self.peer, self._end_session = "", None
             return False
         (log.warning if error else log.info)(
-            "site %s: session %d closed after %d step(s): %s", self.name, self.session,
-            self.step, reason,
+            "site %s: session %d closed after %d step(s)%s: %s", self.name, self.session,
+            self.step - self._session_first_step, f" (steps {self._session_first_step + 1}-"
+            f"{self.step} of the resumed run)" if self._session_first_step else "", reason,
         )
         if self._uncommitted and self.state in (RUNNING, PAUSED):
             self._enter(Trigger.INTEGRATOR_LOST,
@@ -286,7 +289,8 @@ class ExperimentalSite(CommandGate):
             log.error("site %s: %s (%s)", self.name, exc, reason)
             return
         if new is HOLD:
-            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason)
+            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason,
+                      extra=cause_of(reason))  # one line per (site, cause) per interval
             self.guard.hold()
         else:
             log.warning("site %s: %s at step %d: %s (stays %s)", self.name, trigger, self.step,

@@ -33,6 +33,7 @@ from multiprocessing.process import BaseProcess
 from typing import Any
 
 from ..site_output import CommittedStep
+from ..worker_output import OUTPUT, quiet_tracker, relay_output
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
 log = logging.getLogger("fresco_bridge.twins")
@@ -148,6 +149,7 @@ class Learner:
     async def _spawn(self) -> None:
         assert self._loop is not None
         ctx = multiprocessing.get_context("spawn")
+        quiet_tracker()  # its report of a killed bridge's semaphores (worker_output)
         inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
@@ -202,6 +204,9 @@ class Learner:
         if generation != self._generation:
             return
         kind = reply[0]
+        if kind == OUTPUT:  # a line the worker logged or printed
+            relay_output(self.source, self.pid, reply)
+            return
         if kind == "ready":
             if self._ready is not None and not self._ready.done():
                 self._ready.set_result(None)
