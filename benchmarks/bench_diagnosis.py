@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._shared import MEASURED, require_shared
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.model import DZ_MAX
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 from sim_actuator.models import make_model
 from sim_actuator.models.paths import drive, law_vector

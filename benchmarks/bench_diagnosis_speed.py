@@ -23,9 +23,9 @@ import statistics
 import time
 from typing import Any
 
-from fresco_bridge.diagnosis.independent import independent_record
+from benchmarks.diagnosis.independent import independent_record
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import Record
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 
 PLAIN = ("friction", "backlash", "pinching", "degradation", "actuator_delay", "none")

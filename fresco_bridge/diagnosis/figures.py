@@ -41,7 +41,7 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
         PREDICTION,
         SUPTITLE_SIZE,
         TRUTH,
-        _stride,
+        plot_stride,
         style_panel,
     )
 
@@ -53,7 +53,7 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
     gap_base = result["baseline"]["gap_withheld"]["total_pct"]
     winner = next((e for e in [*result["effects"], *result["pairs"]] if e["name"] == name), None)
     gap_best = None if winner is None else winner["gap_after"]["total_pct"]
-    k = _stride(t.size)
+    k = plot_stride(t.size)
     fig = Figure(figsize=(10.0, 7.6))
     axes = fig.subplot_mosaic([["base", "effect"], ["residual", "residual"]],
                               height_ratios=[3.0, 2.0])
@@ -102,19 +102,19 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
 def _residual_span(ax: Axes, result: dict[str, Any], *residuals: np.ndarray) -> None:
     """A residual axis spans at least ± the noise floor of the peak force: round-off residuals
     (a record the sim matches exactly) must not fill the axis and look like a misfit."""
-    from ..report.figures import _min_span
+    from ..report.figures import min_span
 
     f = result["_series"]["force"]
     peak = float(np.nanmax(np.abs(f))) if np.isfinite(f).any() else 0.0
     floor = result["noise_floor"]["floor_pct"] / 100.0
-    _min_span(ax, np.concatenate(residuals), 2.0 * floor * peak)
+    min_span(ax, np.concatenate(residuals), 2.0 * floor * peak)
 
 
 def plots(result: dict[str, Any]) -> dict[str, bytes]:
     """Every plot of ``diagnose --report``: ``{file name: PNG bytes}``."""
     from matplotlib.figure import Figure
 
-    from ..report.figures import BASELINE, GRID_ALPHA, PREDICTION, _png, _stride
+    from ..report.figures import BASELINE, GRID_ALPHA, PREDICTION, plot_stride, png_bytes
     from ..report.figures import synchronization as sync_figure
     from ..runs import SessionSignals
     from .localise import phase_angle
@@ -124,10 +124,10 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     sim, best, stop = s["sim"], s["best"], s["stop"]
     name = result["verdict"]["effect"]
     added = best is not None and name not in NO_EFFECT
-    k = _stride(t.size)
+    k = plot_stride(t.size)
     files: dict[str, bytes] = {}
 
-    files["hysteresis_overlay.png"] = _png(overlay_figure(result))
+    files["hysteresis_overlay.png"] = png_bytes(overlay_figure(result))
 
     fig = Figure(figsize=(7.2, 4.8))
     ax = fig.add_subplot()
@@ -144,7 +144,7 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     ax.grid(alpha=GRID_ALPHA)
     ax.legend(fontsize="small", markerscale=4)
     fig.tight_layout()
-    files["residual_vs_phase.png"] = _png(fig)
+    files["residual_vs_phase.png"] = png_bytes(fig)
 
     meas = (m if m is not None else np.full_like(c, math.nan))[:, None]
     signals = SessionSignals("record", 1, t, np.arange(t.size), c[:, None], meas, f[:, None])
@@ -168,6 +168,6 @@ def plots(result: dict[str, Any]) -> dict[str, bytes]:
     ax.grid(alpha=GRID_ALPHA, which="both")
     ax.legend(fontsize="small")
     fig.tight_layout()
-    files["residual_spectrum.png"] = _png(fig)
+    files["residual_spectrum.png"] = png_bytes(fig)
 
     return files

@@ -50,10 +50,16 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-from fresco_bridge.lawfit import Solution, bounded_least_squares, multi_start
+from fresco_bridge.lawfit import (
+    Solution,
+    bounded_least_squares,
+    difference_step,
+    multi_start,
+    parameter_std,
+)
 
 from .baseline import RESTARTS, SCOUT_EVALUATIONS, fit_baseline, select_family
-from .fit import autocorrelation, predict
+from .fit import predict
 from .load import DiagnosisInputError, Record
 from .model import (
     AUTO,
@@ -167,9 +173,7 @@ def _jacobian(residual: Callable[..., list[Any]], x: FloatArray,
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     jac = np.zeros((int(offsets[-1]), x.size))
     for j in range(x.size):
-        h = 1e-3 * max(abs(float(x[j])), 1e-2 * float(upper[j] - lower[j]))
-        if x[j] + h > upper[j]:
-            h = -h
+        h = difference_step(float(x[j]), float(lower[j]), float(upper[j]))
         xj = x.copy()
         xj[j] += h
         parts = residual(xj, only=owner[j])
@@ -222,19 +226,14 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
             lambda x: np.concatenate(parts(x)), x0, lower, upper, scale="jac",
             max_nfev=JOINT_CANDIDATE_EVALUATIONS,
             jac=lambda x: _jacobian(parts, x, lower, upper, owner), tolerance=1e-5)
-    r, jac = sol.residual, sol.jacobian
-    rho = min(max(autocorrelation(r), 0.0), 0.99)
-    s2 = float(np.dot(r, r)) / max(r.size - sol.x.size, 1) * (1.0 + rho) / (1.0 - rho)
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    sd = parameter_std(sol.residual, sol.jacobian)
     values, stds, after = [], [], []
     for i in range(n):
         v = values_of(sol.x, i)
         k = len(shared) + i * len(own)
         values.append({p.name: v[p.name] for p in [*shared, *own]})
-        stds.append({p.name: math.sqrt(max(float(cov[k + j, k + j]), 0.0))
-                     for j, p in enumerate(own)}
-                    | {p.name: math.sqrt(max(float(cov[j, j]), 0.0))
-                       for j, p in enumerate(shared)})
+        stds.append({p.name: float(sd[k + j]) for j, p in enumerate(own)}
+                    | {p.name: float(sd[j]) for j, p in enumerate(shared)})
         force, disp = predict(specs[i], fulls[i], v)
         after.append(_total(fulls[i].record, force, disp, withheld[i]))
     effect_shared = [p for p in shared if p.name in {q.name for q in

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..report.diagnosis import DIAGNOSIS_PREFIX, headline
 from .load import load_record
-from .report import write_report
+from .outputs import write_report
 from .verdict import Options, diagnose
 
 __all__ = ["diagnose_into_run"]

@@ -79,9 +79,9 @@ from .model import (
     BASELINES,
     EFFECT_NAMES,
     Context,
-    _held_sign,
     baseline_report,
     effect_parameters,
+    held_sign,
     make_spec,
 )
 from .names import AUTO_FAMILIES
@@ -185,7 +185,7 @@ def _effect_start(effect: str, cal: Context) -> dict[str, float]:
     if effect == "actuator_undershoot":
         step = np.zeros_like(rec.cmd)
         step[1:] = np.diff(rec.cmd)
-        direction = _held_sign(step)
+        direction = held_sign(step)
         moving = direction != 0.0
         if not np.any(moving):
             return {}
@@ -333,9 +333,9 @@ def diagnose(record: Record, options: Options | None = None,
     if record.meas_disp is not None:
         from sim_actuator.models.paths import drive
 
-        from .model import DZ_MAX, _law_vector
+        from .model import DZ_MAX, law_vector
 
-        law, vec = _law_vector(spec0.law_kind, values0)
+        law, vec = law_vector(spec0.law_kind, values0)
         sim_meas = drive(law, vec, record.meas_disp, 0.0, DZ_MAX)
     winner = next((s for s in [*singles, *pairs] if s.name == verdict["effect"]), None)
     return {

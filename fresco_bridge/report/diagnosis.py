@@ -1,7 +1,7 @@
 """The report's diagnosis section: what ``diagnose RUN --site S --report RUN/diagnosis-S`` wrote.
 
 A run directory holds a site's diagnosis in ``diagnosis-<site>/`` (``diagnosis.json`` and the
-plots of ``fresco_bridge.diagnosis.report``), written by ``diagnosis.rundir`` (the demo,
+plots of ``fresco_bridge.diagnosis.outputs``), written by ``diagnosis.rundir`` (the demo,
 ``report --diagnose SITE``) or by a user's ``diagnose --report``. The report reads it rather
 than diagnosing again (a diagnosis costs seconds to minutes), and imports nothing of the
 diagnosis, which draws with this package's figures.

@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.bench import bench_items, generate
+from benchmarks.diagnosis.realism import realistic_record
+from benchmarks.diagnosis.synth import command_history, synthetic_record
 from fresco_bridge.diagnosis.baseline import choose_baseline
-from fresco_bridge.diagnosis.bench import bench_items, generate
 from fresco_bridge.diagnosis.fit import fit_spec
 from fresco_bridge.diagnosis.load import record_from_arrays
 from fresco_bridge.diagnosis.model import Context, make_spec
 from fresco_bridge.diagnosis.names import AUTO_FAMILIES
-from fresco_bridge.diagnosis.realism import realistic_record
-from fresco_bridge.diagnosis.synth import command_history, synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from sim_actuator.models import make_model
 

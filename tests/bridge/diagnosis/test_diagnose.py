@@ -11,10 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fresco_bridge.diagnosis.bench import MAGNITUDE_OF, effect_magnitude
+from benchmarks.diagnosis.bench import MAGNITUDE_OF, effect_magnitude
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import REVERSAL_SHARE, record_from_arrays, turning_points
 from fresco_bridge.diagnosis.model import EFFECT_NAMES
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 STEPS = 1200

@@ -11,8 +11,8 @@ import pytest
 from matplotlib.colors import to_rgba
 from matplotlib.lines import Line2D
 
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.figures import overlay_figure
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 

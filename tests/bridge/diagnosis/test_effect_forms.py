@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from fresco_bridge.diagnosis.independent import independent_record
+from benchmarks.diagnosis.independent import independent_record
+from benchmarks.diagnosis.synth import command_history
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
-from fresco_bridge.diagnosis.model import _law_vector
-from fresco_bridge.diagnosis.synth import command_history
+from fresco_bridge.diagnosis.model import law_vector
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from sim_actuator.models.paths import drive
 
@@ -22,7 +22,7 @@ EFFECTS = ("friction", "rate_dependence", "sensor_bias", "sensor_noise")
 
 
 def _record(extra: np.ndarray | None, cmd: np.ndarray, dt: float, seed: int) -> Record:
-    force = drive(*_law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
+    force = drive(*law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
     if extra is not None:
         force = force + extra
     rng = np.random.default_rng(seed + 1)
@@ -63,7 +63,7 @@ def test_friction_behind_a_spring_is_friction_with_its_slip() -> None:
     friction, the force and the slip recovered, the rate law not preferred."""
     dt, coulomb, spring = 0.01, 1.2, 40.0
     cmd = _command(32)
-    jenkins = drive(*_law_vector("bilinear", {"k0": spring, "fy": coulomb, "alpha": 0.0}),
+    jenkins = drive(*law_vector("bilinear", {"k0": spring, "fy": coulomb, "alpha": 0.0}),
                     cmd, 0.0, 0.2)
     result = diagnose(_record(jenkins, cmd, dt, 32), Options(effects=EFFECTS, pairs=False))
     assert result["verdict"]["effect"] == "friction", result["verdict"]["explanation"]

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.load import load_record, record_from_arrays
 from fresco_bridge.diagnosis.nocommand import NOT_IDENTIFIABLE
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 

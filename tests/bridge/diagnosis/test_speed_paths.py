@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from fresco_bridge.diagnosis.synth import synthetic_record
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose, stop_of
 
 SEED = 20261127

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import command_history, rig_record, run_rig, synthetic_record
 from fresco_bridge.diagnosis.model import reference
-from fresco_bridge.diagnosis.report import summary
-from fresco_bridge.diagnosis.synth import command_history, rig_record, run_rig, synthetic_record
+from fresco_bridge.diagnosis.outputs import summary
 from fresco_bridge.diagnosis.verdict import FLAG_CONFIDENCE_FACTOR, Options, diagnose, stop_of
 
 DT = 0.01

@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
-from fresco_bridge.diagnosis.bench import SYSTEMATIC
+from benchmarks.diagnosis.bench import SYSTEMATIC
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
 from fresco_bridge.diagnosis.scored import systematic_floor
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 
 
@@ -55,7 +55,7 @@ def test_coloured_noise_is_claimed_by_sensor_noise() -> None:
     the white estimate sees under half of it and no effect explains the rest. The loop's state
     explains almost none of the calibration residual, so ``sensor_noise`` claims it all, and
     its std comes out near the truth (the white part alone: 0.96 of 2.2 kN)."""
-    from fresco_bridge.diagnosis.independent import independent_record
+    from benchmarks.diagnosis.independent import independent_record
 
     generated = independent_record("sensor_noise", 10700358)
     result = diagnose(generated.record)

@@ -33,13 +33,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.diagnosis.load import Record, record_from_arrays
+
 from .independent_laws import (
     BoucWenBaberNoori,
     GiuffreMenegottoPinto,
     IsotropicBilinear,
     SpecimenLaw,
 )
-from .load import Record, record_from_arrays
 
 __all__ = ["CYCLE", "EFFECTS", "INDEPENDENT", "PAIR", "IndependentRecord", "case_label",
            "ground_motion_command", "independent_record"]
