@@ -34,6 +34,7 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
     withheld (scored) part shaded and each model's withheld gap in the legend."""
     from matplotlib.figure import Figure
 
+    from ..report.diagnosis import BASIS_WORDS
     from ..report.figures import (
         BASELINE,
         GRID_ALPHA,
@@ -50,9 +51,8 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
     sim, best, stop = s["sim"], s["best"], s["stop"]
     name = result["verdict"]["effect"]
     added = best is not None and name not in NO_EFFECT
-    gap_base = result["baseline"]["gap_withheld"]["total_pct"]
-    winner = next((e for e in [*result["effects"], *result["pairs"]] if e["name"] == name), None)
-    gap_best = None if winner is None else winner["gap_after"]["total_pct"]
+    verdict = result["verdict"]
+    gap_base, gap_best = verdict["gap_before_pct"], verdict["gap_after_pct"]  # as it quotes
     k = plot_stride(t.size)
     fig = Figure(figsize=(10.0, 7.6))
     axes = fig.subplot_mosaic([["base", "effect"], ["residual", "residual"]],
@@ -93,8 +93,10 @@ def overlay_figure(result: dict[str, Any]) -> Figure:
     style_panel(ax, "force residual in time", "time (s)", "force residual (kN)")
     ax.grid(alpha=GRID_ALPHA)
     ax.legend(fontsize=LABEL_SIZE, loc="upper left", ncol=3)
+    basis = verdict.get("gap_basis", "raw")
     fig.suptitle("hysteresis: the measurement (grey) against the sim without and with the "
-                 "effect", fontsize=SUPTITLE_SIZE)
+                 f"effect (withheld gaps {BASIS_WORDS.get(basis, basis)}, as the verdict)",
+                 fontsize=SUPTITLE_SIZE)
     fig.tight_layout()
     return fig
 

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..numbers import fmt, pct
-from .verdict import LOW_CONFIDENCE
+from ..report.diagnosis import BASIS_WORDS, confidence_text, on_basis
+from .decision import LOW_CONFIDENCE
 
 __all__ = ["summary", "to_json", "write_json", "write_report"]
 
@@ -52,7 +53,7 @@ def summary(result: dict[str, Any]) -> str:
             f"interface NRMS {pct(interface['nrms_pct'])}, FEI amplitude "
             f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
-    lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
+    lines.append(f"VERDICT   {verdict['effect']} (confidence {confidence_text(verdict)}): "
                  f"{verdict['explanation']}")
     if result.get("hidden"):
         lines.append("hidden    no command channel: the measured displacement drives the law, "
@@ -72,12 +73,15 @@ def summary(result: dict[str, Any]) -> str:
             lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], unit, 2)}"
                          f"  ({p['meaning']})"
                          + ("" if not flag else f"  [UNSURE: {flag}]"))
-    lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
+    basis = verdict.get("gap_basis", "raw")
+    lines.append(f"candidates (withheld gap after, shrink, score = shrink − 2 %/parameter; "
+                 f"{BASIS_WORDS.get(basis, basis)}, as the verdict):")
     families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]
     for e in [*result["effects"], *result["pairs"][:3], *families]:
         mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
-        lines.append(f"  {e['name']:<40} {pct(e['gap_after']['total_pct']):>9}  "
-                     f"{pct(e['shrink_pct']):>9}  {fmt(e['score'], digits=3):>6}{mark}")
+        after, shrink, score = on_basis(e, basis)
+        lines.append(f"  {e['name']:<40} {pct(after):>9}  {pct(shrink):>9}  "
+                     f"{fmt(score, digits=3):>6}{mark}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
     return "\n".join(lines)

@@ -68,6 +68,7 @@ from .decision import (
     FLAG_CONFIDENCE_FACTOR,
     LOW_CONFIDENCE,
     PAIR_MARGIN_PCT,
+    confidence_words,
     decide,
     systematic_verdict,
 )
@@ -338,6 +339,14 @@ def diagnose(record: Record, options: Options | None = None,
         law, vec = law_vector(spec0.law_kind, values0)
         sim_meas = drive(law, vec, record.meas_disp, 0.0, DZ_MAX)
     winner = next((s for s in [*singles, *pairs] if s.name == verdict["effect"]), None)
+    refs = {f.name: _gap(record, f.force, f.disp, withheld, white)
+            for f in families if f.force is not None}
+
+    def row(s: _Scored) -> dict[str, Any]:
+        return s.as_dict(without_noise(s, record, withheld, white, sys_before,
+                                       {} if not s.effects else refs))
+
+    verdict["confidence_words"] = confidence_words(verdict)
     return {
         "schema": SCHEMA,
         "record": {
@@ -362,9 +371,9 @@ def diagnose(record: Record, options: Options | None = None,
         },
         "noise_floor": {"floor_pct": opts.noise_floor_pct, **noise_gap},
         "localization": localise(record, f0, sim_meas, stop),
-        "effects": [s.as_dict() for s in singles],
-        "pairs": [s.as_dict() for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
-        "families": [{**s.as_dict(), "role": s.role}
+        "effects": [row(s) for s in singles],
+        "pairs": [row(s) for s in sorted(pairs, key=lambda s: s.score, reverse=True)],
+        "families": [{**row(s), "role": s.role}
                      for s in sorted(families, key=lambda s: s.score, reverse=True)],
         "verdict": verdict,
         "not_identifiable": hidden,
