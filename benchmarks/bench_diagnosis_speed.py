@@ -46,7 +46,7 @@ def _records(steps: int, quick: bool) -> list[tuple[str, Record]]:
 
 def _time(record: Record) -> tuple[float, float, str]:
     cpu, wall = time.process_time(), time.perf_counter()
-    result = diagnose(record)
+    result = diagnose(record).to_json()
     return (time.process_time() - cpu, time.perf_counter() - wall,
             str(result["verdict"]["effect"]))
 

@@ -129,7 +129,7 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
     started = time.perf_counter()
     synthetic = generate(item)
     generated = time.perf_counter()
-    result = diagnose(synthetic.record)
+    result = diagnose(synthetic.record).to_json()
     verdict = result["verdict"]
     also = synthetic.also_present if isinstance(synthetic, SyntheticRecord) else {}
     # the candidate the estimates come from: the verdict's when it is right (the primary named

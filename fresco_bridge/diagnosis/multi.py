@@ -57,6 +57,7 @@ from fresco_bridge.lawfit import (
     multi_start,
     parameter_std,
 )
+from fresco_bridge.numbers import pct
 
 from .baseline import RESTARTS, SCOUT_EVALUATIONS, fit_baseline, select_family
 from .fit import predict
@@ -73,9 +74,9 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
-from .scored import at_bound
+from .scored import MIN_SHRINK_PCT, PARSIMONY_PCT, at_bound
 from .scored import gap as _gap
-from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, diagnose, stop_of
+from .verdict import Options, diagnose, stop_of
 
 __all__ = ["MAGNITUDE_SPREAD", "SCHEMA", "diagnose_device", "fit_joint",
            "fit_joint_candidate", "summary_device"]
@@ -416,16 +417,16 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
     names = {c["effect"] for c in consistent}
     per_record = []
     for i, result in enumerate(results):
-        verdict = result["verdict"]["effect"]
+        verdict = result.verdict.effect
         own = set(verdict.split("+")) - NOT_EFFECTS
         if top is not None and not top["consistent"] and sources[i] in top["present_in"]:
             own.add(top["effect"])  # the story's effect, held here, is this test's own
         departures = sorted(own - names) + ([verdict] if verdict in ("baseline_misfit",
                                                                       "unexplained") else [])
         per_record.append({"source": sources[i], "gap_shared_law_pct": before[i],
-                           "verdict": verdict, "confidence": result["verdict"]["confidence"],
-                           "gap_before_pct": result["verdict"]["gap_before_pct"],
-                           "gap_after_pct": result["verdict"]["gap_after_pct"],
+                           "verdict": verdict, "confidence": result.verdict.confidence,
+                           "gap_before_pct": result.verdict.gap_before_pct,
+                           "gap_after_pct": result.verdict.gap_after_pct,
                            "departures": departures})
     story: dict[str, Any]
     if all(b < opts.noise_floor_pct for b in before):
@@ -511,9 +512,9 @@ def summary_device(doc: dict[str, Any]) -> str:
     lines.append("per record (verdict against the shared law; departures):")
     for p in doc["per_record"]:
         lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}), gap "
-                     f"{p['gap_before_pct']:.2f} → {p['gap_after_pct']:.2f} %; departures: "
+                     f"{pct(p['gap_before_pct'])} → {pct(p['gap_after_pct'])}; departures: "
                      + (", ".join(p["departures"]) or "none"))
-    hidden = {line for r in doc["results"] for line in r.get("hidden", [])}
+    hidden = {line for r in doc["results"] for line in r.hidden}
     if hidden:
         lines.append("hidden    no command channel in some records: " + "; ".join(sorted(hidden)))
     lines.append(f"time      {doc['seconds']:.1f} s")

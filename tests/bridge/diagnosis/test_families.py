@@ -44,7 +44,7 @@ def _record(kind: str, law: dict[str, float], seed: int = 5) -> Record:
 def test_each_family_is_recovered_from_its_own_record(kind: str) -> None:
     law = FAMILIES[kind]
     result = diagnose(_record(kind, law), Options(pairs=False,
-                                                  effects=("backlash", "friction")))
+                                                  effects=("backlash", "friction"))).to_json()
     assert result["baseline"]["kind"] == kind, result["baseline"]["selection"]["reason"]
     fitted = result["baseline"]["params"]
     for name, truth in law.items():
@@ -63,7 +63,7 @@ def test_every_registry_kind_and_every_auto_family_is_a_baseline() -> None:
 
 def test_an_elastic_spring_under_the_elastic_baseline() -> None:
     result = diagnose(_record("elastic", {"k": 4.0}), Options(
-        baseline="elastic", pairs=False, effects=("friction",)))
+        baseline="elastic", pairs=False, effects=("friction",))).to_json()
     assert result["baseline"]["params"]["k"] == pytest.approx(4.0, rel=1e-3)
     gap = result["baseline"]["gap_withheld"]["total_pct"]
     assert gap == pytest.approx(result["noise_floor"]["noise_only_gap_pct"], rel=0.1)

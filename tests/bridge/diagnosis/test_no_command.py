@@ -57,7 +57,7 @@ def test_an_interface_effect_is_never_guessed_without_a_command() -> None:
     assert rec.meas_disp is not None
     blind = record_from_arrays(rec.time, rec.meas_disp, rec.force, source="delay, no command",
                                no_command=True)
-    result = diagnose(blind, Options(pairs=False))
+    result = diagnose(blind, Options(pairs=False)).to_json()
     assert result["verdict"]["effect"] not in NOT_IDENTIFIABLE
     assert result["verdict"]["effect"] == "none", result["verdict"]["explanation"]
     assert "actuator_delay" in result["not_identifiable"]

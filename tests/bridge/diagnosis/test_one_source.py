@@ -17,36 +17,34 @@ import pytest
 from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.figures import overlay_figure
 from fresco_bridge.diagnosis.outputs import summary, write_report
+from fresco_bridge.diagnosis.result import Diagnosis
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from fresco_bridge.numbers import pct
 from fresco_bridge.report.diagnosis import diagnosis_sections, headline, on_basis
 
 
 @pytest.fixture(scope="module")
-def result() -> dict[str, Any]:
+def result() -> Diagnosis:
     record = synthetic_record("degradation", 5, steps=1500).record
     return diagnose(record, Options(effects=("degradation", "pinching", "sensor_noise")))
 
 
-def _winner(result: dict[str, Any]) -> dict[str, Any]:
-    name = result["verdict"]["effect"]
-    return next(e for e in [*result["effects"], *result["pairs"]] if e["name"] == name)
-
-
-def test_the_verdict_quotes_its_winners_row(result: dict[str, Any]) -> None:
-    verdict = result["verdict"]
-    assert verdict["effect"] == "degradation"
-    assert verdict["gap_basis"] == "systematic"
-    after, shrink, _score = on_basis(_winner(result), verdict["gap_basis"])
-    assert after == pytest.approx(verdict["gap_after_pct"], rel=1e-12)
-    assert shrink == pytest.approx(verdict["shrink_pct"], rel=1e-12)
+def test_the_verdict_quotes_its_winners_row(result: Diagnosis) -> None:
+    verdict = result.verdict
+    assert verdict.effect == "degradation"
+    assert verdict.gap_basis == "systematic"
+    winner = result.winner()
+    assert winner is not None
+    after, shrink, _score = on_basis(winner, verdict.gap_basis)
+    assert after == pytest.approx(verdict.gap_after_pct, rel=1e-12)
+    assert shrink == pytest.approx(verdict.shrink_pct, rel=1e-12)
     # on this basis the raw figure differs: quoting it would be the second source
-    assert _winner(result)["gap_after"]["total_pct"] != pytest.approx(after, rel=1e-6)
+    assert winner["gap_after"]["total_pct"] != pytest.approx(after, rel=1e-6)
 
 
-def test_summary_table_figure_and_report_agree(result: dict[str, Any], tmp_path: Path) -> None:
-    verdict = result["verdict"]
-    after, before = pct(verdict["gap_after_pct"]), pct(verdict["gap_before_pct"])
+def test_summary_table_figure_and_report_agree(result: Diagnosis, tmp_path: Path) -> None:
+    verdict = result.verdict
+    after, before = pct(verdict.gap_after_pct), pct(verdict.gap_before_pct)
     text = summary(result)
     verdict_line = next(line for line in text.splitlines() if line.startswith("VERDICT"))
     assert f"from {before} to {after}" in verdict_line
@@ -63,14 +61,14 @@ def test_summary_table_figure_and_report_agree(result: dict[str, Any], tmp_path:
     assert f'<td class="n">{after}</td>' in section
 
 
-def test_the_confidence_comes_with_its_words(result: dict[str, Any]) -> None:
-    verdict = result["verdict"]
-    words = verdict["confidence_words"]
+def test_the_confidence_comes_with_its_words(result: Diagnosis) -> None:
+    verdict = result.verdict
+    words = verdict.confidence_words
     assert words.split(":")[0] in ("high", "moderate", "low")
-    h = headline(result)
-    assert h["confidence_text"] == f"{verdict['confidence']:.2f} ({words})"
+    h = headline(result.to_json())
+    assert h["confidence_text"] == f"{verdict.confidence:.2f} ({words})"
     assert h["confidence_text"] in summary(result)
-    if verdict["confidence"] < 0.5:
+    if verdict.confidence < 0.5:
         assert words.startswith("low: ")
 
 

@@ -49,7 +49,7 @@ def test_the_same_effect_in_three_records_is_reported_as_consistent() -> None:
     # with the story held (the shared law, each test's friction) nothing departs
     assert [p["verdict"] for p in doc["per_record"]] == ["none"] * 3
     assert all(p["departures"] == [] for p in doc["per_record"])
-    assert all(r["baseline"]["fitted"] is False for r in doc["results"])
+    assert all(r.baseline["fitted"] is False for r in doc["results"])
 
 
 def test_one_record_that_departs_is_named(tmp_path: Path,
