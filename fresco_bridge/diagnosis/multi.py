@@ -425,6 +425,7 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
                                                                       "unexplained") else [])
         per_record.append({"source": sources[i], "gap_shared_law_pct": before[i],
                            "verdict": verdict, "confidence": result.verdict.confidence,
+                           "confidence_words": result.verdict.confidence_words,
                            "gap_before_pct": result.verdict.gap_before_pct,
                            "gap_after_pct": result.verdict.gap_after_pct,
                            "departures": departures})
@@ -511,7 +512,8 @@ def summary_device(doc: dict[str, Any]) -> str:
                 for v, s in zip(p["values"], p["std"], strict=True)) + f" {p['unit']}")
     lines.append("per record (verdict against the shared law; departures):")
     for p in doc["per_record"]:
-        lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}), gap "
+        lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}, "
+                     f"{p['confidence_words']}), gap "
                      f"{pct(p['gap_before_pct'])} → {pct(p['gap_after_pct'])}; departures: "
                      + (", ".join(p["departures"]) or "none"))
     hidden = {line for r in doc["results"] for line in r.hidden}
