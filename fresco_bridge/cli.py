@@ -16,13 +16,13 @@ from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
 from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
 from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
-from .exit_codes import exit_code, reader_gone
+from .exit_codes import Interrupted, exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .logs import configure as configure_logging
 from .progress import command_name
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
-from .runs import RunDirError, check_resumable, resolve_run
+from .runs import RunDirError, check_resumable, mark_interrupted, resolve_run
 from .study import add_study_parser, study_command
 from .updating.cli import add_updater_parser, updater_command
 
@@ -39,10 +39,17 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
     cfg, text = load_config(config_path)
     bridge = Bridge(cfg, text, resume=resume)
     stop = asyncio.Event()
+    caught: list[signal.Signals] = []
     loop = asyncio.get_running_loop()
+
+    def on_signal(sig: signal.Signals) -> None:
+        caught.append(sig)
+        stop.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+        loop.add_signal_handler(sig, on_signal, sig)
     await bridge.start()
+    serving: list[str] = []
     try:
         ports = ", ".join(f"{n}={p}" for n, p in bridge.ports.items())
         try:
@@ -52,13 +59,34 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
             logging.getLogger("fresco_bridge").warning(
                 "stdout's reader went away before the ready line (%s); serving on", ports)
         await stop.wait()
+        serving = [name for name, site in bridge.sites.items() if site.busy]
     finally:
         await bridge.close()
-    if bridge.record is not None:  # Ctrl-C: say where the run went and what to do with it
-        run, cmd = bridge.record.directory, command_name()
+    record = bridge.record
+    if serving and caught:  # stopped mid-test: the run was interrupted, not finished
+        raise _interrupted_serve(caught[0], serving, config_path,
+                                 None if record is None else record.directory)
+    if record is not None:  # between tests: say where the run went and what to do with it
+        run, cmd = record.directory, command_name()
         logging.getLogger("fresco_bridge").info(
             "stopped; run record %s (next: %s runs show %s)", run, cmd, run)
     return 0
+
+
+def _interrupted_serve(sig: signal.Signals, serving: list[str], config: Path,
+                       run: Path | None) -> Interrupted:
+    """The one line of a bridge stopped while its sites served clients: the run is recorded
+    as interrupted (resumable), the exit code 128 + the signal."""
+    how = "Ctrl-C" if sig == signal.SIGINT else sig.name
+    what = (f"fresco-bridge serve stopped by {how} while site(s) {', '.join(serving)} served a "
+            "client")
+    if run is None:
+        return Interrupted(f"{what} (recording is off: nothing was recorded)", 128 + sig)
+    mark_interrupted(run)
+    cmd = command_name()
+    return Interrupted(f"{what}; the run is recorded as interrupted: {run} (next: {cmd} runs "
+                       f"show {run}; to continue it: {cmd} serve --config {config} --resume "
+                       f"{run})", 128 + sig)
 
 
 def _warn_if_stale() -> None:

@@ -14,6 +14,7 @@ import math
 import tomllib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from .record.export import (
 )
 from .record.lines import RecordFormatError
 from .record.recovery import open_sessions, run_state
-from .record.rundir import CONFIG_FILE, META_FILE, RECORD_FILE
+from .record.rundir import CONFIG_FILE, META_FILE, RECORD_FILE, update_meta
 
 DEFAULT_DT = 0.01  # TelemetryConfig.monitor_dt's default, for records without integrator time
 XCORR_MAX_LAG = 50  # samples either side for the cross-correlation delay estimate
@@ -192,6 +193,14 @@ def check_resumable(path: Path) -> Path:
     return path
 
 
+def mark_interrupted(path: Path) -> None:
+    """A run stopped mid-test (Ctrl-C while a client was served): ``run.json`` says
+    ``interrupted``, as for a bridge killed and found later, so ``runs list`` shows it and
+    ``runs resume`` continues it. Called after the record closed (its clean close says
+    ``closed``)."""
+    update_meta(path, state="interrupted", interrupted_utc=datetime.now(UTC).isoformat())
+
+
 def resolve_run(name: str | Path, runs_root: Path) -> Path:
     """A run given as a path, or as a directory name (or unique prefix) under ``runs_root``."""
     path = Path(name)
@@ -205,8 +214,10 @@ def resolve_run(name: str | Path, runs_root: Path) -> Path:
         if len(hits) == 1:
             return hits[0]
         if len(hits) > 1:
-            raise RunDirError(f"{name!r} matches {len(hits)} runs under {runs_root}: "
-                              + ", ".join(p.name for p in hits[:5]))
+            more = f" and {len(hits) - 5} more" if len(hits) > 5 else ""
+            shown = ", ".join(p.name for p in hits[:5]) + more
+            raise RunDirError(f"{name!r} matches {len(hits)} runs under {runs_root}: {shown} "
+                              "(give more of the name)")
     raise RunDirError(f"{name}: no such run (not a path, and not a run under {runs_root})")
 
 
