@@ -193,17 +193,18 @@ def _run(args: argparse.Namespace) -> int:
                   if s.kind == "updatable" else "") for s in cfg.sites) + ")")
         return 0
     if args.command == "demo":
-        from .demo import run_demo
+        from .demo import run_demo, story_terminal
         from .demo_story import run_story
 
         common = {"record": args.record, "pga": args.pga, "duration": args.duration,
                   "seed": args.seed, "runs": args.runs, "transport": args.transport,
                   "mqtt": args.mqtt, "mqtt_prefix": args.mqtt_prefix,
                   "metrics_port": args.metrics_port}
-        if args.simple:
-            run_demo(**common)
-        else:
-            run_story(**common, progress=not args.no_progress)
+        with story_terminal():
+            if args.simple:
+                run_demo(**common)
+            else:
+                run_story(**common, progress=not args.no_progress)
         return 0
     if args.command == "lab":
         return lab_command(args)

@@ -116,6 +116,9 @@ class SessionPump:
         self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
+        self.on_refused: Callable[[ElementServerSession], None] | None = None
+        """Given, a client whose size ID the site cannot serve is handed to it with its
+        session (answered with NaN: ``refusal.py``) instead of being closed."""
         self._idle_timeout = idle_timeout = listener.idle_timeout
         self._loop = asyncio.get_running_loop()
         self._activity = self._loop.time()
@@ -304,6 +307,11 @@ class SessionPump:
             # and reported within the rate limit, so hostile churn grows neither log nor record
             self.listener.refuse("handshake", self.peer, f"ended before a valid size ID: "
                                  f"{reason}")
+            element = self._element
+            if (error and element is not None and element.size_id is not None
+                    and self.on_refused is not None):  # its requests follow: told to stop
+                self.on_refused(element)
+                return
         self._close()
 
     @property

@@ -23,7 +23,6 @@ import multiprocessing.queues
 import os
 import pickle
 import queue
-import signal
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -167,9 +166,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
                 outbox: multiprocessing.queues.Queue[Reply]) -> None:
     """The worker process: build, say ready, then answer batches of messages in order until
     ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
-    BLAS thread, so training takes the CPU the bridge's step loop leaves. Ctrl-C reaches the
-    whole process group: the bridge handles it and ends this worker, which ignores it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    BLAS thread, so training takes the CPU the bridge's step loop leaves."""
     with contextlib.suppress(OSError):
         os.nice(NICE)
     limits = _one_blas_thread()
