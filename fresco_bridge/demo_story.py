@@ -191,6 +191,8 @@ def run_story(
                            scores, diagnosis)
         from .report.html import write_report
 
+        summary_file = run_dir / "summary.json"  # the report's overview quotes its scores
+        summary_file.write_text(json.dumps(summary, indent=2), encoding="utf-8")
         write_report(run_dir)
     except KeyboardInterrupt:
         raise Interrupted(
@@ -198,7 +200,7 @@ def run_story(
             "recorded and closed; the scores, diagnosis or report were not finished (next: "
             f"{command_name()} report {run_dir} --diagnose {SOURCE})") from None
     summary["total_wall_s"] = round(time.perf_counter() - started, 1)
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    summary_file.write_text(json.dumps(summary, indent=2), encoding="utf-8")
     print(format_story(summary), file=sys.stderr)
     return summary
 

@@ -282,9 +282,9 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     ax = axes[0, 1]
     ks = _stride(source_f.size)
     ax.plot(source_time[::ks], source_f[::ks], **{**TRUTH, "lw": 0.8},
-            label=f"source {source} (measured)")
+            label=f"measured at {source}")
     ax.plot(twin_time[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8},
-            label=f"twin {twin} (predicted)")
+            label=f"served by {twin} (predicted)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (kN)")
     ax.set_title("predicted vs source force", fontsize=10)
