@@ -73,18 +73,22 @@ class Run:
                 names.append(s.site)
         return names
 
-    def sources(self) -> dict[str, str]:
-        """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
-        snapshot, or no updatable site)."""
+    def site_configs(self) -> dict[str, dict[str, Any]]:
+        """``{site: its [[sites]] table}`` from the config snapshot (``{}``: no snapshot, or
+        one that does not parse)."""
         if self.config_text is None:
             return {}
         try:
             sites = tomllib.loads(self.config_text).get("sites", [])
         except tomllib.TOMLDecodeError:
             return {}
-        return {str(s["name"]): str(s["learns_from"]) for s in sites
-                if isinstance(s, dict) and s.get("kind") == "updatable" and "name" in s
-                and "learns_from" in s}
+        return {str(s["name"]): s for s in sites if isinstance(s, dict) and "name" in s}
+
+    def sources(self) -> dict[str, str]:
+        """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
+        snapshot, or no updatable site)."""
+        return {name: str(s["learns_from"]) for name, s in self.site_configs().items()
+                if s.get("kind") == "updatable" and "learns_from" in s}
 
     def config_value(self, section: str, key: str, default: Any) -> Any:
         """A value from the config snapshot (``default`` when absent or unreadable)."""

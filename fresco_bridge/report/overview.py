@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import html
 import json
-import tomllib
 from pathlib import Path
 from typing import Any, Final
 
@@ -48,16 +47,6 @@ def _read_json(path: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
-def _site_configs(run: Run) -> dict[str, dict[str, Any]]:
-    if run.config_text is None:
-        return {}
-    try:
-        sites = tomllib.loads(run.config_text).get("sites", [])
-    except tomllib.TOMLDecodeError:
-        return {}
-    return {str(s["name"]): s for s in sites if isinstance(s, dict) and "name" in s}
-
-
 def _controller_words(cfg: dict[str, Any]) -> str:
     ctl = cfg.get("controller", {})
     if not isinstance(ctl, dict):
@@ -71,7 +60,7 @@ def _controller_words(cfg: dict[str, Any]) -> str:
 
 
 def _tested(run: Run, summaries: list[SiteSummary], twins: dict[str, str]) -> str:
-    configs = _site_configs(run)
+    configs = run.site_configs()
     parts = []
     for s in summaries:
         cfg = configs.get(s.site, {})
