@@ -124,9 +124,16 @@ def main(argv: list[str] | None = None) -> int:
                               "the config's run_dir) instead of starting a new one")
     p_check = sub.add_parser("check", help="validate a lab config and exit")
     p_check.add_argument("--config", type=Path, required=True)
+    demo_help = ("the source paper's story end to end: the two-story frame, the tested "
+                 "damper on the simulated rig, its twin learned online, the diagnosis")
     p_demo = sub.add_parser(
-        "demo", help="the source paper's story end to end: the two-story frame, the tested "
-                     "damper on the simulated rig, its twin learned online, the diagnosis")
+        "demo", help=demo_help,
+        description=f"Run {demo_help}, in one process on embedded defaults (no broker, no "
+                    "hardware, no file from outside the package). Four acts: 1 the "
+                    "characterisation test, 2 the hybrid test through the bridge, 3 the twin's "
+                    "scores against the calibrated Bilinear, 4 the diagnosis; then the report. "
+                    "Each act's bridge logs into its run directory's bridge.log.",
+        epilog="Ctrl-C stops it with one line; the run is then recorded as interrupted.")
     p_demo.add_argument("--simple", action="store_true",
                         help="the plumbing alone: an ideal bilinear damper, no rig, no twin")
     p_demo.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -136,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--duration", type=float, default=20.0, help="seconds of synthetic record")
     p_demo.add_argument("--seed", type=int, default=1, help="synthetic record seed")
     p_demo.add_argument("--runs", type=Path, default=Path("runs"), help="run directory root")
-    p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
+    p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp",
+                        help="how the integrator reaches the bridge's sites, as genericClient's "
+                             "default or its -udp (default: tcp)")
     p_demo.add_argument("--mqtt", metavar="HOST[:PORT]", default=None,
                         help="publish live telemetry to this MQTT broker (default: off)")
     p_demo.add_argument("--mqtt-prefix", default="fresco", help="MQTT topic prefix")

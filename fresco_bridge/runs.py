@@ -458,13 +458,13 @@ def summarise(run: Run) -> list[SiteSummary]:
 
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
     """``runs show``: metadata, then one block per site."""
-    lines = [f"run        {run.directory}"]
-    lines.append(f"{'state':<10} {run_state(run.directory, run.meta)}")
-    for key in ("started_utc", "host", "fresco_bridge", "format"):
-        if key in run.meta:
-            lines.append(f"{key:<10} {run.meta[key]}")
-    lines.append(f"size       {human_size(run.size_bytes)}")
-    lines.extend(f"note       {n}" for n in run.notes)
+    head = [("run", str(run.directory)), ("state", run_state(run.directory, run.meta))]
+    head += [(key, str(run.meta[key])) for key in ("started_utc", "host", "fresco_bridge",
+                                                    "format") if key in run.meta]
+    head += [("size", human_size(run.size_bytes)), *(("note", n) for n in run.notes)]
+    width = max(len(k) for k, _ in head)
+    lines = [f"{k:<{width}}  {v}" for k, v in head]
+    twins = run.sources()
     for s in summaries:
         events = ", ".join(f"{k} {n}" for k, n in sorted(s.events.items())) or "none"
         lines += ["", f"site {s.site}: {s.steps} committed step(s), {s.sessions} session(s), "
@@ -475,6 +475,10 @@ def format_show(run: Run, summaries: list[SiteSummary]) -> str:
                 f"{fmt(d.time_start)}..{fmt(d.time_end)} s; peak |cmd| {fmt(d.peak_cmd, 'mm')}, "
                 f"|meas| {fmt(d.peak_meas, 'mm')}; force {fmt(d.force_min)}..{fmt(d.force_max)} kN"
             )
+            if s.site in twins:  # no actuator: its "measurement" is its trial, zeros say nothing
+                lines.append(f"    updatable site (the twin of {twins[s.site]}): no actuator, no "
+                             "tracking error")
+                continue
             lines.append(
                 f"    max |error| {fmt(d.max_tracking_error, 'mm')}, NRMS {fmt(d.nrms)}, "
                 f"TI {fmt(d.ti_final, 'mm²')}, FEI amplitude {fmt(d.fei_amplitude)}, "
