@@ -329,6 +329,6 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
             _no_data(ax, "no committed twin steps")
         elif n >= 2 and not steps.size:
             _no_data(ax, "no update lines (a record before format 5)")
-    fig.suptitle(f"Updatable site {twin}: its twin learned online from {source}", fontsize=11)
+    fig.suptitle(f"Updatable site {twin}: the twin of {source}, learned online", fontsize=11)
     fig.tight_layout()
     return _png(fig)
