@@ -179,8 +179,10 @@ def load_run(path: Path) -> Run:
                      "it was skipped, everything before it is intact")
     state = run_state(directory, meta)
     if state == "interrupted":
-        notes.append("the run ended without a clean close (bridge killed or host lost); "
-                     "'fresco-bridge runs resume' continues it")
+        how = ("the bridge was stopped (Ctrl-C or SIGTERM) while a client was served"
+               if "interrupted_utc" in meta else
+               "the run ended without a clean close (bridge killed or host lost)")
+        notes.append(f"{how}; 'fresco-bridge runs resume' continues it")
     for site, session in open_sessions(directory):
         if state != "running":
             notes.append(f"site {site} session {session} was opened and never closed")

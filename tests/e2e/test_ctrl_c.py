@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.runs import load_run
 
 pytest.importorskip("filterpy")
 
@@ -114,6 +115,8 @@ def test_serve_with_a_twin_interrupted_mid_test(tmp_path: Path) -> None:
     assert "the run is recorded as interrupted" in lines[0], text
     assert "--resume" in lines[0] and "damper" in lines[0], text
     assert _run_state(tmp_path) == "interrupted"
+    (run,) = (tmp_path / "runs").iterdir()
+    assert "stopped (Ctrl-C or SIGTERM) while a client was served" in " ".join(load_run(run).notes)
 
 
 def test_serve_with_a_twin_stopped_between_tests(tmp_path: Path) -> None:
