@@ -350,7 +350,7 @@ def format_story(s: dict[str, Any]) -> str:
         f"{fmt(bil['rmseth_kN'], 'kN', 2)}, max {fmt(bil['maeth_kN'], 'kN', 2)} -> updating "
         f"cuts the RMS error by {pct(tw['rmseth_reduction_pct'], 0)}",
         diagnosis,
-        f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)"
+        f"report         {run}/report.html (opens with the run at a glance and what to do next)"
         f" and {run}/{TWIN_FIGURE}",
         f"next           {cmd} report {run} --diagnose {SOURCE}   (again, from the record)",
         f"               {cmd} diagnose {run} --site {SOURCE}",
