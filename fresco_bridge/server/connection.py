@@ -63,6 +63,8 @@ class SiteListener:
     """The listener's log lines about peers (errors, resets): one per cause per interval."""
     tls_handshakes: int = 0
     """TLS handshakes in flight (bounded by ``tls.MAX_HANDSHAKES``)."""
+    told_to_stop: int = 0
+    """Refused clients being answered with NaN now (bounded by ``refusal.MAX_REFUSALS``)."""
 
     def __post_init__(self) -> None:
         self.site.rejections = self.rejections

@@ -9,7 +9,9 @@ ends and its ``wipe`` or exit sends DIE. Nothing of it reaches a site: the refus
 parses the protocol (its own sans-IO session) to know how long each reply is.
 
 Bounded: the connection ends at DIE, EOF, a protocol error, a client that does not read its
-answers, or ``REFUSAL_WINDOW`` seconds after the refusal, whichever comes first.
+answers, or ``REFUSAL_WINDOW`` seconds after the refusal, whichever comes first; and at most
+``MAX_REFUSALS`` refused clients of a site are answered at once (the transport closes the
+others at once, as before), so a flood of refused connections holds no more than that.
 """
 
 from __future__ import annotations
@@ -27,12 +29,14 @@ from protocol import (
     Sentinel,
 )
 
-__all__ = ["REFUSAL_WINDOW", "Refusal"]
+__all__ = ["MAX_REFUSALS", "REFUSAL_WINDOW", "Refusal"]
 
 REFUSAL_WINDOW = 10.0
 """Seconds a refused client is answered with NaN before its connection is closed: an
 OpenSees analysis stops at its first NaN answer (milliseconds); this only bounds a client
 that ignores them."""
+MAX_REFUSALS = 8
+"""Refused clients of one site answered with NaN at once; more are closed."""
 
 
 class Refusal:
@@ -44,11 +48,13 @@ class Refusal:
     """
 
     def __init__(self, send: Callable[[bytes], None], close: Callable[[], None], *,
-                 max_data_size: int, session: ElementServerSession | None = None) -> None:
+                 max_data_size: int, session: ElementServerSession | None = None,
+                 ended: Callable[[], None] | None = None) -> None:
         self.session = session if session is not None else ElementServerSession(
             max_data_size=max_data_size)
         self._send = send
         self._close = close
+        self._ended = ended
         self.closed = False
         self.answered = 0
         """Requests answered with NaN so far."""
@@ -100,4 +106,6 @@ class Refusal:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+        if self._ended is not None:
+            self._ended()
         self._close()

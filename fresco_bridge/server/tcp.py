@@ -29,7 +29,7 @@ from protocol import ElementServerSession
 
 from ..sites import SiteError
 from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
-from .refusal import Refusal
+from .refusal import MAX_REFUSALS, Refusal
 from .tls import HANDSHAKE_TIMEOUT, MAX_HANDSHAKES, check_issued_directly, describe_failure
 
 log = logging.getLogger("fresco_bridge.server")
@@ -189,13 +189,20 @@ class TcpConnection(asyncio.Protocol):
     def _tell_to_stop(self, transport: asyncio.Transport,
                       session: ElementServerSession | None = None) -> None:
         """A refused client: an element-protocol one is answered with NaN until it leaves
-        (``refusal.py``: OpenSees then stops instead of spinning); others are closed."""
-        if self.site.cfg.protocol != "element":
+        (``refusal.py``: OpenSees then stops instead of spinning); others, and those past
+        ``MAX_REFUSALS`` at once, are closed."""
+        listener = self.listener
+        if self.site.cfg.protocol != "element" or listener.told_to_stop >= MAX_REFUSALS:
             transport.abort()
             return
         transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
-        self.pump = Refusal(self._reply, transport.close,
-                            max_data_size=self.listener.max_data_size, session=session)
+        listener.told_to_stop += 1
+
+        def ended() -> None:
+            listener.told_to_stop -= 1
+
+        self.pump = Refusal(self._reply, transport.close, max_data_size=listener.max_data_size,
+                            session=session, ended=ended)
         early, self._early = self._early, []
         for data in early:
             self.pump.feed(data)
