@@ -19,6 +19,7 @@ from pydantic import (
     model_validator,
 )
 
+from .config_lines import locate
 from .config_model import ClientAddress, ConfigPath, IPv4Address, StrictConfig
 from .controls.kind import ControllerConfigBase
 from .controls.registry import CONTROLLER_KINDS, controller_kind, known_kinds
@@ -367,7 +368,8 @@ class LabConfig(_Strict):
         return self
 
 
-def _format_errors(source: str, exc: ValidationError) -> str:
+def _format_errors(source: str, exc: ValidationError, text: str = "",
+                   raw: dict[str, Any] | None = None) -> str:
     lines = [f"{source}: invalid configuration ({exc.error_count()} problem(s))"]
     for err in exc.errors():
         parts = list(err["loc"])
@@ -375,6 +377,8 @@ def _format_errors(source: str, exc: ValidationError) -> str:
                                                          and p in CONTROLLER_KINDS)]
         loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in parts)
         loc = loc.replace(".[", "[")
+        where = locate(text, raw or {}, parts)  # "line 12, site damper"
+        loc = f"{where}: {loc}" if where else loc
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown key (typo?)"
@@ -398,7 +402,7 @@ def parse_config(text: str, source: str = "<config>", *, base: Path | None = Non
     try:
         cfg = LabConfig.model_validate(raw)
     except ValidationError as exc:
-        raise ConfigError(_format_errors(source, exc)) from None
+        raise ConfigError(_format_errors(source, exc, text, raw)) from None
     if not any(s.kind == "updatable" for s in cfg.sites):
         return cfg
     cfg, problems = _updatable_sites(cfg, Path.cwd() if base is None else base)

@@ -282,9 +282,9 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     ax = axes[0, 1]
     ks = plot_stride(source_f.size)
     ax.plot(source_time[::ks], source_f[::ks], **{**TRUTH, "lw": 0.8},
-            label=f"source {source} (measured)")
+            label=f"measured at {source}")
     ax.plot(twin_time[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8},
-            label=f"twin {twin} (predicted)")
+            label=f"served by {twin} (predicted)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (kN)")
     ax.set_title("predicted vs source force", fontsize=10)
@@ -329,6 +329,6 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
             _no_data(ax, "no committed twin steps")
         elif n >= 2 and not steps.size:
             _no_data(ax, "no update lines (a record before format 5)")
-    fig.suptitle(f"Updatable site {twin}: its twin learned online from {source}", fontsize=11)
+    fig.suptitle(f"Updatable site {twin}: the twin of {source}, learned online", fontsize=11)
     fig.tight_layout()
     return png_bytes(fig)

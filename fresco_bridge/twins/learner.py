@@ -32,6 +32,7 @@ from collections.abc import Callable
 from multiprocessing.process import BaseProcess
 from typing import Any
 
+from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep
 from ..worker_output import OUTPUT, quiet_tracker, relay_output
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
@@ -153,7 +154,7 @@ class Learner:
         inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
-                           name=f"fresco-learner-{self.source}", daemon=True)
+                           name=f"{WORKER_PROCESS_PREFIX}learner-{self.source}", daemon=True)
         self._generation += 1
         self._ready = self._loop.create_future()
         self._backlog.clear()
