@@ -70,6 +70,10 @@ class ModbusControllerConfig(NetworkControllerConfig):
     """Pause between STATE polls while a move runs, s."""
     move_timeout: float = Field(10.0, gt=0.0, le=3600.0, allow_inf_nan=False)
     """A move still MOVING after this long (wall s) is an error (like the MTS WAIT bound)."""
+    external_register: int | None = Field(None, ge=0, le=CHANNEL_STRIDE - 2)
+    """The external channel (``Daq.external``): the address, within each channel's register
+    block, of a float32 displacement (mm) from a second transducer; ``sim-actuator serve``
+    serves the specimen's displacement at 24 (EXT_DISP). None: no external channel."""
 
 
 class ModbusController(NetworkController):
@@ -81,6 +85,8 @@ class ModbusController(NetworkController):
     def __init__(self, config: ModbusControllerConfig, n_actuators: int = 1) -> None:
         super().__init__(config, f"modbus controller {config.host}:{config.port}", n_actuators)
         self._client: AsyncModbusTcpClient | None = None
+        if config.external_register is not None:
+            self.external_channel = f"register {config.external_register}"
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -277,6 +283,16 @@ class ModbusController(NetworkController):
     async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         statuses = [await self._read_status(c) for c in range(self.n_actuators)]
         return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        address = self.config.external_register
+        assert address is not None  # only called with an external channel
+        values = []
+        for c in range(self.n_actuators):
+            values.append(decode_float32(await self._read(
+                c * CHANNEL_STRIDE + address, 2,
+                f"read the external channel{self._channel(c)} (register {address})")))
+        return tuple(values)
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         for channel in range(self.n_actuators):  # HOLD holds every actuator

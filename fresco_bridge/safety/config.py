@@ -108,11 +108,11 @@ class CorrectionConfig(StrictConfig):
                     which = f" of control point {i}" if isinstance(value, list) else ""
                     raise ValueError(f"{key}{which}: {v!r} mm must be "
                                      f"{'> 0' if strict else '>= 0'}")
-        if self.actuators is not None:
-            if not self.actuators or len(set(self.actuators)) != len(self.actuators) or \
-                    min(self.actuators) < 1:
-                raise ValueError(f"actuators {self.actuators}: distinct control points, "
-                                 "1-based, at least one")
+        points = self.actuators
+        if points is not None and (not points or len(set(points)) != len(points)
+                                   or min(points) < 1):
+            raise ValueError(f"actuators {points}: distinct control points, 1-based, at "
+                             "least one")
         return self
 
     def to_settings(self, n_actuators: int) -> CorrectionSettings:

@@ -13,6 +13,7 @@ and the state table. The experimental site passes its own gate instead.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -183,7 +184,5 @@ class LimitedPath:
     async def hold(self, reason: str) -> None:
         self.state = next_state(self.state, Trigger.HOLD, in_session=True)
         self.reason = reason
-        try:
-            await self.controller.hold()
-        except ControllerError:
-            pass  # already holding nothing forward; the reason above stays the cause
+        with contextlib.suppress(ControllerError):  # nothing more is forwarded either way; the
+            await self.controller.hold()           # reason above stays the cause

@@ -21,6 +21,8 @@ addr   name         type     acc  meaning
 18-19  TARGET       float32  ro   target of the current or last accepted move, mm
 20-21  SIM_TIME     float32  ro   simulated time, s
 22     MAP_VERSION  uint16   ro   1
+24-25  EXT_DISP     float32  ro   external displacement at the end of the last move: the
+                                  specimen's, behind frame compliance and pin play, mm
 ====== ============ ======== ==== ===========================================================
 
 Every write of 1 to EXECUTE is a trigger (no 0 -> 1 edge needed; the register reads back what
@@ -112,6 +114,8 @@ class ModbusRigServer:
                 SimData(base + Reg.EXECUTE, count=2, values=0, datatype=DataType.REGISTERS),
                 SimData(base + Reg.STATE, count=last - Reg.STATE + 1, values=0,
                         datatype=DataType.REGISTERS, readonly=True),
+                SimData(base + Reg.EXT_DISP, count=2, values=0, datatype=DataType.REGISTERS,
+                        readonly=True),
             ]
         # id 0: answer whatever unit id a master uses, as Modbus TCP servers usually do
         return SimDevice(id=0, simdata=blocks, action=self._action)
@@ -226,5 +230,6 @@ class ModbusRigServer:
             put(Reg.TARGET, encode_float32(c.target))
             put(Reg.SIM_TIME, encode_float32(c.rig.time))
             put(Reg.MAP_VERSION, [MAP_VERSION])
+            put(Reg.EXT_DISP, encode_float32(c.measurement.specimen_displacement))
             if n > 1:
                 put(Reg.CHANNELS, [n])

@@ -52,6 +52,9 @@ class Reg:
     MAP_VERSION = 22
     CHANNELS = 23
     """Channels served (multi-channel servers only; a one-channel server leaves it unmapped)."""
+    EXT_DISP = 24
+    """External displacement, float32 mm: the simulated rig's specimen displacement behind
+    frame compliance, pin play and servo undershoot (a transducer on the specimen)."""
 
 
 CHANNEL_STRIDE = 32

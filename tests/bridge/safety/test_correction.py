@@ -91,7 +91,7 @@ def test_the_table_per_control_point_and_its_errors() -> None:
     assert (s.gain, s.policy, s.max_iterations) == (0.8, "accept-with-event", 6)
     with pytest.raises(ValueError, match=r"correction.tolerance: 2 value\(s\) for 3"):
         config.to_settings(3)
-    with pytest.raises(ValidationError, match="tolerance: -0.1 mm must be > 0"):
+    with pytest.raises(ValidationError, match=r"tolerance: -0\.1 mm must be > 0"):
         CorrectionConfig(tolerance=-0.1, max_correction=1.0)
     with pytest.raises(ValidationError, match="policy"):
         CorrectionConfig(tolerance=0.1, max_correction=1.0, policy="ignore")
