@@ -247,3 +247,32 @@ def test_mts_over_loopback_with_the_external_field() -> None:
     steps = run(scenario)
     assert [s.verdict.outcome for s in steps] == ["converged"] * 3
     assert all(s.residual <= 0.01 for s in steps)
+
+
+def test_modbus_two_channels_each_corrected_on_its_own_register() -> None:
+    async def scenario() -> StepCorrection:
+        stiff = parse_rig_config(rig_description(frame={"stiffness": 48.0}))
+        soft = parse_rig_config(rig_description(frame={"stiffness": 16.0}))
+        served = [ServedRig(build_rig(stiff)), ServedRig(build_rig(soft))]
+        server = ModbusRigServer(served, host="127.0.0.1", port=0)
+        _, port = await server.start()
+        for s in served:
+            s.start_heartbeat(50.0)
+        ctl = ModbusController(ModbusControllerConfig(
+            kind="modbus", port=port, request_timeout=2.0, ramp_time=0.05,
+            external_register=24), n_actuators=2)
+        await ctl.connect()
+        try:
+            correction, _ = loop(ctl, max_correction=[2.0, 3.0])
+            return await correction.run((4.0, -3.0))
+        finally:
+            await ctl.close()
+            await server.stop()
+            for s in served:
+                await s.close()
+
+    step = run(scenario)
+    assert step.verdict.outcome == "converged" and step.residual <= 0.01
+    first = step.iterations[0].measured  # each channel short by its own frame's compliance
+    assert first[0] == pytest.approx(4.0 * 48 / 56, abs=1e-4)
+    assert first[1] == pytest.approx(-3.0 * 16 / 24, abs=1e-4)
