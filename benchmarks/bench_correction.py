@@ -51,7 +51,8 @@ from sim_actuator.servers.modbus import ModbusRigServer
 T = TypeVar("T")
 CORRECTION = CorrectionConfig(tolerance=0.01, max_correction=3.0, max_iterations=10,
                               measured="external", policy="accept-with-event")
-"""accept-with-event: a step that does not converge is counted (``not converged``), not a stop."""
+"""accept-with-event: a step that does not converge is counted (``not converged``), not a stop.
+``--gain`` and ``--max-iterations`` replace the gain and the bound."""
 
 
 def eager(coro: Coroutine[Any, Any, T]) -> T:
@@ -82,12 +83,13 @@ def rig_file(effects: dict[str, Any]) -> Path:
 class RigElement:
     """A story element on the rig: set_trial moves it (corrected or not), answers the force."""
 
-    def __init__(self, effects: dict[str, Any], corrected: bool) -> None:
+    def __init__(self, effects: dict[str, Any], corrected: bool,
+                 correction: CorrectionConfig = CORRECTION) -> None:
         self.rig = RigController(RigControllerConfig(file=rig_file(effects),
                                                      external="specimen"))
         self.initial_tangent = DAMPER["k0"]
         self.loop = CorrectionLoop(LimitedPath(self.rig, Limiter([], 1)),
-                                   CORRECTION.to_settings(1), self.rig, external=True) \
+                                   correction.to_settings(1), self.rig, external=True) \
             if corrected else None
         self.targets: list[float] = []
         self.specimen: list[float] = []
@@ -115,8 +117,9 @@ class RigElement:
         """A physical rig has no trial state."""
 
 
-def frame_run(effects: dict[str, Any], corrected: bool, steps: int | None) -> dict[str, Any]:
-    element = RigElement(effects, corrected)
+def frame_run(effects: dict[str, Any], corrected: bool, steps: int | None,
+              correction: CorrectionConfig = CORRECTION) -> dict[str, Any]:
+    element = RigElement(effects, corrected, correction)
     coupling = StoryCoupling({"damper": Placement(0, element)})
     integrator = demo_frame_integrator(coupling, demo_ground_motion())
     response = run_coupled(integrator, coupling, steps=steps)
@@ -183,7 +186,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--gap", type=float, default=0.2, help="pin gap each side, mm")
     parser.add_argument("--modbus-steps", type=int, default=60)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--gain", type=float, default=CORRECTION.gain)
+    parser.add_argument("--max-iterations", type=int, default=CORRECTION.max_iterations)
     args = parser.parse_args(argv)
+    correction = CORRECTION.model_copy(update={"gain": args.gain,
+                                               "max_iterations": args.max_iterations})
+    print(f"correction: gain {correction.gain:g}, max_iterations {correction.max_iterations}, "
+          f"tolerance {correction.tolerance} mm, max_correction {correction.max_correction} mm")
     steps = 500 if args.quick else None
     rounds = 2 if args.quick else max(3, args.rounds)
     ideal = frame_run({}, corrected=False, steps=steps)
@@ -193,7 +202,7 @@ def main(argv: list[str] | None = None) -> None:
                 f"pin gap {args.gap:g} mm": {"backlash": {"gap": args.gap}}}
     for name, effects in variants.items():
         off = summarise(frame_run(effects, False, steps), ideal["drift"])
-        on = summarise(frame_run(effects, True, steps), ideal["drift"])
+        on = summarise(frame_run(effects, True, steps, correction), ideal["drift"])
         print(f"\n{name}")
         for key in off:
             print(f"  {key:24s} without {off[key]:10.4g}   with {on[key]:10.4g}")

@@ -82,9 +82,10 @@ class CorrectionConfig(StrictConfig):
     control point; a correction beyond it is never sent (→ ``policy``)."""
     max_iterations: int = Field(default=5, ge=1, le=100)
     """Corrected commands per step at most; still outside the tolerance after them → ``policy``."""
-    gain: float = Field(default=1.0, gt=0, le=2.0)
-    """Next command = last command + gain·(target − measured); 1 removes a linear error in one
-    iteration, below 1 is gentler on a rig with play."""
+    gain: float = Field(default=1.0, gt=0, le=1.0)
+    """Next command = last command + gain·(target − measured), in (0, 1]: 1 removes a linear
+    error (compliance, undershoot) in one iteration; above 1 a correction overshoots, and an
+    inelastic specimen keeps the excursion in its history (BENCHMARKS.md)."""
     policy: Literal["hold", "accept-with-event"] = "hold"
     """Not converged or beyond ``max_correction``: ``hold`` → HOLD; ``accept-with-event`` →
     the integrator gets the force at the last position reached, and an event is recorded."""

@@ -8,7 +8,10 @@ target ``t``, last command ``c`` and measured ``m``:
 
 * every corrected point within ``tolerance`` (``|t - m| <= tol``): **converged**;
 * else, after ``max_iterations`` corrections: **not converged** → the policy;
-* else the next command ``c + gain * (t - m)``; if that lies farther than ``max_correction``
+* else the next command ``c + gain * (t - m)`` (``gain`` <= 1: behind a series compliance or a
+  pin gap the specimen then approaches the target from one side and never passes it, so an
+  inelastic specimen sees no excursion the integrator did not ask for);
+  if that lies farther than ``max_correction``
   from the target on any point: **beyond max_correction** → the policy, and it is never
   proposed (so never forwarded);
 * a measurement that is not finite: **HOLD**, whatever the policy.
@@ -52,9 +55,10 @@ class CorrectionSettings:
                                  f"must be > 0 and max_correction {most!r} mm >= 0")
         if self.max_iterations < 1:
             raise ValueError(f"correction: max_iterations {self.max_iterations} must be >= 1")
-        if not 0.0 < self.gain <= 2.0:
-            raise ValueError(f"correction: gain {self.gain!r} must be in (0, 2] (beyond 2 the "
-                             "iteration diverges even on a perfectly linear rig)")
+        if not 0.0 < self.gain <= 1.0:
+            raise ValueError(f"correction: gain {self.gain!r} must be in (0, 1]: above 1 a "
+                             "correction overshoots the target, and an inelastic specimen "
+                             "keeps the excursion in its history")
 
     @property
     def n(self) -> int:
