@@ -20,7 +20,14 @@ from typing import Protocol
 
 from ..controls.base import Controller, ControllerError, Daq
 from ..safety import Limiter, SiteState, Trigger, next_state
-from ..safety.correction import REFUSED, CorrectionSettings, Terminal, correct, needs_warning
+from ..safety.correction import (
+    REFUSED,
+    CorrectionSettings,
+    Terminal,
+    correct,
+    needs_warning,
+    residual,
+)
 
 __all__ = ["CommandPath", "CorrectionLoop", "Iteration", "LimitedPath", "StepCorrection"]
 
@@ -64,19 +71,14 @@ class StepCorrection:
     """The last measurement (the integrator's answer), None if refused before any."""
     warn: bool
     """More than half of ``max_iterations`` corrections were needed."""
+    residual: float
+    """Largest |target − measured| of the corrected control points at the end, mm (NaN
+    without a measurement)."""
 
     @property
     def corrections(self) -> int:
         """Corrected commands sent after the target."""
         return max(0, len(self.iterations) - 1)
-
-    @property
-    def residual(self) -> float:
-        """Largest |target − measured| at the end, mm (NaN without a measurement)."""
-        if not self.iterations:
-            return math.nan
-        last = self.iterations[-1].measured
-        return max(abs(t - m) for t, m in zip(self.target, last, strict=True))
 
     def as_record(self) -> dict[str, object]:
         return {"target": list(self.target), "outcome": self.verdict.outcome,
@@ -127,11 +129,16 @@ class CorrectionLoop:
             if isinstance(verdict, Terminal):
                 if verdict.hold:
                     await path.hold(f"displacement correction: {verdict.describe()}")
-                return StepCorrection(target, tuple(iterations), verdict, daq,
-                                      needs_warning(settings, len(iterations) - 1))
+                return self._step(target, iterations, verdict, daq)
             reached = await path.send(verdict)
-        return StepCorrection(target, tuple(iterations), REFUSED, daq,
-                              needs_warning(settings, max(0, len(iterations) - 1)))
+        return self._step(target, iterations, REFUSED, daq)
+
+    def _step(self, target: tuple[float, ...], iterations: list[Iteration], verdict: Terminal,
+              daq: Daq | None) -> StepCorrection:
+        settings = self.settings
+        left = residual(settings, target, iterations[-1].measured) if iterations else math.nan
+        return StepCorrection(target, tuple(iterations), verdict, daq,
+                              needs_warning(settings, max(0, len(iterations) - 1)), left)
 
 
 class LimitedPath:

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import select
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -22,6 +25,7 @@ from sim_actuator.config import RigConfig, build_rig, parse_rig_config
 from sim_actuator.servers.controller import RigController as ServedRig
 from sim_actuator.servers.modbus import ModbusRigServer
 from sim_actuator.servers.mts_stub import MtsStubServer
+from tests.support.net import free_ports
 
 T = TypeVar("T")
 
@@ -276,3 +280,50 @@ def test_modbus_two_channels_each_corrected_on_its_own_register() -> None:
     first = step.iterations[0].measured  # each channel short by its own frame's compliance
     assert first[0] == pytest.approx(4.0 * 48 / 56, abs=1e-4)
     assert first[1] == pytest.approx(-3.0 * 16 / 24, abs=1e-4)
+
+
+def test_sim_actuator_serve_serves_the_external_register(tmp_path: Path) -> None:
+    """The process a lab starts: ``sim-actuator serve --protocol modbus --rig FILE``."""
+    file = tmp_path / "rig.toml"
+    file.write_text(toml(rig_description(frame={"stiffness": 48.0})), encoding="utf-8")
+    port = free_ports(1)[0]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sim_actuator.cli", "serve", "--protocol", "modbus", "--port",
+         str(port), "--rig", str(file), "--time-scale", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+        line = proc.stdout.readline() if ready else ""
+        assert line.startswith("sim-actuator ready"), line
+
+        async def scenario() -> list[StepCorrection]:
+            ctl = ModbusController(ModbusControllerConfig(
+                kind="modbus", port=port, request_timeout=2.0, ramp_time=0.05,
+                external_register=24))
+            await ctl.connect()
+            try:
+                correction, _ = loop(ctl)
+                return [await correction.run((t,)) for t in (3.0, -2.0)]
+            finally:
+                await ctl.close()
+
+        steps = run(scenario)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    assert [s.verdict.outcome for s in steps] == ["converged"] * 2
+    first = steps[0].iterations[0].measured[0]
+    assert first == pytest.approx(3.0 * 48 / 56, abs=1e-4)  # the specimen, behind the frame
+    assert all(s.residual <= 0.01 for s in steps)
+
+
+def test_a_two_actuator_rig_reads_each_specimen(tmp_path: Path) -> None:
+    file = tmp_path / "rig.toml"
+    file.write_text(toml(rig_description(frame={"stiffness": 48.0})), encoding="utf-8")
+    controller = RigController(RigControllerConfig(file=file, external="specimen"), 2)
+    controller.set_ctrl_now((2.0, -1.0))
+    daq = controller.get_daq_now()
+    assert daq.disp == pytest.approx((2.0, -1.0))  # the LVDT on the piston
+    assert daq.external == pytest.approx((2.0 * 48 / 56, -1.0 * 48 / 56))
+    assert RigController(RigControllerConfig(file=file), 2).get_daq_now().external is None
