@@ -18,7 +18,9 @@ forwards nothing while it holds, so this is a new session or an operator's resum
 again, but only if this adapter engaged it: an interlock engaged by an operator or another
 master, or a latched fault, is reported and left alone.
 
-Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
+With ``external_register`` the measurement also reads each channel's external displacement
+(``Daq.external``, one more read per channel; the outer-loop correction's ``measured =
+"external"``). Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
 changing (checked on every status read); a physical rig cannot report its stiffness, so the
 tangent and initial stiffness are a configured estimate.
 """

@@ -9,6 +9,12 @@ loop never talks to the controller itself, so a correction cannot bypass a limit
 ``LimitedPath`` is that path without a site: the ctrl and daq limits (``reject``/``pause`` →
 HOLD, since there is no operator to wait for; ``clamp`` and sub-commands as the site does them)
 and the state table. The experimental site passes its own gate instead.
+
+Wiring a site: build ``CorrectionLoop(path, config.to_settings(n), controller,
+external=config.measured == "external")`` once, with ``path`` the site's gate (``send``: limits,
+pause, guard; ``acquire``: the site's daq read and checks; ``hold``: ``enter_hold``); per trial,
+``await loop.run(ctrl)`` where the site sent ``ctrl`` and acquired; answer with ``step.daq``,
+record ``step.as_record()``, report ``corrections``/``residual`` and warn on ``step.warn``.
 """
 
 from __future__ import annotations
