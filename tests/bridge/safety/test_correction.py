@@ -138,11 +138,12 @@ finite = st.floats(-60.0, 60.0, allow_nan=False)
     st.one_of(finite, st.just(math.nan), st.just(math.inf)), max_size=12),
     policy=st.sampled_from(["reject", "clamp"]), gain=st.floats(0.1, 1.0),
     most=st.floats(0.0, 10.0), increment=st.floats(0.5, 20.0),
-    accept=st.booleans())
+    velocity=st.floats(5.0, 500.0), substeps=st.sampled_from([0, 4]), accept=st.booleans())
 def test_no_command_outside_the_limits_whatever_the_rig_does(
         target: float, readings: list[float], policy: str, gain: float, most: float,
-        increment: float, accept: bool) -> None:
+        increment: float, velocity: float, substeps: int, accept: bool) -> None:
     limits = ControlPointLimits(0, disp_min=-25.0, disp_max=25.0, disp_increment=increment,
+                                velocity=velocity, step_time=0.01, max_substeps=substeps,
                                 policy=policy)  # type: ignore[arg-type]
     limiter = Limiter([limits], 1)
     rig = ArbitraryRig(list(readings))
@@ -155,6 +156,7 @@ def test_no_command_outside_the_limits_whatever_the_rig_does(
     for sent in path.sent:
         assert -25.0 <= sent[0] <= 25.0
         assert abs(sent[0] - previous) <= increment * (1 + 1e-12)
+        assert abs(sent[0] - previous) / 0.01 <= velocity * (1 + 1e-9)
         previous = sent[0]
     assert step.corrections <= 6
     if step.verdict.hold:
