@@ -20,9 +20,9 @@ master, or a latched fault, is reported and left alone.
 
 With ``external_register`` the measurement also reads each channel's external displacement
 (``Daq.external``, one more read per channel; the outer-loop correction's ``measured =
-"external"``). Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
-changing (checked on every status read); a physical rig cannot report its stiffness, so the
-tangent and initial stiffness are a configured estimate.
+"external"``). Float32 values are IEEE-754 in two registers, high word first. The heartbeat
+register must keep changing (checked on every status read); a physical rig cannot report its
+stiffness, so the tangent and initial stiffness are a configured estimate.
 """
 
 from __future__ import annotations

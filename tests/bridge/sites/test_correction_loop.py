@@ -327,3 +327,9 @@ def test_a_two_actuator_rig_reads_each_specimen(tmp_path: Path) -> None:
     assert daq.disp == pytest.approx((2.0, -1.0))  # the LVDT on the piston
     assert daq.external == pytest.approx((2.0 * 48 / 56, -1.0 * 48 / 56))
     assert RigController(RigControllerConfig(file=file), 2).get_daq_now().external is None
+
+
+def test_max_correction_zero_only_checks(tmp_path: Path) -> None:
+    correction, path = loop(rig(tmp_path, frame={"stiffness": 48.0}), max_correction=0.0)
+    step = drive(correction, [0.001, 3.0])[-1]
+    assert step.verdict.outcome == "beyond-max-correction" and path.sent == [(0.001,), (3.0,)]
