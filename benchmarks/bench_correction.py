@@ -71,11 +71,14 @@ def rig_description(effects: dict[str, Any]) -> dict[str, Any]:
             "effects": effects, "default_ramp_time": 0.05, "settle_time": 0.01}
 
 
+_FILES = tempfile.TemporaryDirectory(prefix="bench-correction-")
+"""The rig files of this run (removed when the process ends)."""
+
+
 def rig_file(effects: dict[str, Any]) -> Path:
     """The rig description as a file, as a lab writes it for ``[sites.controller] file``."""
     parse_rig_config(rig_description(effects))  # a bad description fails here, named
-    folder = Path(tempfile.mkdtemp(prefix="bench-correction-"))
-    path = folder / "rig.toml"
+    path = Path(_FILES.name) / f"rig-{len(list(Path(_FILES.name).iterdir()))}.toml"
     path.write_text(dump_toml(rig_description(effects)), encoding="utf-8")
     return path
 

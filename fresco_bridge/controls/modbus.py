@@ -19,10 +19,11 @@ again, but only if this adapter engaged it: an interlock engaged by an operator 
 master, or a latched fault, is reported and left alone.
 
 With ``external_register`` the measurement also reads each channel's external displacement
-(``Daq.external``, one more read per channel; the outer-loop correction's ``measured =
-"external"``). Float32 values are IEEE-754 in two registers, high word first. The heartbeat
-register must keep changing (checked on every status read); a physical rig cannot report its
-stiffness, so the tangent and initial stiffness are a configured estimate.
+(``Daq.external``, in the same request as the status block when the controller maps every
+register between them, else one more read per channel; the outer-loop correction's
+``measured = "external"``). Float32 values are IEEE-754 in two registers, high word first.
+The heartbeat register must keep changing (checked on every status read); a physical rig cannot
+report its stiffness, so the tangent and initial stiffness are a configured estimate.
 """
 
 from __future__ import annotations
@@ -89,6 +90,10 @@ class ModbusController(NetworkController):
         self._client: AsyncModbusTcpClient | None = None
         if config.external_register is not None:
             self.external_channel = f"register {config.external_register}"
+        self._external_in_one_read = True
+        """The external register is read with the status block (until a controller refuses)."""
+        self._external: tuple[float, ...] | None = None
+        """The external displacements read with the last status blocks, if they were."""
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -283,10 +288,31 @@ class ModbusController(NetworkController):
                 f"{status.sequence} (expected {expected}); another master is commanding it?")
 
     async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        statuses = [await self._read_status(c) for c in range(self.n_actuators)]
+        address = self.config.external_register
+        if address is None or address < Reg.STATE or not self._external_in_one_read:
+            statuses = [await self._read_status(c) for c in range(self.n_actuators)]
+            self._external = None
+            return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+        # the status block and the external register in one request per channel (no extra
+        # round trip); a controller with an unmapped register between them answers exception
+        # 02 once, and from then on the external register is read on its own
+        count = max(STATUS_COUNT, address + 2 - Reg.STATE)
+        statuses, external = [], []
+        for c in range(self.n_actuators):
+            words = await self._read(c * CHANNEL_STRIDE + Reg.STATE, count,
+                                     f"read status and external channel{self._channel(c)}",
+                                     missing=-1)
+            if words[0] == -1:
+                self._external_in_one_read = False
+                return await self._measure()
+            statuses.append(self._status(words[:STATUS_COUNT], c))
+            external.append(decode_float32(words[address - Reg.STATE:address - Reg.STATE + 2]))
+        self._external = tuple(external)
         return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
 
     async def _measure_external(self) -> tuple[float, ...]:
+        if self._external is not None:
+            return self._external
         address = self.config.external_register
         assert address is not None  # only called with an external channel
         values = []

@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from fresco_bridge.controls.base import Controller
+from fresco_bridge.controls.base import Controller, ControllerError
 from fresco_bridge.controls.modbus import ModbusController, ModbusControllerConfig
 from fresco_bridge.controls.mts import MtsController, MtsControllerConfig
 from fresco_bridge.controls.rig import RigController, RigControllerConfig
@@ -333,3 +333,15 @@ def test_max_correction_zero_only_checks(tmp_path: Path) -> None:
     correction, path = loop(rig(tmp_path, frame={"stiffness": 48.0}), max_correction=0.0)
     step = drive(correction, [0.001, 3.0])[-1]
     assert step.verdict.outcome == "beyond-max-correction" and path.sent == [(0.001,), (3.0,)]
+
+
+def test_an_unmapped_external_register_is_a_clear_controller_error() -> None:
+    async def scenario() -> str:
+        async with modbus(compliant(), external_register=28) as ctl:
+            with pytest.raises(ControllerError) as err:
+                await ctl.get_daq()
+            return str(err.value)
+
+    message = run(scenario)
+    assert "read the external channel (register 28)" in message
+    assert "ILLEGAL_DATA_ADDRESS" in message
