@@ -39,6 +39,7 @@ BENCHMARKS: dict[str, str] = {
     "first_output": "First output of long commands",
     "setups": "Multi-actuator setups",
     "tangent": "Measured tangent",
+    "correction": "Displacement correction",
 }
 """Benchmark name -> the BENCHMARKS.md section it feeds. The module is ``bench_NAME`` if that
 exists, else ``NAME``; each has ``main(argv)`` accepting ``--quick``."""

@@ -39,6 +39,11 @@ class Daq(NamedTuple):
 
     disp: tuple[float, ...]
     force: tuple[float, ...]
+    external: tuple[float, ...] | None = None
+    """A second displacement per actuator (mm) from a separate transducer, e.g. on the
+    specimen behind the frame's compliance and the pin's play, where the controller provides
+    one and its config names it (``Controller.external_channel``); None otherwise (the default
+    costs nothing: no field is read, no value made)."""
 
 
 class Controller(abc.ABC):
@@ -51,6 +56,11 @@ class Controller(abc.ABC):
     n_actuators: int = 1
     inline: bool = False
     """True when every call completes without suspending (in-process); then no deadline task."""
+    external_channel: str | None = None
+    """What ``Daq.external`` measures when this controller fills it (its config named an
+    external channel), e.g. ``"specimen displacement"``; None: ``Daq.external`` is always None.
+    The outer-loop correction (``sites/correction_loop.py``) reads it when a site asks for
+    ``measured = "external"``."""
 
     async def connect(self) -> None:  # noqa: B027 - optional hook
         """Open the link to the controller (no-op for in-process controllers)."""

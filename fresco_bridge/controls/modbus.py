@@ -18,9 +18,12 @@ forwards nothing while it holds, so this is a new session or an operator's resum
 again, but only if this adapter engaged it: an interlock engaged by an operator or another
 master, or a latched fault, is reported and left alone.
 
-Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
-changing (checked on every status read); a physical rig cannot report its stiffness, so the
-tangent and initial stiffness are a configured estimate.
+With ``external_register`` the measurement also reads each channel's external displacement
+(``Daq.external``, in the same request as the status block when the controller maps every
+register between them, else one more read per channel; the outer-loop correction's
+``measured = "external"``). Float32 values are IEEE-754 in two registers, high word first.
+The heartbeat register must keep changing (checked on every status read); a physical rig cannot
+report its stiffness, so the tangent and initial stiffness are a configured estimate.
 """
 
 from __future__ import annotations
@@ -70,6 +73,10 @@ class ModbusControllerConfig(NetworkControllerConfig):
     """Pause between STATE polls while a move runs, s."""
     move_timeout: float = Field(10.0, gt=0.0, le=3600.0, allow_inf_nan=False)
     """A move still MOVING after this long (wall s) is an error (like the MTS WAIT bound)."""
+    external_register: int | None = Field(None, ge=0, le=CHANNEL_STRIDE - 2)
+    """The external channel (``Daq.external``): the address, within each channel's register
+    block, of a float32 displacement (mm) from a second transducer; ``sim-actuator serve``
+    serves the specimen's displacement at 24 (EXT_DISP). None: no external channel."""
 
 
 class ModbusController(NetworkController):
@@ -81,6 +88,12 @@ class ModbusController(NetworkController):
     def __init__(self, config: ModbusControllerConfig, n_actuators: int = 1) -> None:
         super().__init__(config, f"modbus controller {config.host}:{config.port}", n_actuators)
         self._client: AsyncModbusTcpClient | None = None
+        if config.external_register is not None:
+            self.external_channel = f"register {config.external_register}"
+        self._external_in_one_read = True
+        """The external register is read with the status block (until a controller refuses)."""
+        self._external: tuple[float, ...] | None = None
+        """The external displacements read with the last status blocks, if they were."""
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -275,8 +288,39 @@ class ModbusController(NetworkController):
                 f"{status.sequence} (expected {expected}); another master is commanding it?")
 
     async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        statuses = [await self._read_status(c) for c in range(self.n_actuators)]
+        address = self.config.external_register
+        if address is None or address < Reg.STATE or not self._external_in_one_read:
+            statuses = [await self._read_status(c) for c in range(self.n_actuators)]
+            self._external = None
+            return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+        # the status block and the external register in one request per channel (no extra
+        # round trip); a controller with an unmapped register between them answers exception
+        # 02 once, and from then on the external register is read on its own
+        count = max(STATUS_COUNT, address + 2 - Reg.STATE)
+        statuses, external = [], []
+        for c in range(self.n_actuators):
+            words = await self._read(c * CHANNEL_STRIDE + Reg.STATE, count,
+                                     f"read status and external channel{self._channel(c)}",
+                                     missing=-1)
+            if words[0] == -1:
+                self._external_in_one_read = False
+                return await self._measure()
+            statuses.append(self._status(words[:STATUS_COUNT], c))
+            external.append(decode_float32(words[address - Reg.STATE:address - Reg.STATE + 2]))
+        self._external = tuple(external)
         return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        if self._external is not None:
+            return self._external
+        address = self.config.external_register
+        assert address is not None  # only called with an external channel
+        values = []
+        for c in range(self.n_actuators):
+            values.append(decode_float32(await self._read(
+                c * CHANNEL_STRIDE + address, 2,
+                f"read the external channel{self._channel(c)} (register {address})")))
+        return tuple(values)
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         for channel in range(self.n_actuators):  # HOLD holds every actuator

@@ -44,6 +44,10 @@ class MtsControllerConfig(NetworkControllerConfig):
     port: int = Field(5021, ge=1, le=65535)
     wait_timeout: float = Field(10.0, gt=0.0, le=3600.0)
     """Server-side WAIT bound of a move, s; a ramp still running then is an error."""
+    external_field: str | None = Field(None, pattern=r"^[a-z_]+$")
+    """The external channel (``Daq.external``): the key of the ``ACQUIRE`` reply that carries
+    a second transducer's displacement (mm), read from the same reply (no extra round trip);
+    ``sim-actuator serve --protocol mts`` sends the specimen's as ``specimen``. None: none."""
 
 
 def _float(fields: dict[str, str], key: str, where: str) -> float:
@@ -75,6 +79,10 @@ class MtsController(NetworkController):
         self._writer: asyncio.StreamWriter | None = None
         self._ramp: int | None = None
         """Id of the last ramp this adapter completed (for ``ACQUIRE <id>``)."""
+        self._acquired: dict[str, str] = {}
+        """The last ``ACQUIRE`` reply (the external channel is read from it)."""
+        if config.external_field is not None:
+            self.external_channel = f"ACQUIRE {config.external_field}"
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -218,8 +226,14 @@ class MtsController(NetworkController):
             raise ControllerError(f"{self.where}: ACQUIRE {ramp} refused: {exc}") from None
         self._heartbeats[0].observe(int(_float(status, "heartbeat", self.where)))
         n = self.n_actuators
+        self._acquired = reply
         return (_floats(reply, "displacement", self.where, n),
                 _floats(reply, "force", self.where, n))
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        field = self.config.external_field
+        assert field is not None  # only called with an external channel
+        return _floats(self._acquired, field, self.where, self.n_actuators)
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         await self._ask_control(["INTERLOCK ON"] if on

@@ -78,6 +78,11 @@ class NetworkController(PhysicalController, abc.ABC):
     async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """(displacements mm, forces kN) of the last move (the lock is held)."""
 
+    async def _measure_external(self) -> tuple[float, ...]:
+        """The external channel's displacements, mm (the lock is held, right after
+        ``_measure``); only called when ``external_channel`` is set."""
+        raise ControllerError(f"{self.where}: this controller kind has no external channel")
+
     @abc.abstractmethod
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         """Engage or release the program interlock (the lock is held)."""
@@ -133,12 +138,16 @@ class NetworkController(PhysicalController, abc.ABC):
         async with self._lock:
             await self._ensure_link()
             disp, force = await self._measure()
-        if not all(math.isfinite(v) for v in (*disp, *force)):
+            external = None if self.external_channel is None else \
+                await self._measure_external()
+        if not all(math.isfinite(v) for v in (*disp, *force, *(external or ()))):
             one = len(disp) == 1
+            also = "" if external is None else \
+                f", {self.external_channel} {external[0] if one else list(external)!r} mm"
             raise ControllerError(f"{self.where}: non-finite measurement: displacement "
                                   f"{disp[0] if one else list(disp)!r} mm, force "
-                                  f"{force[0] if one else list(force)!r} kN")
-        return Daq(disp, force)
+                                  f"{force[0] if one else list(force)!r} kN{also}")
+        return Daq(disp, force, external)
 
     async def hold(self) -> None:
         """Engage the program interlock (stops a running move where it is)."""

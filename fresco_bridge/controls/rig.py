@@ -103,6 +103,10 @@ class RigControllerConfig(ControllerConfigBase):
     """Stiffness estimate reported as tangent and initial stiffness per actuator, kN/mm."""
     reset_on_new_session: bool = True
     """A new integrator session starts from new rigs (virgin specimens, fresh noise streams)."""
+    external: Literal["specimen"] | None = None
+    """``"specimen"``: an external channel (``Daq.external``) reads each rig's true specimen
+    displacement, behind frame compliance, pin play and servo undershoot (an ideal transducer
+    on the specimen), for the outer-loop correction's ``measured = "external"``."""
 
     @model_validator(mode="after")
     def _one_rig(self) -> RigControllerConfig:
@@ -153,6 +157,8 @@ class RigController(InlineController, PhysicalController):
         self.config = config
         self.n_actuators = n_actuators
         self.stiffness = config.stiffness
+        if config.external == "specimen":
+            self.external_channel = "specimen displacement"
         try:
             self._rig_configs = config.rig_configs(n_actuators)
         except ValueError as exc:
@@ -182,8 +188,11 @@ class RigController(InlineController, PhysicalController):
                 self._last[channel] = rig.measure()
 
     def get_daq_now(self) -> Daq:
-        return Daq(tuple(m.displacement for m in self._last),
-                   tuple(m.force for m in self._last))
+        last = self._last
+        disp, force = tuple(m.displacement for m in last), tuple(m.force for m in last)
+        if self.external_channel is None:
+            return Daq(disp, force)
+        return Daq(disp, force, tuple(m.specimen_displacement for m in last))
 
     def commit_now(self) -> None:
         """A physical rig has no trial state to commit."""

@@ -21,6 +21,9 @@ addr   name         type     acc  meaning
 18-19  TARGET       float32  ro   target of the current or last accepted move, mm
 20-21  SIM_TIME     float32  ro   simulated time, s
 22     MAP_VERSION  uint16   ro   1
+23     CHANNELS     uint16   ro   channels served
+24-25  EXT_DISP     float32  ro   external displacement at the end of the last move: the
+                                  specimen's, behind frame compliance and pin play, mm
 ====== ============ ======== ==== ===========================================================
 
 Every write of 1 to EXECUTE is a trigger (no 0 -> 1 edge needed; the register reads back what
@@ -31,7 +34,7 @@ zero length. When CONTROL and EXECUTE are in one write, CONTROL acts first.
 
 Several channels (``sim-actuator serve --channels N``): channel c's block is the same table at
 ``c * 32 + addr`` (``CHANNEL_STRIDE``), each driving its own rig; register 23 (CHANNELS, ro) of
-every block then reads N. A one-channel server is exactly the table above.
+every block reads N (1 for one channel), so STATE .. EXT_DISP is one contiguous read.
 
 Exception codes: 01 coil/discrete-input functions; 02 unmapped address or write to a read-only
 register (from pymodbus); 03 EXECUTE or CONTROL value not allowed, command not finite, ramp time
@@ -99,8 +102,6 @@ class ModbusRigServer:
 
     def _device(self) -> SimDevice:
         blocks: list[SimData] = []
-        n = len(self.controllers)
-        last = Reg.MAP_VERSION if n == 1 else Reg.CHANNELS
         for channel, controller in enumerate(self.controllers):
             base, rig = channel * CHANNEL_STRIDE, controller.rig
             blocks += [
@@ -110,7 +111,7 @@ class ModbusRigServer:
                         values=encode_float32(rig.default_ramp_time),
                         datatype=DataType.REGISTERS),
                 SimData(base + Reg.EXECUTE, count=2, values=0, datatype=DataType.REGISTERS),
-                SimData(base + Reg.STATE, count=last - Reg.STATE + 1, values=0,
+                SimData(base + Reg.STATE, count=Reg.EXT_DISP + 2 - Reg.STATE, values=0,
                         datatype=DataType.REGISTERS, readonly=True),
             ]
         # id 0: answer whatever unit id a master uses, as Modbus TCP servers usually do
@@ -226,5 +227,5 @@ class ModbusRigServer:
             put(Reg.TARGET, encode_float32(c.target))
             put(Reg.SIM_TIME, encode_float32(c.rig.time))
             put(Reg.MAP_VERSION, [MAP_VERSION])
-            if n > 1:
-                put(Reg.CHANNELS, [n])
+            put(Reg.EXT_DISP, encode_float32(c.measurement.specimen_displacement))
+            put(Reg.CHANNELS, [n])

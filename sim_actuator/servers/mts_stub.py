@@ -91,7 +91,8 @@ def _values(values: list[float]) -> float | str:
 
 def _feedback(move_id: int, ms: list[Measurement]) -> str:
     return ok(ramp=move_id, time=ms[0].time, displacement=_values([m.displacement for m in ms]),
-              force=_values([m.force for m in ms]), command=_values([m.command for m in ms]))
+              force=_values([m.force for m in ms]), command=_values([m.command for m in ms]),
+              specimen=_values([m.specimen_displacement for m in ms]))
 
 
 _SEVERITY = (ControllerState.MOVING, ControllerState.FAULT, ControllerState.INTERLOCK,

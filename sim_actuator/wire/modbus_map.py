@@ -51,7 +51,10 @@ class Reg:
     SIM_TIME = 20
     MAP_VERSION = 22
     CHANNELS = 23
-    """Channels served (multi-channel servers only; a one-channel server leaves it unmapped)."""
+    """Channels served (1 for one channel; an older one-channel server left it unmapped)."""
+    EXT_DISP = 24
+    """External displacement, float32 mm: the simulated rig's specimen displacement behind
+    frame compliance, pin play and servo undershoot (a transducer on the specimen)."""
 
 
 CHANNEL_STRIDE = 32
