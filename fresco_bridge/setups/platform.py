@@ -231,3 +231,27 @@ class Platform:
                             f"(Newton's method did not converge in {NEWTON_MAX_ITERATIONS} "
                             "iterations)")
 
+
+
+class PlatformGeometry:
+    """The platform as the rig's coupled specimen sees it (``sim_actuator.platform.Geometry``):
+    the driven DOFs behind some strokes and ``∂s/∂q`` there, exact (``nlGeom``) or linear —
+    the setup's own geometry, so the simulated specimen is loaded as the setup transforms."""
+
+    def __init__(self, platform: Platform, nl_geom: bool) -> None:
+        self.platform = platform
+        self.nl_geom = nl_geom
+        self.n_actuators = platform.n_actuators
+        self._last: Vec | None = None
+        """The last exact state: Newton's method starts there (the strokes move little)."""
+
+    def state(self, strokes: Sequence[float]) -> tuple[Vec, Rows]:
+        p = self.platform
+        s = tuple(strokes)
+        if not self.nl_geom:
+            q: Sequence[float] = p.linear_state(s)
+            rows = p.linear
+        else:
+            q = self._last = p.state(s, self._last)
+            rows = p.jacobian(q)
+        return tuple(q[i] for i in p.driven), rows
