@@ -18,6 +18,7 @@ from fresco_bridge.config import ConfigError, parse_config
 from fresco_bridge.record import read_record
 from sim_actuator.config import build_rig, channel_config, preset
 from tests.support.bridge import RunningBridge, run_opensees
+from tests.support.column import three_actuators_2d
 
 PRESETS = ("servo-hydraulic", "lab-realistic", "ideal-elastic")
 RAMP = 0.02
@@ -102,15 +103,7 @@ def test_a_channel_table_per_actuator_or_a_config_error() -> None:
         parse_config(both)
 
 
-THREE_ACTUATORS_2D = """[sites.setup]
-kind = "ThreeActuators2d"
-La1 = 1000.0
-La2 = 800.0
-La3 = 800.0
-L1 = 400.0
-L2 = 600.0
-nlGeom = true
-"""
+THREE_ACTUATORS_2D = three_actuators_2d(nl_geom=True)
 PLATFORM = """
 [sites.controller.platform]
 specimen = [{ kind = "bilinear", params = { k0 = 20.0, fy = 15.0, alpha = 0.05 } },

@@ -17,6 +17,7 @@ from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import read_record
 from sim_actuator.config import build_rig, preset
 from tests.support.bridge import RunningBridge
+from tests.support.column import L1, L2, LINEAR_T, three_actuators_2d
 
 RAMP = 0.05
 
@@ -101,15 +102,7 @@ def _column_toml(preset_name: str, nl_geom: bool = False) -> str:
 name = "col"
 port = 0
 dofs = 3
-[sites.setup]
-kind = "ThreeActuators2d"
-La1 = 1000.0
-La2 = 800.0
-La3 = 800.0
-L1 = 400.0
-L2 = 600.0
-nlGeom = {str(nl_geom).lower()}
-[sites.controller]
+{three_actuators_2d(nl_geom)}[sites.controller]
 kind = "rig"
 preset = "{preset_name}"
 ramp_time = {RAMP}
@@ -120,7 +113,7 @@ def _k_actuators() -> list[list[float]]:
     """J(0)⁻ᵀ K J(0)⁻¹: the actuator stiffness of the column (linear geometry)."""
     import numpy as np
 
-    t_inv = np.linalg.inv(np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]]))
+    t_inv = np.linalg.inv(np.array(LINEAR_T))
     k: list[list[float]] = (t_inv.T @ np.diag(K_BASIC) @ t_inv).tolist()
     return k
 
@@ -145,7 +138,7 @@ def test_three_actuators_loading_one_platform_feel_each_other(tmp_path: Path) ->
         expected = [sum(k[r][c] * ctrl[c] for c in range(3)) for r in range(3)]
         assert daq["force"] == pytest.approx(expected, rel=1e-12, abs=1e-9)
     assert abs(daqs[0]["force"][0]) < 1e-9 and daqs[0]["force"][1] == \
-        pytest.approx(daqs[0]["force"][2] * 600.0 / 400.0)  # v alone: the beam shares it
+        pytest.approx(daqs[0]["force"][2] * L2 / L1)  # v alone: the beam shares it
 
 
 def test_the_platform_is_loaded_through_the_exact_geometry_under_nl_geom(
@@ -166,14 +159,14 @@ def test_the_platform_is_loaded_through_the_exact_geometry_under_nl_geom(
                                            rel=1e-9)
         run_dir = b.run_dir
     ctrls = [r["ctrl"] for r in read_record(run_dir) if r["kind"] == "trial"]
-    linear = np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]]) @ np.array(trials[-1])
+    linear = np.array(LINEAR_T) @ np.array(trials[-1])
     assert np.max(np.abs(np.array(ctrls[-1]) - linear)) > 0.01  # the exact strokes, not J(0)·q
 
 
 def test_servo_lag_on_every_actuator_keeps_the_platform_in_equilibrium(tmp_path: Path) -> None:
     import numpy as np
 
-    t = np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]])
+    t = np.array(LINEAR_T)
     with RunningBridge(_column_toml("servo-hydraulic"), tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
         site = b.bridge.sites["col"]
