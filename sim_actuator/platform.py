@@ -57,28 +57,44 @@ class Platform:
         self.n = n
         self.geometry = geometry
         self.laws = list(laws)
+        self._rows: object = None
+        """The last J the geometry gave and its inverse (kept while the geometry gives the
+        very same rows: a linear one)."""
+        self._inv: npt.NDArray[np.float64] = np.eye(n)
         self._x = np.zeros(n)
-        _, j = self._pose(self._x)
-        self._f = self._forces(j, np.array([law.committed[1] for law in self.laws]))
+        _, inv = self._pose(self._x)
+        self._f = self._forces(inv, np.array([law.committed[1] for law in self.laws]))
         self._trial: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
 
     def _pose(self, strokes: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64],
                                                                npt.NDArray[np.float64]]:
+        """(q, J⁻¹) behind ``strokes``: one inverse serves the forces and the tangent (a rig
+        asks on every substep of a move, so this is the platform's hot path)."""
         try:
             q, j = self.geometry.state(tuple(float(v) for v in strokes))
         except ValueError as exc:
             raise PlatformError(f"the strokes {strokes.tolist()} put the platform nowhere "
                                 f"(singular or out of reach): {exc}") from None
+        if j is self._rows:  # a linear geometry: the same J every time
+            return np.array(q, dtype=np.float64), self._inv
         jac = np.array(j, dtype=np.float64)
-        if jac.shape != (self.n, self.n) or not np.all(np.isfinite(jac)) \
-                or np.linalg.cond(jac) > _MAX_CONDITION:
+        try:
+            inv = np.asarray(np.linalg.inv(jac), dtype=np.float64) \
+                if jac.shape == (self.n, self.n) else None
+        except np.linalg.LinAlgError:
+            inv = None
+        # ‖J‖·‖J⁻¹‖ (max-norms): a condition estimate without an SVD per call
+        if inv is None or not np.all(np.isfinite(inv)) or \
+                float(np.abs(jac).max()) * float(np.abs(inv).max()) > _MAX_CONDITION:
             raise PlatformError(f"the strokes {strokes.tolist()} do not fix the platform "
                                 f"(∂s/∂q = {jac.tolist()} is singular)")
-        return np.array(q, dtype=np.float64), jac
+        self._rows, self._inv = j, inv
+        return np.array(q, dtype=np.float64), inv
 
     @staticmethod
-    def _forces(j: npt.NDArray[np.float64], p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return np.asarray(np.linalg.solve(j.T, p), dtype=np.float64)
+    def _forces(inv: npt.NDArray[np.float64], p: npt.NDArray[np.float64]
+                ) -> npt.NDArray[np.float64]:
+        return np.asarray(inv.T @ p, dtype=np.float64)
 
     def basic(self, strokes: Sequence[float]) -> tuple[float, ...]:
         """The platform DOFs q for actuator strokes ``strokes``."""
@@ -100,13 +116,13 @@ class Platform:
         exact geometry is left out)."""
         x = self._x.copy()
         x[actuator] = stroke
-        q, j = self._pose(x)
+        q, inv = self._pose(x)
         p, k = np.empty(self.n), np.empty(self.n)
         for i, law in enumerate(self.laws):
             p[i], k[i] = law.set_trial(float(q[i]))
-        f = self._forces(j, p)
+        f = self._forces(inv, p)
         self._trial = (x, f)
-        row = np.linalg.solve(j, np.eye(self.n)[:, actuator])  # column ``actuator`` of J⁻¹
+        row = inv[:, actuator]
         return float(f[actuator]), float(row @ (k * row))
 
     def commit(self) -> None:
