@@ -8,7 +8,7 @@ No socket, no event-loop round trip: what is left is exactly the code a ``data_r
 
     python -m benchmarks.bench_step_path [--quick] [--dofs 1] [--steps 20000] [--no-record]
         [--limits] [--whole-steps] [--set SECTION.KEY=VALUE ...] [--profile FILE]
-        [--sort tottime] [--controller sim|rig] [--elastic]
+        [--sort tottime] [--controller sim|rig] [--elastic] [--platform linear|nlgeom]
 
 Feeds BENCHMARKS.md, "Step cost and scaling". ``--quick``: 200 steps, one repeat (a smoke run).
 
@@ -17,7 +17,9 @@ every reply); ``--whole-steps`` feeds a step's 14 messages as one chunk instead.
 overrides a TOML key for attribution (e.g. ``--set telemetry.monitors=false``,
 ``--set record.fsync='"off"'``). ``--controller rig``: one in-process simulated rig per
 actuator (preset ``ideal-elastic``, 10 ms ramps) instead of the ``sim`` models; ``--elastic``:
-an elastic specimen at 1 DOF too (as at more DOFs), to compare actuator counts.
+an elastic specimen at 1 DOF too (as at more DOFs), to compare actuator counts;
+``--platform`` (with ``--controller rig --dofs 3``): the three rigs load one elastic platform
+through a ``ThreeActuators2d`` setup, linear or ``nlGeom`` (the coupled column).
 
 Reported: µs of process CPU per step (``time.process_time``, best of ``--repeats``), and with
 ``--profile`` the cProfile table (top 30 by ``--sort``).
@@ -43,7 +45,8 @@ from ._step_peers import DT, STEP_CODES
 def config_text(run_dir: Path, dofs: int, record: bool, limits: bool,
                 overrides: dict[str, dict[str, str]] | None = None,
                 site: str | None = None, *,
-                controller: str = "sim", elastic: bool = False) -> str:
+                controller: str = "sim", elastic: bool = False,
+                platform: str | None = None) -> str:
     """The bench's TOML; ``site`` replaces the ``[[sites]]`` table (named ``spec``)."""
     model = ('model = "elastic"\nparams = { k = 100.0 }' if dofs > 1 or elastic
              else 'model = "bilinear"\nparams = { k0 = 100.0, fy = 20.0, alpha = 0.02 }')
@@ -69,16 +72,33 @@ enabled = {"true" if record else "false"}
 {section("record")}
 [telemetry]
 {section("telemetry")}
-{site or default_site(dofs, model, lim, controller)}"""
+{site or default_site(dofs, model, lim, controller, platform)}"""
 
 
-def default_site(dofs: int, model: str, lim: str, controller: str = "sim") -> str:
+PLATFORM = """[sites.controller.platform]
+specimen = [{ kind = "elastic", params = { k = 1.0 } }, { kind = "elastic", params = { k = 1.0 } },
+            { kind = "elastic", params = { k = 100.0 } }]
+"""
+"""The coupled column's specimen (x, y, θ of the loading beam): soft enough that the bench's
+trials (0.1 mm, 0.1 rad) stay within the ``ideal-elastic`` actuators' capacity."""
+
+
+def default_site(dofs: int, model: str, lim: str, controller: str = "sim",
+                 platform: str | None = None) -> str:
+    setup = 'setup = "NoTransformation"'
+    if platform is not None:
+        if controller != "rig" or dofs != 3:
+            raise ValueError("--platform needs --controller rig --dofs 3")
+        nl_geom = "true" if platform == "nlgeom" else "false"
+        setup = ('[sites.setup]\nkind = "ThreeActuators2d"\nLa1 = 1000.0\nLa2 = 900.0\n'
+                 f'La3 = 800.0\nL1 = 500.0\nL2 = 400.0\nnlGeom = {nl_geom}')
+        model += "\n" + PLATFORM
     return f"""
 [[sites]]
 name = "spec"
 port = 0
 dofs = {dofs}
-setup = "NoTransformation"
+{setup}
 [sites.controller]
 kind = "{controller}"
 {model}
@@ -118,7 +138,7 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
               profile: Path | None, *, per_message: bool = True,
               overrides: dict[str, dict[str, str]] | None = None,
               site: str | None = None, controller: str = "sim",
-              elastic: bool = False) -> list[float]:
+              elastic: bool = False, platform: str | None = None) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
     from fresco_bridge.server.connection import SessionPump, SiteListener
@@ -127,7 +147,7 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:
         text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides, site,
-                           controller=controller, elastic=elastic)
+                           controller=controller, elastic=elastic, platform=platform)
         bridge = Bridge(parse_config(text), text)
         await bridge.start()
         try:
@@ -183,6 +203,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--controller", choices=["sim", "rig"], default="sim")
     parser.add_argument("--elastic", action="store_true",
                         help="an elastic specimen at 1 DOF too")
+    parser.add_argument("--platform", choices=["linear", "nlgeom"], default=None,
+                        help="rig, 3 DOF: the actuators load one platform (ThreeActuators2d)")
     args = parser.parse_args(argv)
     if args.quick:
         args.steps, args.repeats = min(args.steps, 200), 1
@@ -196,10 +218,12 @@ def main(argv: list[str] | None = None) -> None:
     per_step = asyncio.run(run(args.dofs, args.steps, not args.no_record, args.limits,
                                args.repeats, args.profile, per_message=not args.whole_steps,
                                overrides=overrides, controller=args.controller,
-                               elastic=args.elastic))
+                               elastic=args.elastic, platform=args.platform))
     feed = "whole steps" if args.whole_steps else "per message"
     sets = "".join(f", {item}" for item in args.set)
     who = "" if args.controller == "sim" else f" ({args.controller} controller)"
+    if args.platform is not None:
+        who += f" (one platform, {args.platform} geometry)"
     print(f"step path{who}, {args.dofs} DOF, record {'off' if args.no_record else 'on'}, limits "
           f"{'on' if args.limits else 'off'}, {feed}{sets}: {min(per_step):.1f} µs CPU/step best, "
           f"{sorted(per_step)[len(per_step) // 2]:.1f} median of {len(per_step)}", flush=True)

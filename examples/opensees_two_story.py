@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from fresco_bridge.integrator import GroundMotionFormatError, read_peer_at2
+from fresco_bridge.integrator import GroundMotion, GroundMotionFormatError, read_peer_at2
 from fresco_bridge.opensees_runtime import (
     BridgeNotListening,
     OpenSeesUnavailable,
@@ -35,9 +35,17 @@ ALPHA_M = 2.0  # 1/s: mass-proportional damping, about 5 % at the first mode (T1
 RECORD = Path(__file__).resolve().parent / "data" / "RSN960_NORTHR_LOS270.AT2"
 
 
+class Stop(Exception):
+    """The example cannot run: the message for stderr and the exit status."""
+
+    def __init__(self, message: str, status: int) -> None:
+        super().__init__(message)
+        self.status = status
+
+
 def run_frame(ops: Any, accel_mm_s2: Sequence[float], dt: float, steps: int, host: str,
               ports: Sequence[int]) -> float:
-    """Build the frame, integrate ``steps`` steps; the peak story-1 drift (mm)."""
+    """Build the frame, integrate ``steps`` steps; the peak story-1 drift (mm), or :class:`Stop`."""
     ops.wipe()
     ops.model("basic", "-ndm", 1, "-ndf", 1)
     for tag in (1, 2, 3):
@@ -68,10 +76,39 @@ def run_frame(ops: Any, accel_mm_s2: Sequence[float], dt: float, steps: int, hos
     for step in range(steps):
         if ops.analyze(1, dt) != 0:
             ops.wipe()
-            raise RuntimeError(f"the analysis failed at step {step + 1}")
+            raise Stop(f"the analysis failed at step {step + 1}", 1)
         peak = max(peak, abs(ops.nodeDisp(2, 1)))
     ops.wipe()  # sends DIE: the bridge closes the sessions and waits for the next ones
     return peak
+
+
+def example_parser(doc: str) -> argparse.ArgumentParser:
+    """The options every OpenSeesPy example shares: the record, its PGA and length, the host."""
+    parser = argparse.ArgumentParser(prog=Path(sys.argv[0]).name, description=doc.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--record", type=Path, default=RECORD,
+                        help="a PEER .AT2 record (default: %(default)s)")
+    parser.add_argument("--pga", type=float, default=3.0, help="m/s^2 (default %(default)s)")
+    parser.add_argument("--steps", type=int, default=None, help="default: the whole record")
+    parser.add_argument("--host", default="127.0.0.1", help="the bridge's address")
+    return parser
+
+
+def prepare(args: argparse.Namespace, ports: Sequence[int],
+            config: str) -> tuple[GroundMotion, int, Any]:
+    """(the scaled record, its steps, OpenSeesPy) once the bridge of ``config`` listens on
+    ``ports``; :class:`Stop` (2: a bad record, 1: no bridge or no OpenSeesPy) otherwise."""
+    try:
+        motion = read_peer_at2(args.record).scaled_to_pga(args.pga)
+    except (OSError, GroundMotionFormatError) as exc:
+        raise Stop(f"cannot read the record: {exc}", 2) from None
+    steps = motion.npts if args.steps is None else min(args.steps, motion.npts)
+    try:  # the bridge first: before OpenSees is loaded, whose exit prints its own line
+        require_listening(ports, args.host,
+                          hint=f"start it first: .venv/bin/fresco-bridge serve --config {config}")
+        return motion, steps, import_opensees()
+    except (OpenSeesUnavailable, BridgeNotListening) as exc:
+        raise Stop(str(exc), 1) from None
 
 
 def main(argv: Sequence[str] | None = None, *, doc: str = __doc__,
@@ -79,36 +116,17 @@ def main(argv: Sequence[str] | None = None, *, doc: str = __doc__,
          next_step: str = ".venv/bin/fresco-bridge runs list   # the run the bridge recorded"
          ) -> int:
     """Parse ``argv``, run the frame against the bridge of ``config``; the exit status."""
-    prog = Path(sys.argv[0]).name
-    parser = argparse.ArgumentParser(prog=prog, description=doc.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--record", type=Path, default=RECORD,
-                        help="a PEER .AT2 record (default: %(default)s)")
-    parser.add_argument("--pga", type=float, default=3.0, help="m/s^2 (default %(default)s)")
-    parser.add_argument("--steps", type=int, default=None, help="default: the whole record")
-    parser.add_argument("--host", default="127.0.0.1", help="the bridge's address")
+    parser = example_parser(doc)
     parser.add_argument("--ports", type=int, nargs=2, default=ports, metavar=("STORY1", "STORY2"),
                         help="the two sites' ports (default: %(default)s, as in " + config + ")")
     args = parser.parse_args(argv)
     try:
-        motion = read_peer_at2(args.record).scaled_to_pga(args.pga)
-    except (OSError, GroundMotionFormatError) as exc:
-        print(f"{prog}: cannot read the record: {exc}", file=sys.stderr)
-        return 2
-    steps = motion.npts if args.steps is None else min(args.steps, motion.npts)
-    try:  # the bridge first: before OpenSees is loaded, whose exit prints its own line
-        require_listening(args.ports, args.host,
-                          hint=f"start it first: .venv/bin/fresco-bridge serve --config {config}")
-        ops = import_opensees()
-    except (OpenSeesUnavailable, BridgeNotListening) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 1
-    try:
+        motion, steps, ops = prepare(args, args.ports, config)
         peak = run_frame(ops, motion.accel_mm_s2.tolist(), motion.dt, steps, args.host,
                          args.ports)
-    except RuntimeError as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 1
+    except Stop as exc:
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return exc.status
     print(f"{args.record.name} scaled to PGA {args.pga:g} m/s², {steps} steps of {motion.dt:g} s: "
           f"peak story-1 drift {peak:.2f} mm")
     print(f"next: {next_step}")

@@ -141,10 +141,12 @@ class SiteConfig(_Strict):
         if self.setup == "OneActuator" and self.dofs > 2:
             raise ValueError("setup OneActuator serves dofs = 1 or 2 (two nodes, -dof 1 -dof 1)")
         try:
-            n_act = make_setup(self.setup, self.dofs).n_actuators  # setups.py owns the count
+            setup = make_setup(self.setup, self.dofs)  # setups/ owns the count and geometry
         except SetupError as exc:
             raise ValueError(str(exc)) from None
-        problem = controller_kind(self.controller.kind).actuators_problem(self.controller, n_act)
+        n_act = setup.n_actuators
+        problem = controller_kind(self.controller.kind).actuators_problem(
+            self.controller, n_act, setup.specimen_geometry())
         if problem is not None:
             raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
         self._kind_keys_fit(n_act)

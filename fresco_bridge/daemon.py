@@ -48,7 +48,8 @@ T = TypeVar("T")
 
 def make_controller(cfg: SiteConfig) -> Controller:
     """The controller adapter a site's config asks for (its kind's factory, ``controls/``)."""
-    return controls.make_controller(cfg.controller, make_setup(cfg.setup, cfg.dofs).n_actuators)
+    setup = make_setup(cfg.setup, cfg.dofs)
+    return controls.make_controller(cfg.controller, setup.n_actuators, setup.specimen_geometry())
 
 
 def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:

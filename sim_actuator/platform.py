@@ -1,10 +1,12 @@
-"""A specimen several actuators load together: a rigid platform with linear geometry.
+"""A specimen several actuators load together: a rigid platform whose geometry the caller gives.
 
-The platform has n basic DOFs q (e.g. a column top's u, v, theta) and n actuators whose strokes
-are ``x = T·q`` (T: n×n, one row per actuator, as a linear OpenFresco setup such as
-``ThreeActuators2d`` without ``-nlGeom``). The specimen is one uniaxial law per basic DOF,
-``p_j(q_j)``; platform equilibrium ``Tᵀ·f = p`` gives the actuator forces ``f = T⁻ᵀ·p``. So
-moving one actuator loads the others: the coupling a multi-actuator rig has.
+The platform has n basic DOFs q (a column top's u, v, θ) and n actuators. Where the strokes put
+the platform is the *geometry*'s business (:class:`Geometry`: the platform state behind some
+strokes and the Jacobian ``J = ∂s/∂q`` there — linear or exact). The bridge hands its site's
+setup geometry (``fresco_bridge/setups/``), so the rig's platform is the one the setup
+transforms for: one home for the kinematics. The specimen is one uniaxial law per basic DOF,
+``p_j(q_j)``; platform equilibrium by virtual work ``Jᵀ·f = p`` gives the actuator forces
+``f = J⁻ᵀ·p``. So moving one actuator loads the others: the coupling a multi-actuator rig has.
 
 Each actuator's rig drives the platform through :meth:`Platform.channel`, a ``SpecimenModel``
 view: a trial moves that actuator's stroke with the others where they are (material semantics,
@@ -15,47 +17,89 @@ other; :meth:`Platform.force` is any actuator's force in the current committed s
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from sim_actuator.models import HysteresisModel
 
-__all__ = ["Platform", "PlatformError"]
+__all__ = ["Geometry", "Platform", "PlatformError"]
 
 _MAX_CONDITION = 1e12
 
 
 class PlatformError(ValueError):
-    """The geometry is not square, not invertible or does not fit the specimen laws."""
+    """The geometry does not fit the specimen laws, or strokes no platform state has."""
+
+
+class Geometry(Protocol):
+    """Where n actuator strokes put a platform of n basic DOFs."""
+
+    @property
+    def n_actuators(self) -> int: ...
+
+    def state(self, strokes: Sequence[float]) -> tuple[tuple[float, ...],
+                                                       tuple[tuple[float, ...], ...]]:
+        """(q, J): the platform's basic DOFs behind ``strokes`` and ``∂s/∂q`` there (n×n, one
+        row per actuator); ``ValueError`` for strokes no platform state has."""
+        ...
 
 
 class Platform:
     """n actuators on a rigid platform with n basic DOFs; see the module docstring."""
 
-    def __init__(self, geometry: Sequence[Sequence[float]],
-                 laws: Sequence[HysteresisModel]) -> None:
-        t = np.array(geometry, dtype=np.float64)
+    def __init__(self, geometry: Geometry, laws: Sequence[HysteresisModel]) -> None:
         n = len(laws)
-        if t.ndim != 2 or t.shape != (n, n):
-            raise PlatformError(f"geometry must be {n}×{n} (one row per actuator, one column "
-                                f"per basic DOF, {n} specimen laws), got shape {t.shape}")
-        if not np.all(np.isfinite(t)) or np.linalg.cond(t) > _MAX_CONDITION:
-            raise PlatformError(f"geometry {t.tolist()} is singular: the strokes do not fix "
-                                "the platform")
+        if geometry.n_actuators != n:
+            raise PlatformError(f"the platform has {geometry.n_actuators} actuators and "
+                                f"{n} specimen laws: give one law per basic DOF")
         self.n = n
+        self.geometry = geometry
         self.laws = list(laws)
-        self._t_inv: npt.NDArray[np.float64] = np.asarray(np.linalg.inv(t), dtype=np.float64)
+        self._rows: object = None
+        """The last J the geometry gave and its inverse (kept while the geometry gives the
+        very same rows: a linear one)."""
+        self._inv: npt.NDArray[np.float64] = np.eye(n)
         self._x = np.zeros(n)
-        self._f = self._forces(np.array([law.committed[1] for law in self.laws]))
+        _, inv = self._pose(self._x)
+        self._f = self._forces(inv, np.array([law.committed[1] for law in self.laws]))
         self._trial: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
 
-    def _forces(self, p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return self._t_inv.T @ p
+    def _pose(self, strokes: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64],
+                                                               npt.NDArray[np.float64]]:
+        """(q, J⁻¹) behind ``strokes``: one inverse serves the forces and the tangent (a rig
+        asks on every substep of a move, so this is the platform's hot path)."""
+        try:
+            q, j = self.geometry.state(tuple(float(v) for v in strokes))
+        except ValueError as exc:
+            raise PlatformError(f"the strokes {strokes.tolist()} put the platform nowhere "
+                                f"(singular or out of reach): {exc}") from None
+        if j is self._rows:  # a linear geometry: the same J every time
+            return np.array(q, dtype=np.float64), self._inv
+        jac = np.array(j, dtype=np.float64)
+        try:
+            inv = np.asarray(np.linalg.inv(jac), dtype=np.float64) \
+                if jac.shape == (self.n, self.n) else None
+        except np.linalg.LinAlgError:
+            inv = None
+        # ‖J‖·‖J⁻¹‖ (max-norms): a condition estimate without an SVD per call
+        if inv is None or not np.all(np.isfinite(inv)) or \
+                float(np.abs(jac).max()) * float(np.abs(inv).max()) > _MAX_CONDITION:
+            raise PlatformError(f"the strokes {strokes.tolist()} do not fix the platform "
+                                f"(∂s/∂q = {jac.tolist()} is singular)")
+        self._rows, self._inv = j, inv
+        return np.array(q, dtype=np.float64), inv
+
+    @staticmethod
+    def _forces(inv: npt.NDArray[np.float64], p: npt.NDArray[np.float64]
+                ) -> npt.NDArray[np.float64]:
+        return np.asarray(inv.T @ p, dtype=np.float64)
 
     def basic(self, strokes: Sequence[float]) -> tuple[float, ...]:
         """The platform DOFs q for actuator strokes ``strokes``."""
-        return tuple(float(v) for v in self._t_inv @ np.asarray(strokes, dtype=np.float64))
+        q, _ = self._pose(np.asarray(strokes, dtype=np.float64))
+        return tuple(float(v) for v in q)
 
     def force(self, actuator: int) -> float:
         """Actuator ``actuator``'s force (0-based) in the committed state, kN."""
@@ -68,16 +112,17 @@ class Platform:
 
     def set_trial(self, actuator: int, stroke: float) -> tuple[float, float]:
         """Actuator ``actuator`` at ``stroke``, the others where they are: its (force, tangent
-        stiffness ∂f_i/∂x_i)."""
+        stiffness ∂f_i/∂x_i — the specimen's part, ``J⁻ᵀ k J⁻¹``; the geometric part of an
+        exact geometry is left out)."""
         x = self._x.copy()
         x[actuator] = stroke
-        q = self._t_inv @ x
+        q, inv = self._pose(x)
         p, k = np.empty(self.n), np.empty(self.n)
-        for j, law in enumerate(self.laws):
-            p[j], k[j] = law.set_trial(float(q[j]))
-        f = self._forces(p)
+        for i, law in enumerate(self.laws):
+            p[i], k[i] = law.set_trial(float(q[i]))
+        f = self._forces(inv, p)
         self._trial = (x, f)
-        row = self._t_inv[:, actuator]
+        row = inv[:, actuator]
         return float(f[actuator]), float(row @ (k * row))
 
     def commit(self) -> None:

@@ -362,7 +362,7 @@ class GenericTcpController(PhysicalController):
 KIND = ControllerKind(
     name="generic-tcp",
     config=GenericTcpControllerConfig,
-    factory=GenericTcpController,
+    factory=lambda config, n, _geometry: GenericTcpController(config, n),
     summary="a lab's own controller server speaking OpenFresco's `expControl GenericTCP` "
     "protocol (TCP, UDP or mutual TLS), e.g. `sim-actuator serve --protocol generic-tcp`",
     max_actuators=None,

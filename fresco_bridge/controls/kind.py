@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from sim_actuator.platform import Geometry
+
 from ..config_model import StrictConfig
 from .base import Controller
 
@@ -30,24 +32,28 @@ class ControllerKind:
 
     name: str
     config: type[ControllerConfigBase]
-    factory: Callable[[Any, int], Controller]
-    """``factory(config, n_actuators)``: the adapter for a site whose setup drives
-    ``n_actuators`` control points (``setups.py`` owns that count)."""
+    factory: Callable[[Any, int, Geometry | None], Controller]
+    """``factory(config, n_actuators, geometry)``: the adapter for a site whose setup drives
+    ``n_actuators`` control points (``setups/`` owns that count) through ``geometry`` (the
+    setup's platform, for a simulated specimen several actuators load; None without one)."""
     summary: str
     """The kind's description in docs/configuration.md's table (markdown, one cell)."""
     max_actuators: int | None = 1
     """How many actuators one controller of this kind drives (None: any number)."""
-    fits: Callable[[Any, int], str | None] | None = None
-    """``fits(config, n_actuators)``: why this kind's table cannot drive ``n_actuators``
-    (e.g. a table per channel, and not that many), or None."""
+    fits: Callable[[Any, int, Geometry | None], str | None] | None = None
+    """``fits(config, n_actuators, geometry)``: why this kind's table cannot drive
+    ``n_actuators`` through ``geometry`` (e.g. a table per channel, and not that many), or
+    None."""
 
-    def actuators_problem(self, config: ControllerConfigBase, n_actuators: int) -> str | None:
+    def actuators_problem(self, config: ControllerConfigBase, n_actuators: int,
+                          geometry: Geometry | None = None) -> str | None:
         """Why ``config`` cannot drive a site of ``n_actuators`` control points, or None."""
         most = self.max_actuators
         if most is not None and n_actuators > most:
             return (f"controller {self.name} drives {most} actuator(s); this site needs "
                     f"{n_actuators}")
-        return None if self.fits is None else self.fits(config, n_actuators)
+        return None if self.fits is None else self.fits(config, n_actuators, geometry)
 
-    def build(self, config: ControllerConfigBase, n_actuators: int) -> Controller:
-        return self.factory(config, n_actuators)
+    def build(self, config: ControllerConfigBase, n_actuators: int,
+              geometry: Geometry | None = None) -> Controller:
+        return self.factory(config, n_actuators, geometry)

@@ -348,7 +348,7 @@ class ModbusController(NetworkController):
 KIND = ControllerKind(
     name="modbus",
     config=ModbusControllerConfig,
-    factory=ModbusController,
+    factory=lambda config, n, _geometry: ModbusController(config, n),
     summary="a Modbus TCP controller speaking the register map of `sim-actuator serve`, a "
     "register block per actuator",
     max_actuators=None,

@@ -250,7 +250,7 @@ class MtsController(NetworkController):
 KIND = ControllerKind(
     name="mts",
     config=MtsControllerConfig,
-    factory=MtsController,
+    factory=lambda config, n, _geometry: MtsController(config, n),
     summary="an MTS-CSI-like line controller over TCP, e.g. `sim-actuator serve --protocol mts`, "
     "its channels one ramp",
     max_actuators=None,

@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
+from sim_actuator.platform import Geometry
+
 from .base import Controller
 from .generic_tcp import KIND as GENERIC_TCP
 from .kind import ControllerConfigBase, ControllerKind
@@ -44,9 +46,11 @@ def controller_kind(name: str) -> ControllerKind:
         raise ValueError(f"unknown controller kind {name!r}; expected {known_kinds()}") from None
 
 
-def make_controller(config: ControllerConfigBase, n_actuators: int) -> Controller:
-    """The adapter ``config`` asks for, driving ``n_actuators`` control points."""
-    return controller_kind(config.kind).build(config, n_actuators)
+def make_controller(config: ControllerConfigBase, n_actuators: int,
+                    geometry: Geometry | None = None) -> Controller:
+    """The adapter ``config`` asks for, driving ``n_actuators`` control points (through the
+    setup's platform ``geometry``, if it has one)."""
+    return controller_kind(config.kind).build(config, n_actuators, geometry)
 
 
 def controller_kinds_markdown() -> str:

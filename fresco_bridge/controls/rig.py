@@ -26,8 +26,8 @@ from sim_actuator.config import (
     load_rig_config,
     preset,
 )
-from sim_actuator.models import make_model
-from sim_actuator.platform import Platform, PlatformError
+from sim_actuator.models import HysteresisModel, make_model
+from sim_actuator.platform import Geometry, Platform, PlatformError
 from sim_actuator.rig import Measurement, Rig, RigError
 
 from ..config_model import ConfigPath, StrictConfig
@@ -60,24 +60,28 @@ def _rig_config(preset_name: str | None, file: Path | None) -> RigConfig:
 
 
 class PlatformConfig(StrictConfig):
-    """The specimen several actuators load together (``[sites.controller.platform]``): a rigid
-    platform with linear geometry, one law per basic DOF (``sim_actuator/platform.py``)."""
+    """The specimen several actuators load together (``[sites.controller.platform]``): one law
+    per DOF of the platform the site's setup moves (``ThreeActuators2d``: x, y, θ), loaded
+    through the setup's own geometry — linear, or exact with ``nlGeom``
+    (``sim_actuator/platform.py``)."""
 
-    geometry: list[list[float]]
-    """Strokes from platform DOFs, one row per actuator (e.g. ThreeActuators2d, linear:
-    ``[[1, 0, 0], [0, 1, -L1], [0, 1, L2]]``)."""
-    specimen: list[SpecimenConfig]
+    specimen: list[SpecimenConfig] = Field(min_length=1)
     """One law per platform DOF, ``{ kind = "elastic", params = { k = 10.0 } }``."""
 
     @model_validator(mode="after")
-    def _fits(self) -> PlatformConfig:
-        self.build()  # a singular or misshapen geometry is a config error, now
+    def _laws(self) -> PlatformConfig:
+        self.laws()  # an unknown law or bad parameters is a config error, now
         return self
 
-    def build(self) -> Platform:
+    def laws(self) -> list[HysteresisModel]:
         try:
-            return Platform(self.geometry, [make_model(s.kind, **s.params)
-                                            for s in self.specimen])
+            return [make_model(s.kind, **s.params) for s in self.specimen]
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"specimen: {exc}") from None
+
+    def build(self, geometry: Geometry) -> Platform:
+        try:
+            return Platform(geometry, self.laws())
         except PlatformError as exc:
             raise ValueError(str(exc)) from None
 
@@ -94,9 +98,10 @@ class RigControllerConfig(ControllerConfigBase):
     channels: list[RigChannelConfig] | None = None
     """One rig per actuator, in control-point order (instead of ``preset``/``file``)."""
     platform: PlatformConfig | None = None
-    """The actuators load one platform specimen (coupled) instead of a specimen each; their
-    rigs' own specimens are then not used, and load-path effects (friction, backlash, frame
-    compliance) are not simulated through a platform: a config error."""
+    """The actuators load one platform specimen (coupled) through the site's setup geometry
+    instead of a specimen each; their rigs' own specimens are then not used, and load-path
+    effects (friction, backlash, frame compliance) are not simulated through a platform: a
+    config error."""
     ramp_time: float | None = Field(None, ge=0.0, le=3600.0, allow_inf_nan=False)
     """Ramp time of every move, s (default: each rig's ``default_ramp_time``)."""
     stiffness: float = Field(68.0, gt=0.0, allow_inf_nan=False)
@@ -118,10 +123,10 @@ class RigControllerConfig(ControllerConfigBase):
         elif not self.channels:
             raise ValueError("channels: at least one [[sites.controller.channels]] table")
         if self.platform is not None:
-            n = len(self.platform.geometry)
+            n = len(self.platform.specimen)
             if self.channels is not None and len(self.channels) != n:
-                raise ValueError(f"platform: {n} actuators, {len(self.channels)} channel "
-                                 "table(s)")
+                raise ValueError(f"platform: {n} specimen laws (one per platform DOF, one "
+                                 f"actuator each), {len(self.channels)} channel table(s)")
             for c, rig in enumerate(self.rig_configs(n), 1):
                 fx = rig.effects
                 if fx.friction.coulomb or fx.friction.viscous or fx.backlash.gap or \
@@ -153,9 +158,14 @@ class RigController(InlineController, PhysicalController):
 
     platform: Platform | None
 
-    def __init__(self, config: RigControllerConfig, n_actuators: int = 1) -> None:
+    def __init__(self, config: RigControllerConfig, n_actuators: int = 1,
+                 geometry: Geometry | None = None) -> None:
         self.config = config
         self.n_actuators = n_actuators
+        problem = _fits(config, n_actuators, geometry)
+        if problem is not None:
+            raise ControllerError(problem)
+        self.geometry = geometry
         self.stiffness = config.stiffness
         if config.external == "specimen":
             self.external_channel = "specimen displacement"
@@ -215,7 +225,8 @@ class RigController(InlineController, PhysicalController):
 
     def reset(self) -> None:
         """Fresh rigs: virgin specimens, actuators at rest, noise streams from their seeds."""
-        platform = None if self.config.platform is None else self.config.platform.build()
+        spec, geometry = self.config.platform, self.geometry
+        platform = None if spec is None or geometry is None else spec.build(geometry)
         self.platform = platform
         self.rigs = [build_rig(c, None if platform is None else platform.channel(i))
                      for i, c in enumerate(self._rig_configs)]
@@ -223,13 +234,21 @@ class RigController(InlineController, PhysicalController):
         self._diagonal = diagonal((self.stiffness,) * self.n_actuators)
 
 
-def _fits(config: RigControllerConfig, n: int) -> str | None:
+def _fits(config: RigControllerConfig, n: int, geometry: Geometry | None) -> str | None:
     if config.channels is not None and len(config.channels) != n:
         return (f"controller rig has {len(config.channels)} [[sites.controller.channels]] "
                 f"table(s); this site needs one per actuator: {n}")
-    if config.platform is not None and len(config.platform.geometry) != n:
-        return (f"controller rig: the platform has {len(config.platform.geometry)} actuators; "
-                f"this site drives {n}")
+    if config.platform is None:
+        return None
+    if geometry is None:
+        return ("controller rig: [sites.controller.platform] loads its specimen through the "
+                "setup's platform, and this setup has none (use a planar setup: "
+                "TwoActuators2d, ThreeActuators2d, …)")
+    laws = len(config.platform.specimen)
+    if laws != geometry.n_actuators or laws != n:
+        return (f"controller rig: the platform specimen has {laws} law(s); the setup's "
+                f"platform has {geometry.n_actuators} DOF(s) driven by {n} actuator(s) (one "
+                "law per platform DOF)")
     return None
 
 
@@ -240,5 +259,5 @@ KIND = ControllerKind(
     summary="the whole simulated lab of `sim-actuator` in process, one rig per actuator — servo "
     "delay/lag, friction, backlash, compliance, sensor noise",
     max_actuators=None,
-    fits=lambda config, n: _fits(config, n),
+    fits=_fits,
 )

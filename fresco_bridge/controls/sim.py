@@ -119,7 +119,7 @@ class SimController(InlineController):
 KIND = ControllerKind(
     name="sim",
     config=SimControllerConfig,
-    factory=lambda config, n: SimController.from_params(
+    factory=lambda config, n, _geometry: SimController.from_params(
         n, config.model, dict(config.params), load_cell_noise=config.load_cell_noise,
         noise_seed=config.noise_seed),
     summary="in-process specimen model (`controller.model`) per actuator, material semantics = "

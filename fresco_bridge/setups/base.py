@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from sim_actuator.platform import Geometry
+
 Values = tuple[float, ...]
 
 
@@ -42,6 +44,11 @@ class Setup(Protocol):
     def out_accel(self, daq_accel: Values) -> Values: ...
     def basic_force(self, daq_force: Values, daq_disp: Values | None = None) -> Values: ...
     def basic_matrix(self, k_act: Values) -> Values: ...
+    def specimen_geometry(self) -> Geometry | None:
+        """The platform a simulated rig's coupled specimen sits on (the setup's own
+        geometry, without scale factors: they map the element's units to the lab's), or None
+        for setups without one (the linear ones, ``Aggregator``)."""
+        ...
 
 
 SIGNALS = ("Disp", "Vel", "Accel", "Force", "Time")

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from sim_actuator.platform import Geometry
+
 from .base import Factors, Setup, Values, scale
 
 
@@ -28,6 +30,9 @@ class Scaled:
         self._f = {key: factors.get(key, nb if side in ("trial", "out") else na)
                    for side in ("trial", "out", "ctrl", "daq")
                    for key in (f"{side}{sig}Fact" for sig in ("Disp", "Vel", "Accel", "Force"))}
+
+    def specimen_geometry(self) -> Geometry | None:
+        return self.inner.specimen_geometry()
 
     def ctrl_disp(self, trial_disp: Values) -> Values:
         f = self._f
@@ -101,6 +106,10 @@ class Aggregator:
             self._b.append(slice(b, b + p.n_basic))
             self._a.append(slice(a, a + p.n_actuators))
             b, a = b + p.n_basic, a + p.n_actuators
+
+    def specimen_geometry(self) -> None:
+        """Setups side by side share no platform."""
+        return None
 
     def _zip(self) -> zip[tuple[Setup, slice, slice]]:
         return zip(self.parts, self._b, self._a, strict=True)

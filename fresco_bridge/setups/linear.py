@@ -40,6 +40,10 @@ class LinearSetup:
         object.__setattr__(self, "identity", self.n_actuators == self.n_basic
                            and bool(np.array_equal(t, np.eye(self.n_basic))))
 
+    def specimen_geometry(self) -> None:
+        """No platform: each actuator loads its own basic DOF."""
+        return None
+
     def ctrl_disp(self, trial_disp: tuple[float, ...]) -> tuple[float, ...]:
         if self.identity:
             return trial_disp

@@ -19,7 +19,7 @@ import logging
 import math
 
 from .base import SetupError, Values
-from .platform import GeometryError, Platform, Rows, Vec
+from .platform import GeometryError, Platform, PlatformGeometry, Rows, Vec
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,9 @@ class PlanarSetup:
         self._jacobian: tuple[Values, Rows] | None = None  # (daq, Jacobian rows)
         self._matrix: tuple[Values, Values] | None = None
         self._warned = False
+
+    def specimen_geometry(self) -> PlatformGeometry:
+        return PlatformGeometry(self.platform, self.nl_geom)
 
     # -- trial → ctrl -------------------------------------------------------------------------
     def _local(self, trial: Values | list[float]) -> Vec:

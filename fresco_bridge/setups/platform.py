@@ -85,6 +85,9 @@ class Platform:
     _la: Vec = field(init=False, repr=False, compare=False)
     _j0: Rows = field(init=False, repr=False, compare=False)
     _det0: float = field(init=False, repr=False, compare=False)
+    _j0_inv: Rows = field(init=False, repr=False, compare=False)
+    """J(0)⁻¹ (driven DOFs × actuators): linear geometry's state of some strokes is one
+    product, not an elimination (the site and a coupled rig ask it on every measurement)."""
     _reach: float = field(init=False, repr=False, compare=False)
     _geometry: tuple[tuple[float, float, float, float, float], ...] = field(
         init=False, repr=False, compare=False)
@@ -112,6 +115,11 @@ class Platform:
                                 "linearised map is singular: check the lengths)")
         object.__setattr__(self, "_j0", j0)
         object.__setattr__(self, "_det0", det)
+        n = len(j0)
+        columns = [solve(j0, tuple(1.0 if r == c else 0.0 for r in range(n)))[0]
+                   for c in range(n)]
+        object.__setattr__(self, "_j0_inv", tuple(tuple(col[r] for col in columns)
+                                                  for r in range(n)))
 
     @property
     def n_actuators(self) -> int:
@@ -181,8 +189,8 @@ class Platform:
     def linear_state(self, strokes: Vec) -> list[float]:
         """The platform state of ``strokes`` under linear geometry."""
         q = [0.0, 0.0, 0.0]
-        for i, v in zip(self.driven, solve(self._j0, strokes)[0], strict=True):
-            q[i] = v
+        for i, row in zip(self.driven, self._j0_inv, strict=True):
+            q[i] = sum(a * b for a, b in zip(row, strokes, strict=True))
         return q
 
     # -- the inverse --------------------------------------------------------------------------
@@ -194,28 +202,37 @@ class Platform:
         reached from rest without passing a singular pose, so ``det J`` keeps its sign at rest.
         A solution of another mode is refused and sought again from the linear estimate.
         """
+        return self.state_and_jacobian(strokes, start)[0]
+
+    def state_and_jacobian(self, strokes: Vec, start: Sequence[float] | None = None
+                           ) -> tuple[Vec, Rows]:
+        """:meth:`state` and ``∂s/∂q`` (driven DOFs) there, from Newton's last iteration."""
         for begin in (start, None) if start is not None else (None,):
-            q, det = self._newton(strokes, begin)
+            q, det, j = self._newton(strokes, begin)
             if det * self._det0 > 0:
-                return q
+                return q, j
         raise GeometryError(f"the measured strokes {list(strokes)} put the platform in "
                             "another assembly mode (past a singular pose)")
 
-    def _newton(self, strokes: Vec, start: Sequence[float] | None) -> tuple[Vec, float]:
+    def _newton(self, strokes: Vec, start: Sequence[float] | None
+                ) -> tuple[Vec, float, Rows]:
         q = self.linear_state(strokes) if start is None else list(start)
         near = q[2]
         # the strokes are lengths La + s: their rounding is a few ulps of the longest length
         floor = 8 * EPS * (max(self._la) + max(abs(v) for v in strokes))
         previous = math.inf
+        driven = self.driven
+        full_dofs = driven == (0, 1, 2)
         for _ in range(NEWTON_MAX_ITERATIONS):
-            residual = tuple(a - b for a, b in zip(self.strokes(q), strokes, strict=True))
+            at, rows = self.pose(q)  # strokes and Jacobian in one pass
+            residual = tuple(a - b for a, b in zip(at, strokes, strict=True))
             size = max(abs(v) for v in residual)
-            j = self.jacobian(q)
+            j = rows if full_dofs else tuple(tuple(r[i] for i in driven) for r in rows)
             if size <= floor or (size >= previous and size <= 1e3 * floor):
                 # at the rounding floor (or no longer improving just above it); of the
                 # rotations 2π apart, the one nearest the start
                 q[2] -= 2 * math.pi * round((q[2] - near) / (2 * math.pi))
-                return tuple(q), solve(j, residual)[1]
+                return tuple(q), solve(j, residual)[1], j
             previous = size
             step, _ = solve(j, residual)
             full = [0.0, 0.0, 0.0]
@@ -231,3 +248,27 @@ class Platform:
                             f"(Newton's method did not converge in {NEWTON_MAX_ITERATIONS} "
                             "iterations)")
 
+
+
+class PlatformGeometry:
+    """The platform as the rig's coupled specimen sees it (``sim_actuator.platform.Geometry``):
+    the driven DOFs behind some strokes and ``∂s/∂q`` there, exact (``nlGeom``) or linear —
+    the setup's own geometry, so the simulated specimen is loaded as the setup transforms."""
+
+    def __init__(self, platform: Platform, nl_geom: bool) -> None:
+        self.platform = platform
+        self.nl_geom = nl_geom
+        self.n_actuators = platform.n_actuators
+        self._last: Vec | None = None
+        """The last exact state: Newton's method starts there (the strokes move little)."""
+
+    def state(self, strokes: Sequence[float]) -> tuple[Vec, Rows]:
+        p = self.platform
+        s = tuple(strokes)
+        if not self.nl_geom:
+            q: Sequence[float] = p.linear_state(s)
+            rows = p.linear
+        else:
+            q, rows = p.state_and_jacobian(s, self._last)
+            self._last = q
+        return tuple(q[i] for i in p.driven), rows

@@ -18,10 +18,12 @@ from fresco_bridge.config import ConfigError, parse_config
 from fresco_bridge.record import read_record
 from sim_actuator.config import build_rig, channel_config, preset
 from tests.support.bridge import RunningBridge, run_opensees
+from tests.support.column import three_actuators_2d
 
 PRESETS = ("servo-hydraulic", "lab-realistic", "ideal-elastic")
 RAMP = 0.02
 LIMIT = 0.5  # mm, actuator 2 (the vertical one): reached after about 240 steps
+COUPLED_LIMIT = 0.85  # mm, actuator 2 of the coupled column: reached after about 290 steps
 
 
 def toml(limit: float | None = LIMIT) -> str:
@@ -101,9 +103,9 @@ def test_a_channel_table_per_actuator_or_a_config_error() -> None:
         parse_config(both)
 
 
+THREE_ACTUATORS_2D = three_actuators_2d(nl_geom=True)
 PLATFORM = """
 [sites.controller.platform]
-geometry = [[1.0, 0.0, 0.0], [0.0, 1.0, -400.0], [0.0, 1.0, 600.0]]
 specimen = [{ kind = "bilinear", params = { k0 = 20.0, fy = 15.0, alpha = 0.05 } },
             { kind = "elastic", params = { k = 40.0 } },
             { kind = "elastic", params = { k = 8.0e6 } }]
@@ -112,15 +114,16 @@ specimen = [{ kind = "bilinear", params = { k0 = 20.0, fy = 15.0, alpha = 0.05 }
 
 def test_a_column_of_three_coupled_actuators_under_opensees_holds_all_three(
         tmp_path: Path) -> None:
-    """The three rigs (servo dynamics each) load one column (a platform specimen): every
-    measurement is in the platform's equilibrium, and the limit on actuator 2 holds all."""
+    """The three rigs (servo dynamics each) load one column through the site's own
+    ``ThreeActuators2d`` geometry (exact, ``nlGeom``): every measurement is in the platform's
+    equilibrium, and the limit on actuator 2 holds all."""
     import numpy as np
 
     presets = ("servo-hydraulic", "servo-hydraulic", "ideal-elastic")
     uncoupled = "".join(f'[[sites.controller.channels]]\npreset = "{p}"\n' for p in PRESETS)
     coupled = "".join(f'[[sites.controller.channels]]\npreset = "{p}"\n' for p in presets)
-    # actuator 2 reaches 1.4 mm after about 210 steps
-    text = toml(limit=1.4).replace(uncoupled, coupled + PLATFORM)
+    text = toml(limit=COUPLED_LIMIT).replace(uncoupled, coupled + PLATFORM).replace(
+        'setup = "NoTransformation"\n', THREE_ACTUATORS_2D)
     with RunningBridge(text, tmp_path) as b:
         result = run_opensees(
             "column3", timeout=300, port=b.ports["col"], nsteps=400, dt=0.01,
@@ -129,21 +132,22 @@ def test_a_column_of_three_coupled_actuators_under_opensees_holds_all_three(
         site = b.bridge.sites["col"]
         ctl = site.controller
         rigs, platform = b.call(lambda: (list(ctl.rigs), ctl.platform))  # type: ignore[attr-defined]
+        geometry = site.setup.specimen_geometry()
         run_dir = b.run_dir
     records = list(read_record(run_dir))
     holds = [r for r in records if r["kind"] == "event" and r.get("event") == "hold"]
     commits = [r for r in records if r["kind"] == "commit"]
     assert result["failed_at"] is not None and len(holds) == 1, result["failed_at"]
-    assert "ctrl disp[2]" in str(holds[0]["reason"]) and len(commits) >= 150
+    assert "ctrl disp[2]" in str(holds[0]["reason"]) and len(commits) >= 150, len(commits)
     ctrls = [tuple(r["ctrl"]) for r in records if r["kind"] == "trial"]
     last_sent = ctrls[-2]  # the last trial is the refused one
     assert [r.command for r in rigs] == list(last_sent)  # held: nothing moved after
-    t = np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]])
+    assert geometry is not None
     for d in (r for r in records if r["kind"] == "daq"):
-        x, f = np.array(d["disp"]), np.array(d["force"])
-        q = np.linalg.solve(t, x)
-        # the platform's equilibrium T'f = p(q) on its elastic DOFs (axial, rotation)
-        np.testing.assert_allclose((t.T @ f)[1:], [40.0 * q[1], 8.0e6 * q[2]], rtol=1e-9,
-                                   atol=1e-6)
+        q, j = geometry.state(d["disp"])
+        f = np.array(d["force"])
+        # the platform's equilibrium J(q)'f = p(q) on its elastic DOFs (axial, rotation)
+        np.testing.assert_allclose((np.array(j).T @ f)[1:], [40.0 * q[1], 8.0e6 * q[2]],
+                                   rtol=1e-9, atol=1e-6)
     last_measured = [r for r in records if r["kind"] == "daq"][-1]["disp"]
     assert platform.strokes == pytest.approx(last_measured, abs=1e-12)  # where it was held

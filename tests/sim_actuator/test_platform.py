@@ -1,6 +1,11 @@
-"""A platform several actuators load together: equilibrium, coupling, material semantics."""
+"""A platform several actuators load together: equilibrium, coupling, material semantics.
+
+The geometry here is a constant matrix (pure logic); the bridge's setups give theirs
+(tests/bridge/controls/test_rig.py loads the platform through ``ThreeActuators2d``)."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -13,8 +18,21 @@ COLUMN = [[1.0, 0.0, 0.0], [0.0, 1.0, -L1], [0.0, 1.0, L2]]  # ThreeActuators2d,
 K_BASIC = (10.0, 200.0, 5.0e6)  # shear kN/mm, axial kN/mm, rotation kN·mm/rad
 
 
+class MatrixGeometry:
+    """Strokes ``x = T·q``: a linear geometry given as its matrix."""
+
+    def __init__(self, t: Sequence[Sequence[float]]) -> None:
+        self.t = tuple(tuple(float(v) for v in row) for row in t)
+        self.n_actuators = len(self.t)
+
+    def state(self, strokes: Sequence[float]) -> tuple[tuple[float, ...],
+                                                       tuple[tuple[float, ...], ...]]:
+        q = np.linalg.solve(np.array(self.t), np.asarray(strokes, dtype=np.float64))
+        return tuple(float(v) for v in q), self.t
+
+
 def elastic_column() -> Platform:
-    return Platform(COLUMN, [make_model("elastic", k=k) for k in K_BASIC])
+    return Platform(MatrixGeometry(COLUMN), [make_model("elastic", k=k) for k in K_BASIC])
 
 
 def test_one_actuator_moved_loads_the_others_in_equilibrium() -> None:
@@ -33,8 +51,9 @@ def test_one_actuator_moved_loads_the_others_in_equilibrium() -> None:
 
 
 def test_a_trial_is_from_the_committed_state_and_a_commit_moves_the_platform() -> None:
-    platform = Platform(COLUMN, [make_model("bilinear", k0=10.0, fy=5.0, alpha=0.02),
-                                 make_model("elastic", k=200.0), make_model("elastic", k=5e6)])
+    laws = [make_model("bilinear", k0=10.0, fy=5.0, alpha=0.02),
+            make_model("elastic", k=200.0), make_model("elastic", k=5e6)]
+    platform = Platform(MatrixGeometry(COLUMN), laws)
     first, _ = platform.set_trial(0, 2.0)  # beyond yield: 5 + 0.02*10*1.5
     again, _ = platform.set_trial(0, 2.0)  # not committed: the same answer
     assert first == again == pytest.approx(5.0 + 0.2 * 1.5)
@@ -47,6 +66,6 @@ def test_a_trial_is_from_the_committed_state_and_a_commit_moves_the_platform() -
 def test_a_singular_or_misshapen_geometry_is_refused() -> None:
     laws = [make_model("elastic", k=1.0) for _ in range(3)]
     with pytest.raises(PlatformError, match="singular"):
-        Platform([[1, 0, 0], [0, 1, 0], [0, 2, 0]], laws)
-    with pytest.raises(PlatformError, match=r"must be 3×3"):
-        Platform([[1, 0], [0, 1]], laws)
+        Platform(MatrixGeometry([[1, 0, 0], [0, 1, 0], [0, 2, 0]]), laws)
+    with pytest.raises(PlatformError, match=r"2 actuators and 3 specimen laws"):
+        Platform(MatrixGeometry([[1, 0], [0, 1]]), laws)

@@ -17,6 +17,7 @@ from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import read_record
 from sim_actuator.config import build_rig, preset
 from tests.support.bridge import RunningBridge
+from tests.support.column import L1, L2, LINEAR_T, three_actuators_2d
 
 RAMP = 0.05
 
@@ -86,23 +87,22 @@ def test_bad_rig_choices_are_config_errors(controller: str, fragment: str) -> No
 
 # -- several actuators loading one platform (a three-actuator column) -------------------------
 
-COLUMN_PLATFORM = """
+K_BASIC = (10.0, 200.0, 5.0e5)  # shear kN/mm, axial kN/mm, rotation kN·mm/rad
+COLUMN_PLATFORM = f"""
 [sites.controller.platform]
-geometry = [[1.0, 0.0, 0.0], [0.0, 1.0, -400.0], [0.0, 1.0, 600.0]]
-specimen = [{ kind = "elastic", params = { k = 10.0 } },
-            { kind = "elastic", params = { k = 200.0 } },
-            { kind = "elastic", params = { k = 5.0e6 } }]
+specimen = [{{ kind = "elastic", params = {{ k = {K_BASIC[0]} }} }},
+            {{ kind = "elastic", params = {{ k = {K_BASIC[1]} }} }},
+            {{ kind = "elastic", params = {{ k = {K_BASIC[2]} }} }}]
 """
 
 
-def _column_toml(preset_name: str) -> str:
+def _column_toml(preset_name: str, nl_geom: bool = False) -> str:
     return f"""
 [[sites]]
 name = "col"
 port = 0
 dofs = 3
-setup = "NoTransformation"
-[sites.controller]
+{three_actuators_2d(nl_geom)}[sites.controller]
 kind = "rig"
 preset = "{preset_name}"
 ramp_time = {RAMP}
@@ -110,46 +110,89 @@ ramp_time = {RAMP}
 
 
 def _k_actuators() -> list[list[float]]:
+    """J(0)⁻ᵀ K J(0)⁻¹: the actuator stiffness of the column (linear geometry)."""
     import numpy as np
 
-    t_inv = np.linalg.inv(np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]]))
-    k: list[list[float]] = (t_inv.T @ np.diag([10.0, 200.0, 5.0e6]) @ t_inv).tolist()
+    t_inv = np.linalg.inv(np.array(LINEAR_T))
+    k: list[list[float]] = (t_inv.T @ np.diag(K_BASIC) @ t_inv).tolist()
     return k
 
 
 def test_three_actuators_loading_one_platform_feel_each_other(tmp_path: Path) -> None:
+    """The setup's platform is the specimen's: the element sees its own diagonal stiffness,
+    and each actuator's force carries the others' moves."""
     k = _k_actuators()
     with RunningBridge(_column_toml("ideal-elastic"), tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
-        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2), (-0.3, 0.2, 0.1)], 1):
+        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2e-3), (-0.3, 0.2, 1e-4)], 1):
             link.set_trial(x, time=0.01 * i)
             forces = link.force()
             link.commit()
-            expected = [sum(k[r][c] * x[c] for c in range(3)) for r in range(3)]
-            assert forces == pytest.approx(expected, rel=1e-12, abs=1e-9)
-            if i == 1:  # actuator 2 alone moved; actuator 3 holds the platform's rotation
-                assert abs(forces[2]) > 1.0
+            assert forces == pytest.approx([kb * v for kb, v in zip(K_BASIC, x, strict=True)],
+                                           rel=1e-12, abs=1e-9)
+        run_dir = b.run_dir
+    records = list(read_record(run_dir))
+    ctrls = [r["ctrl"] for r in records if r["kind"] == "trial"]
+    daqs = [r for r in records if r["kind"] == "daq"]
+    for ctrl, daq in zip(ctrls, daqs, strict=True):
+        expected = [sum(k[r][c] * ctrl[c] for c in range(3)) for r in range(3)]
+        assert daq["force"] == pytest.approx(expected, rel=1e-12, abs=1e-9)
+    assert abs(daqs[0]["force"][0]) < 1e-9 and daqs[0]["force"][1] == \
+        pytest.approx(daqs[0]["force"][2] * L2 / L1)  # v alone: the beam shares it
+
+
+def test_the_platform_is_loaded_through_the_exact_geometry_under_nl_geom(
+        tmp_path: Path) -> None:
+    """``nlGeom``: strokes are the exact ones of the rotated beam, and the element still sees
+    its specimen (p = K q) to rounding at rotations of a few hundredths of a radian (as far
+    as the actuators' force capacity lets this stiff column go)."""
+    import numpy as np
+
+    trials = [(0.4 * i, -0.1 * i, 0.002 * i) for i in range(1, 13)]  # to θ = 0.024 rad
+    with RunningBridge(_column_toml("ideal-elastic", nl_geom=True), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
+        for i, x in enumerate(trials, 1):
+            link.set_trial(x, time=0.01 * i)
+            forces = link.force()
+            link.commit()
+            assert forces == pytest.approx([kb * v for kb, v in zip(K_BASIC, x, strict=True)],
+                                           rel=1e-9)
+        run_dir = b.run_dir
+    ctrls = [r["ctrl"] for r in read_record(run_dir) if r["kind"] == "trial"]
+    linear = np.array(LINEAR_T) @ np.array(trials[-1])
+    assert np.max(np.abs(np.array(ctrls[-1]) - linear)) > 0.01  # the exact strokes, not J(0)·q
 
 
 def test_servo_lag_on_every_actuator_keeps_the_platform_in_equilibrium(tmp_path: Path) -> None:
-    k = _k_actuators()
+    import numpy as np
+
+    t = np.array(LINEAR_T)
     with RunningBridge(_column_toml("servo-hydraulic"), tmp_path) as b, \
             GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
         site = b.bridge.sites["col"]
-        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2), (-0.3, 0.2, 0.1)], 1):
+        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2e-3), (-0.3, 0.2, 1e-4)], 1):
             link.set_trial(x, time=0.01 * i)
             forces = link.force()
             link.commit()
             measured = b.call(lambda: site.daq.disp)
-            assert any(abs(m - c) > 1e-6 for m, c in zip(measured, x, strict=True))  # the lag
-            expected = [sum(k[r][c] * measured[c] for c in range(3)) for r in range(3)]
-            assert forces == pytest.approx(expected, rel=1e-9, abs=1e-6)
+            q = np.linalg.solve(t, np.array(measured))
+            assert np.max(np.abs(q - np.array(x))) > 1e-6  # the lag
+            assert forces == pytest.approx((np.array(K_BASIC) * q).tolist(), rel=1e-9,
+                                           abs=1e-6)
 
 
 def test_a_platform_that_does_not_fit_is_a_config_error() -> None:
-    with pytest.raises(ConfigError, match=r"platform has 3 actuators; this site drives 2"):
-        parse_config(_column_toml("ideal-elastic").replace("dofs = 3", "dofs = 2"))
+    two_laws = _column_toml("ideal-elastic").replace(
+        f""",
+            {{ kind = "elastic", params = {{ k = {K_BASIC[2]} }} }}]""", "]")
+    with pytest.raises(ConfigError, match=r"platform specimen has 2 law\(s\); the setup's "
+                                          r"platform has 3 DOF\(s\) driven by 3 actuator"):
+        parse_config(two_laws)
+    no_platform = _column_toml("ideal-elastic").replace(
+        'kind = "ThreeActuators2d"', 'kind = "NoTransformation"')
+    no_platform = "\n".join(line for line in no_platform.splitlines()
+                            if not line.startswith(("La", "L1", "L2", "nlGeom")))
+    with pytest.raises(ConfigError, match=r"this setup has none \(use a planar setup"):
+        parse_config(no_platform)
     with pytest.raises(ConfigError, match=r"lab-realistic\) has load-path effects"):
         parse_config(_column_toml("lab-realistic"))
-    with pytest.raises(ConfigError, match="singular"):
-        parse_config(_column_toml("ideal-elastic").replace("-400.0", "600.0"))
