@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING
 
 from protocol import Signals, SignalSizes
 
-from ..config import SiteConfig
 from ..controls.base import Controller, Daq, InlineController
 from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
@@ -48,6 +47,7 @@ from .base import Later, SiteError
 from .gate import CommandGate
 from .guard import ControllerGuard
 from .listeners import EventListener, StepListener
+from .site_config import SiteConfigBase
 from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
@@ -70,7 +70,7 @@ class ExperimentalSite(CommandGate):
 
     def __init__(
         self,
-        cfg: SiteConfig,
+        cfg: SiteConfigBase,
         controller: Controller,
         record: RunRecord | None,
         *,
@@ -80,6 +80,9 @@ class ExperimentalSite(CommandGate):
         self.cfg = cfg
         self.name = cfg.name
         self.controller = controller
+        self._reset_on_new_session = bool(getattr(getattr(cfg, "controller", None),
+                                                  "reset_on_new_session", False))
+        """``[sites.controller] reset_on_new_session``: a new session starts a fresh specimen."""
         self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
         self._plain = self.setup.kind == "NoTransformation"
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
@@ -195,7 +198,7 @@ class ExperimentalSite(CommandGate):
             self._commit_time = self.time
             self._resume_at = None
         reset = getattr(self.controller, "reset", None)
-        if reset is not None and getattr(self.cfg.controller, "reset_on_new_session", False):
+        if reset is not None and self._reset_on_new_session:
             reset()
             self._reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)

@@ -1,26 +1,32 @@
-"""From the lab config to learners and twin controllers: one learner per source site, one
-twin controller per updatable site."""
+"""From the updatable sites' configs to their learners and sites: one learner per source site,
+one twin site per updatable site, and the wiring to the sources once every site exists."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..config import ConfigError, LabConfig, SiteConfig
+from ..config_model import ConfigError
 from ..record.export import committed_steps
+from ..sites import controlled_site
+from ..sites.base import Site
 from ..updating.base import UpdaterError
 from ..updating.histories import read_history
-from .controller import TwinController
+from .controller import MeasuredSource, TwinController
 from .learner import Learner
 from .worker import LearnerSpec, Message, TwinSpec
 
-__all__ = ["build_twins", "preload_from_record", "twin_spec"]
+if TYPE_CHECKING:
+    from ..sites.kind import SiteContext
+    from .config import UpdatableSiteConfig
+
+__all__ = ["build_twins", "preload_from_record", "twin_spec", "wire_twins"]
 
 
-def twin_spec(cfg: SiteConfig) -> TwinSpec:
+def twin_spec(cfg: UpdatableSiteConfig) -> TwinSpec:
     """The updater of updatable site ``cfg`` with its data read (paths already resolved)."""
-    assert cfg.updater is not None
     options: dict[str, Any] = dict(cfg.updater_options)
     try:
         if cfg.offline is not None:
@@ -33,32 +39,63 @@ def twin_spec(cfg: SiteConfig) -> TwinSpec:
     return TwinSpec(cfg.name, cfg.updater, options, cfg.on_learner_loss)
 
 
-def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinController]]:
-    """``({source site: its learner}, {updatable site: its controller})`` (not started)."""
-    groups: dict[str, list[SiteConfig]] = {}
-    for scfg in config.sites:
-        if scfg.kind == "updatable":
-            assert scfg.learns_from is not None
-            groups.setdefault(scfg.learns_from, []).append(scfg)
+def build_twins(configs: Sequence[UpdatableSiteConfig], context: SiteContext
+                ) -> tuple[dict[str, Learner], dict[str, Site], dict[str, TwinController]]:
+    """``({source site: its learner}, {updatable site: its site}, {updatable site: its twin
+    controller})`` (not started)."""
+    groups: dict[str, list[UpdatableSiteConfig]] = {}
+    for cfg in configs:
+        groups.setdefault(cfg.learns_from, []).append(cfg)
     learners: dict[str, Learner] = {}
+    sites: dict[str, Site] = {}
     controllers: dict[str, TwinController] = {}
     for source, twins in groups.items():
         spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
         learner = learners[source] = Learner(source, spec,
                                              deadline=min(t.learner_deadline for t in twins))
         for t in twins:
-            assert t.updater is not None
-            controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
-                                                 causality=t.causality)
-    return learners, controllers
+            controller = controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
+                                        causality=t.causality)
+            sites[t.name] = controlled_site(t, controller, context)
+    return learners, sites, controllers
 
 
-def preload_from_record(learners: dict[str, Learner], run_dir: Path, config: LabConfig) -> None:
+def _event_sink(site: Site, on_loss: str) -> Callable[[str, str, dict[str, object]],
+                                                                  None]:
+    """A learner's events as events of one of its twin sites; a lost learner HOLDs a ``hold``
+    twin at once, not only at its next request (a ``freeze`` twin answers from its snapshot)."""
+    def sink(kind: str, reason: str, extra: dict[str, object]) -> None:
+        site.event(kind, reason, **extra)
+        if kind == "learner-lost" and site.in_session and on_loss == "hold":
+            site.enter_hold(reason)
+    return sink
+
+
+def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
+               controllers: Mapping[str, TwinController], sites: Mapping[str, Site]) -> None:
+    """Each learner listens to its source's committed steps; its events go to its twins, and
+    each twin site writes its update lines after its step lines."""
+    for source_name, learner in learners.items():
+        source = sites[source_name]
+        source.add_listener(learner)
+        for spec in learner.spec.twins:
+            site = twins[spec.name]
+            learner.add_event_sink(_event_sink(site, spec.on_loss))
+            controller = controllers[spec.name]
+            if not isinstance(source, MeasuredSource):  # the config checks the source's kind
+                raise ConfigError(f"site {spec.name}: its source {source_name} has no "
+                                  "measurement to learn from")
+            controller.bind(site, source)
+            site.add_listener(controller)
+
+
+def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
+                        configs: Sequence[UpdatableSiteConfig]) -> None:
     """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
     committed steps and each twin's committed trials, in the record's order (the order the
     bridge saw them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
     steps = committed_steps(run_dir)
-    same_step = {s.name for s in config.sites if s.causality == "same-step"}
+    same_step = {c.name for c in configs if c.causality == "same-step"}
     for learner in learners.values():
         twins = {t.name for t in learner.spec.twins}
         log: list[Message] = []

@@ -25,17 +25,50 @@ from __future__ import annotations
 
 import asyncio
 import math
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+from protocol import Signals
 
 from ..controls.base import Controller, ControllerError, Daq
 from ..safety import SiteState
 from ..site_output import CommittedStep
-from ..sites import ExperimentalSite
 from .learner import Learner, LearnerError
+
+if TYPE_CHECKING:
+    from ..record.site import SiteRecorder
 
 __all__ = ["TwinController"]
 
 POLL = 0.0002
 """Seconds between two looks at the source's trial while a same-step trial waits for it."""
+
+
+class TwinHost(Protocol):
+    """What the twin controller reads of its own site (its step, trial, events, record)."""
+
+    session: int
+    step: int
+    time: float
+    trial: Signals
+    recorder: SiteRecorder | None
+
+    def event(self, kind: str, reason: str, **extra: object) -> None: ...
+
+
+@runtime_checkable
+class MeasuredSource(Protocol):
+    """What a same-step twin reads of its source site: its trial and that trial's one
+    measurement."""
+
+    step: int
+    time: float
+    state: SiteState
+    pending: tuple[float, ...] | None
+
+    @property
+    def trial_forwarded(self) -> bool: ...
+
+    async def acquire(self) -> Daq: ...
 
 
 class TwinController(Controller):
@@ -60,14 +93,14 @@ class TwinController(Controller):
         """The source's one-step error of the twin's current step (the last answer's)."""
         self._answered = False
         """Whether the last trial was answered by the learner (else no update line)."""
-        self._site: ExperimentalSite | None = None
-        self._source: ExperimentalSite | None = None
+        self._site: TwinHost | None = None
+        self._source: MeasuredSource | None = None
         self._fallback_session = -1
         """The session in which same-step fell back to previous-step."""
         self.same_step_steps = 0
         """Trials answered same-step."""
 
-    def bind(self, site: ExperimentalSite, source: ExperimentalSite) -> None:
+    def bind(self, site: TwinHost, source: MeasuredSource) -> None:
         """The twin's own site and its source's (same-step matches their trials)."""
         self._site, self._source = site, source
 
@@ -115,7 +148,7 @@ class TwinController(Controller):
         self.learner.observe_same_step(step, d, f)
         return True
 
-    def _fall_back(self, site: ExperimentalSite, why: str) -> None:
+    def _fall_back(self, site: TwinHost, why: str) -> None:
         self._fallback_session = site.session
         site.event("same-step-fallback", f"twin {self.twin}: {why}; previous-step from step "
                    f"{site.step + 1} to the end of session {site.session}", step=site.step + 1)

@@ -25,6 +25,7 @@ from tests.support.bridge import RunningBridge, run_opensees
 from tests.support.controller import sim_actuator
 from tests.support.net import free_ports
 from tests.support.opensees_frame import BILINEAR, frame_params, rel_diff
+from tests.support.twins import learners_of
 
 pytest.importorskip("openseespy")
 
@@ -136,7 +137,7 @@ def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Pa
                       f'[sites.updater_options]\nmodel = "bilinear"\nparams = {_params(STORY2)}\n')
     with RunningBridge(toml, tmp_path) as bridge:
         sites = bridge.bridge.sites
-        learner = bridge.bridge.learners["story1"]
+        learner = learners_of(bridge)["story1"]
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 40)))
         ports = [bridge.ports["story1"], bridge.ports["story2"]]
         failure: list[BaseException] = []
@@ -192,7 +193,7 @@ def test_worker_killed_mid_run_freezes_the_twin_and_the_run_goes_on(tmp_path: Pa
     toml = frame_toml('updater = "online_ukf"\non_learner_loss = "freeze"\n')
     with RunningBridge(toml, tmp_path) as bridge:
         sites = bridge.bridge.sites
-        learner = bridge.bridge.learners["story1"]
+        learner = learners_of(bridge)["story1"]
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 60)))
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 80)))
         ports = [bridge.ports["story1"], bridge.ports["story2"]]

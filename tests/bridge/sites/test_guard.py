@@ -11,7 +11,8 @@ import pytest
 from fresco_bridge.config import parse_config
 from fresco_bridge.controls.base import Controller, ControllerError, ControllerLinkError, Daq
 from fresco_bridge.site_output import SiteNotice
-from fresco_bridge.sites import ExperimentalSite, SiteState
+from fresco_bridge.sites import SiteState
+from fresco_bridge.sites.experimental import ExperimentalSite
 from fresco_bridge.telemetry.schema import SiteStatus
 from protocol import Signals, SignalSizes
 

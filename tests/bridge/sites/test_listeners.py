@@ -8,11 +8,11 @@ from pathlib import Path
 from typing import Any
 
 from fresco_bridge.config import parse_config
-from fresco_bridge.daemon import make_controller
 from fresco_bridge.eager import Suspended, start_eager
 from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.site_output import CommittedStep, SiteNotice
-from fresco_bridge.sites import ExperimentalSite
+from fresco_bridge.sites.experimental import ExperimentalSite
+from fresco_bridge.sites.experimental_kind import site_controller as make_controller
 from fresco_bridge.telemetry.schema import SiteStatus
 from protocol import Signals, SignalSizes
 

@@ -1,0 +1,123 @@
+"""The ``experimental`` site kind: a controller (``controls/``) behind a setup and the limits.
+
+Its config adds the ``[sites.controller]`` table (a discriminated union of the controller
+kinds of ``controls/registry.py``; ``sim`` when omitted); its group builds one
+``ExperimentalSite`` per entry, connects the controllers at start (an unreachable one is
+logged: the site HOLDs at its first command) and closes them at the end.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
+
+from pydantic import Discriminator, Field, Tag
+
+from ..controls.base import Controller, ControllerError
+from ..controls.kind import ControllerConfigBase
+from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controller
+from ..controls.sim import SimControllerConfig
+from .base import Site
+from .experimental import ExperimentalSite
+from .kind import SiteConfigBase, SiteContext, SiteKind
+
+if TYPE_CHECKING:
+    from ..telemetry.metrics import Metrics
+
+__all__ = ["KIND", "ExperimentalSiteConfig", "controlled_site", "site_controller"]
+
+log = logging.getLogger("fresco_bridge")
+
+
+def _controller_kind(v: Any) -> str:
+    """``kind`` may be omitted for the default in-process simulated controller."""
+    kind = v.get("kind", "sim") if isinstance(v, dict) else getattr(v, "kind", "sim")
+    return str(kind)
+
+
+if TYPE_CHECKING:
+    ControllerConfig = ControllerConfigBase
+else:  # the discriminated union of every registered kind's config model
+    ControllerConfig = Annotated[
+        Union[tuple(Annotated[k.config, Tag(k.name)] for k in CONTROLLER_KINDS.values())],  # noqa: UP007
+        Discriminator(_controller_kind),
+    ]
+
+
+class ExperimentalSiteConfig(SiteConfigBase):
+    """A site whose force is measured: a controller behind the setup and the limits."""
+
+    kind: Literal["experimental"] = "experimental"
+    controller: ControllerConfig = Field(default_factory=SimControllerConfig)
+    """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
+    ``modbus``, ``mts``."""
+
+    def actuators_fit(self, n_actuators: int) -> None:
+        most = controller_kind(self.controller.kind).max_actuators
+        if most is not None and n_actuators > most:
+            raise ValueError(
+                f"controller {self.controller.kind} drives {most} actuator(s); this site needs "
+                f"{n_actuators} (use setup OneActuator or dofs = 1)"
+            )
+
+
+def site_controller(cfg: ExperimentalSiteConfig) -> Controller:
+    """The controller adapter a site's config asks for (its kind's factory, ``controls/``)."""
+    return make_controller(cfg.controller, cfg.n_actuators)
+
+
+def controlled_site(cfg: SiteConfigBase, controller: Controller, context: SiteContext) -> Site:
+    """A site answering through ``controller`` behind ``cfg``'s setup and limits, with the
+    shared site core (sessions, states, operator, NaN stop, listeners, record, status): how a
+    kind whose force comes from a model in the bridge (a twin) serves it."""
+    return ExperimentalSite(cfg, controller, context.record,
+                            controller_timeout=context.controller_timeout)
+
+
+class ExperimentalGroup:
+    """The experimental sites of one bridge: each with its controller."""
+
+    def __init__(self, configs: Sequence[ExperimentalSiteConfig], context: SiteContext) -> None:
+        self._sites = {cfg.name: ExperimentalSite(
+            cfg, site_controller(cfg), context.record,
+            controller_timeout=context.controller_timeout,
+            controller_recovery=context.controller_recovery) for cfg in configs}
+        self._timeout = context.controller_timeout
+
+    @property
+    def sites(self) -> Mapping[str, Site]:
+        return self._sites
+
+    async def start(self) -> None:
+        for site in self._sites.values():
+            try:
+                await asyncio.wait_for(site.controller.connect(), self._timeout)
+            except (ControllerError, TimeoutError) as exc:
+                # Not fatal: the site serves anyway and HOLDs at the first command if the
+                # controller is still unreachable (adapters reconnect on reads).
+                log.error("site %s: controller not reachable at start: %s", site.name,
+                          exc or "timeout")
+
+    def wire(self, sites: Mapping[str, Site]) -> None:
+        """Nothing: an experimental site needs no other site."""
+
+    def attach_metrics(self, metrics: Metrics) -> None:
+        """Nothing beyond the per-site metrics the bridge sets."""
+
+    async def close(self) -> None:
+        for site in self._sites.values():
+            try:
+                await asyncio.wait_for(site.controller.close(), self._timeout)
+            except Exception as exc:  # closing must go on for the other sites
+                log.warning("site %s: controller close failed: %s", site.name, exc)
+
+
+KIND = SiteKind(
+    name="experimental",
+    config=ExperimentalSiteConfig,
+    factory=ExperimentalGroup,
+    summary="a controller (`[sites.controller]`) behind the setup and the limits; its force "
+            "is measured",
+)
