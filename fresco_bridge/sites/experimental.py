@@ -229,6 +229,7 @@ class ExperimentalSite(CommandGate):
         command is the client's, checked against the measured position."""
         self.session = session
         self._resume_at = (step, time)
+        self.step, self.time = step, time  # what ``ctl status`` shows until the session opens
         self.event("resumed", f"run resumed after an interruption: site {self.name} continues "
                     f"from committed step {step} (t = {time:g} s) with session {session + 1}",
                     step=step, time=time)

@@ -50,6 +50,7 @@ class TwinHost(Protocol):
     step: int
     time: float
     trial: Signals
+    in_session: bool
     recorder: SiteRecorder | None
 
     def event(self, kind: str, reason: str, **extra: object) -> None: ...
@@ -191,4 +192,4 @@ class TwinController(Controller):
         return {"kind": "updatable", "source": self.learner.source, "updater": self.updater,
                 "causality": self.causality + (" (fell back to previous-step)" if fallen
                                                else ""),
-                **self.learner.status(self.twin)}
+                **self.learner.status(self.twin, active=site is not None and site.in_session)}

@@ -486,13 +486,18 @@ class Learner:
         (tangent,) = await self._request(("initial", twin), self.deadline)
         return float(tangent)
 
-    def status(self, twin: str) -> dict[str, object]:
-        """Twin ``twin``'s view of its learner (``ctl status``)."""
-        behind = self.source_step - self.trained_through - 1
-        shown = self.state if self.state != "live" or behind <= 0 else f"behind {behind}"
+    def status(self, twin: str, *, active: bool = True) -> dict[str, object]:
+        """Twin ``twin``'s view of its learner (``ctl status``). ``behind`` only while the
+        twin's session is ``active`` (after a run the last source steps wait, unlearned, for a
+        trial that never comes); a frozen twin says the step its snapshot was trained through."""
+        trained = self.trained_through
+        behind = self.source_step - trained - 1
+        shown = self.state if self.state != "live" or behind <= 0 or not active \
+            else f"behind {behind}"
         if self.state != "live" and twin in self._freezes and self._local is not None:
             shown = "frozen"
+            trained = self._local.twins[twin].trained_through
         return {"learner": shown, "learner_reason": self.reason or None,
-                "steps_trained": self.trained_through, "source_step": self.source_step,
+                "steps_trained": trained, "source_step": self.source_step,
                 "not_trained": self.not_trained, "learner_losses": self.losses,
                 "worker_pid": self.pid}

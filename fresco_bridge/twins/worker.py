@@ -19,10 +19,12 @@ import contextlib
 import logging
 import math
 import multiprocessing
+import multiprocessing.connection
 import multiprocessing.queues
 import os
 import pickle
 import queue
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -167,6 +169,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
     """The worker process: build, say ready, then answer batches of messages in order until
     ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
     BLAS thread, so training takes the CPU the bridge's step loop leaves."""
+    _end_with_the_bridge()
     with contextlib.suppress(OSError):
         os.nice(NICE)
     limits = _one_blas_thread()
@@ -192,6 +195,22 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
             if reply is not None:
                 outbox.put(reply)
     del limits
+
+
+def _end_with_the_bridge() -> None:
+    """A thread that ends this process the moment the bridge's process is gone, however it
+    ended (``kill -9`` included) and whatever the worker is doing (a long refit, a backlog of
+    batches): it waits on the parent's sentinel, which the kernel closes at the parent's
+    death. Nothing of the worker's state outlives its bridge (the record is the bridge's)."""
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(0)
+
+    threading.Thread(target=watch, name="bridge-watch", daemon=True).start()
 
 
 def _handled(state: LearnerState, msg: Message) -> Reply | None:

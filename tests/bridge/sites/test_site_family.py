@@ -90,3 +90,16 @@ def test_a_kind_only_takes_its_own_keys() -> None:
                        'kind = "updatable"\nlearns_from = "s"\nupdater = "none"\n')
     assert [s.kind for s in cfg.sites] == ["experimental", "updatable"]
     assert not hasattr(cfg.sites[1], "controller")
+
+
+def test_a_resumed_site_shows_its_real_step_before_its_first_session() -> None:
+    from fresco_bridge.sites.experimental import ExperimentalSite
+    from fresco_bridge.sites.experimental_kind import site_controller
+
+    (cfg,) = parse_config('[[sites]]\nname = "s"\nport = 0\n').sites
+    site = ExperimentalSite(cfg, site_controller(cfg), None,  # type: ignore[arg-type]
+                            controller_timeout=1.0)
+    site.resume_from(1, 600, 6.0)
+    status = site.status()
+    assert (status["session"], status["step"], status["time"]) == (1, 600, 6.0)
+    assert site.open_session("127.0.0.1:1") == 2 and site.step == 600

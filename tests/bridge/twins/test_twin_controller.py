@@ -36,7 +36,7 @@ class FakeLearner:
     async def initial(self, twin: str) -> float:
         return 12.0
 
-    def status(self, twin: str) -> dict[str, object]:
+    def status(self, twin: str, *, active: bool = True) -> dict[str, object]:
         return {"learner": "live", "steps_trained": 7}
 
 
@@ -99,3 +99,18 @@ def test_ctl_status_says_what_the_twin_is() -> None:
     text = format_answer({"sites": [site]})
     assert ("updatable: learns from damper  updater online_ukf  causality previous-step  "
             "learner live  trained through source step 7 (source at 12)") in text
+
+
+def test_status_says_behind_only_while_the_twin_runs_and_frozen_says_the_snapshots_step() -> None:
+    spec = LearnerSpec("damper", (TwinSpec("t", "none", {}, on_loss="freeze"),))
+    learner = Learner("damper", spec, deadline=1.0)
+    learner.state, learner.source_step, learner.trained_through = "live", 775, 0
+    assert learner.status("t", active=True)["learner"] == "behind 774"
+    assert learner.status("t", active=False)["learner"] == "live"  # the run has ended
+    from fresco_bridge.twins.worker import LearnerState
+
+    local = LearnerState(spec)
+    local.twins["t"].trained_through = 700
+    learner.state, learner._local, learner.trained_through = "lost", local, 724
+    status = learner.status("t")
+    assert status["learner"] == "frozen" and status["steps_trained"] == 700
