@@ -34,6 +34,7 @@ from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
     Limiter,
+    LimitHit,
     SiteState,
     TransitionRefused,
     Trigger,
@@ -64,7 +65,7 @@ half-open client cannot keep an aborted site)."""
 RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
 
 
-class ExperimentalSite(CommandGate):
+class ExperimentalSite:
     """One site: config, setup, limits, controller (behind its guard), state, the current
     session's signals, and the listeners its committed steps and events go to."""
 
@@ -118,11 +119,10 @@ class ExperimentalSite(CommandGate):
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
-        self._ctrl_limiter = limiter if limiter is not None and limiter.has_ctrl else None
+        self.gate = CommandGate(self, limiter, inline=self._now is not None)
+        """The limits and the operator's pause between a target and the controller."""
+        self._ctrl_limiter = self.gate.limiter
         self._daq_limiter = limiter if limiter is not None and limiter.has_daq else None
-        self.limit_counts: dict[str, int] = {}
-        self._reference: tuple[float, ...] | None = None  # last command the controller got
-        self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
         self.pending: tuple[float, ...] | None = None  # waits for an operator or a recovery
         self._end_session: Callable[[str], None] | None = None  # the transport's, per session
@@ -135,7 +135,7 @@ class ExperimentalSite(CommandGate):
         n, na = self.cfg.dofs, self.setup.n_actuators
         self.step = 0
         self.time = 0.0
-        self._commit_time = 0.0
+        self.commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
         self.target: tuple[float, ...] = (0.0,) * na  # what the integrator asked for (ctrl)
         self.ctrl: tuple[float, ...] = (0.0,) * na  # what the controller was sent last
@@ -195,14 +195,14 @@ class ExperimentalSite(CommandGate):
         self._reset_signals()
         if self._resume_at is not None:  # the first session after a crash: numbering goes on
             self.step, self.time = self._resume_at
-            self._commit_time = self.time
+            self.commit_time = self.time
             self._resume_at = None
         reset = getattr(self.controller, "reset", None)
         if reset is not None and self._reset_on_new_session:
             reset()
-            self._reference = None
+            self.gate.reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)
-        self._transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
+        self.transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
         self.peer, self.in_session = peer, True
         return self.session
 
@@ -219,7 +219,7 @@ class ExperimentalSite(CommandGate):
             self._enter(Trigger.INTEGRATOR_LOST,
                         f"integrator session ended with an uncommitted command at step "
                         f"{self.step + 1} ({reason})")
-        self._transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
+        self.transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
         self.peer, self.in_session, self._end_session = "", False, None
         return True
 
@@ -261,7 +261,7 @@ class ExperimentalSite(CommandGate):
             raise SiteError(f"{who} sizes do not fit site {self.name}: " + "; ".join(problems))
 
     # -- states --------------------------------------------------------------------------------
-    def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
+    def transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
         """Move along ``safety.states.TRANSITIONS``; record and publish it with its reason."""
         old = self.state
         new = next_state(old, trigger, self.in_session)
@@ -283,7 +283,7 @@ class ExperimentalSite(CommandGate):
             log.warning("site %s: %s while in %s: %s", self.name, trigger, self.state, reason)
             return
         try:
-            new = self._transition(trigger, reason, step=self.step)
+            new = self.transition(trigger, reason, step=self.step)
         except TransitionRefused as exc:
             log.error("site %s: %s (%s)", self.name, exc, reason)
             return
@@ -299,11 +299,10 @@ class ExperimentalSite(CommandGate):
 
     def recovered(self, reason: str, **extra: object) -> None:
         """HOLD → RUNNING: the guard's recovery found the controller answering again."""
-        self._transition(Trigger.RECOVERED, reason, **extra)
+        self.transition(Trigger.RECOVERED, reason, **extra)
 
     def _wake_waiter(self) -> None:
-        if self._wake is not None:
-            self._wake.set()
+        self.gate.wake()
         self.guard.wake()
 
     # -- operator ------------------------------------------------------------------------------
@@ -311,7 +310,7 @@ class ExperimentalSite(CommandGate):
         """Stop forwarding at the next trial; the integrator's request waits for resume/abort."""
         if self.state is PAUSED:
             return f"site {self.name} is already PAUSED ({self.reason})"
-        self._transition(Trigger.PAUSE, f"operator pause ({source})")
+        self.transition(Trigger.PAUSE, f"operator pause ({source})")
         log.warning("site %s: PAUSED by the operator (%s) at step %d; the next command waits "
                     "for 'fresco-bridge ctl resume' or 'abort'", self.name, source, self.step)
         return f"site {self.name} PAUSED at step {self.step}"
@@ -319,7 +318,7 @@ class ExperimentalSite(CommandGate):
     def operator_resume(self, source: str) -> str:
         """PAUSED → RUNNING (the waiting command is checked again) or FAULT → IDLE."""
         old = self.state
-        new = self._transition(Trigger.RESUME, f"operator resume ({source})")
+        new = self.transition(Trigger.RESUME, f"operator resume ({source})")
         log.warning("site %s: %s → %s by the operator (%s)", self.name, old, new, source)
         self._wake_waiter()
         return f"site {self.name} {old} → {new}"
@@ -327,7 +326,7 @@ class ExperimentalSite(CommandGate):
     def operator_abort(self, source: str) -> str:
         """FAULT: hold the controller, answer the session NaN (it stops), refuse new ones."""
         old = self.state
-        self._transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
+        self.transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
         log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
                   "sessions refused until 'fresco-bridge ctl resume'", self.name, source,
                   self.step, old)
@@ -351,7 +350,7 @@ class ExperimentalSite(CommandGate):
             "paused_for": None if since is None else round(_time.monotonic() - since, 3),
             "recovering_for": None if self.guard.recovering_since is None
             else round(_time.monotonic() - self.guard.recovering_since, 3),
-            "holds": self.holds, "limit_events": dict(self.limit_counts),
+            "holds": self.holds, "limit_events": dict(self.gate.limit_counts),
             "record": None if self.recorder is None or self.recorder.failure is None
             else str(self.recorder.failure),
             "refused": {} if self.rejections is None else dict(self.rejections.counts),
@@ -461,7 +460,7 @@ class ExperimentalSite(CommandGate):
             return None
         self._daq_valid = False
         if self.state is RUNNING and (self._ctrl_limiter is None
-                                      or self.clear_of_limits(target)):  # the hot path
+                                      or self.gate.clear_of_limits(target)):  # the hot path
             self.ctrl = target
             if self.recorder is not None:
                 self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
@@ -474,12 +473,12 @@ class ExperimentalSite(CommandGate):
                 self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
                 self._sent(target)
             return None
-        return self.set_trial_later(trial, target)
+        return self.gate.set_trial_later(trial, target)
 
     async def _send_later(self, command: tuple[float, ...]) -> None:
-        await self._send(command)
+        await self.send(command)
 
-    async def _send(self, command: tuple[float, ...]) -> bool:
+    async def send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
         self._uncommitted = True
         if self._now is not None:
@@ -489,12 +488,34 @@ class ExperimentalSite(CommandGate):
                                      command)
         return self._sent(command)
 
+    @property
+    def sent(self) -> tuple[float, ...] | None:
+        """The last setpoint the controller acknowledged in this session."""
+        return self.guard.sent
+
+    async def read_position(self) -> Daq | None:
+        """A fresh measurement for the limits' reference (None: the controller failed)."""
+        return await self.guard.guarded("get_daq (reference position)", self.controller.get_daq)
+
+    def resend_refused(self, command: tuple[float, ...],
+                       measured: tuple[float, ...]) -> str | None:
+        """Why the guard may not re-send ``command`` from ``measured`` (the limits), or None."""
+        return self.gate.resend_refused(command, measured)
+
+    @property
+    def limit_counts(self) -> dict[str, int]:
+        """Limit hits by limit (``ctl status``, metrics)."""
+        return self.gate.limit_counts
+
+    def limit_event(self, hit: LimitHit, action: str) -> None:
+        self.gate.limit_event(hit, action)
+
     def _sent(self, command: tuple[float, ...]) -> bool:
         """After ``command`` went to the controller (or failed: the site is in HOLD)."""
         if self.state is HOLD or self.state is FAULT:
-            self._reference = None  # where the actuator stopped is not known
+            self.gate.reference = None  # where the actuator stopped is not known
             return False
-        self.guard.sent = self._reference = command
+        self.guard.sent = self.gate.reference = command
         return True
 
     async def acquire(self) -> Daq:
@@ -550,7 +571,7 @@ class ExperimentalSite(CommandGate):
             if hit is not None:
                 if self.recorder is not None:  # a real measurement: keep it in the record
                     self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
-                self.limit_event(hit, "hold")
+                self.gate.limit_event(hit, "hold")
                 self.enter_hold(f"daq limit exceeded: {hit.describe()}")
                 return self.daq
         self.daq = daq
@@ -595,7 +616,7 @@ class ExperimentalSite(CommandGate):
         """The controller committed (or failed to: then the site is in HOLD): the step counts."""
         self.step += 1
         self._uncommitted = False
-        commit_time, self._commit_time = self._commit_time, self.time
+        commit_time, self.commit_time = self.commit_time, self.time
         lean = self._step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
@@ -611,7 +632,7 @@ class ExperimentalSite(CommandGate):
                     listener.step_committed(committed)
         except RecordError as exc:  # the record is the first listener: nobody saw the step
             self.step -= 1
-            self._commit_time = commit_time
+            self.commit_time = commit_time
             self.record_failed(exc)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
