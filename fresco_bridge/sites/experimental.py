@@ -47,7 +47,7 @@ from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
 from .guard import ControllerGuard
-from .listeners import EventListener, StepListener
+from .listeners import EventListener, StepListener, TrialListener
 from .site_config import SiteConfigBase
 from .sizes import column_major, size_problems
 
@@ -111,6 +111,7 @@ class ExperimentalSite:
                                            tuple[float, ...]], None], ...] | None = None
         """Every step listener's ``step_values``, when they all have one (``_committed``)."""
         self._event_listeners: list[EventListener] = []
+        self._trial_listeners: list[TrialListener] = []
         self.recorder = None if record is None else SiteRecorder(record, cfg.name)
         """The one writer of this site's lines in the run record (None: recording off)."""
         if self.recorder is not None:
@@ -145,7 +146,8 @@ class ExperimentalSite:
         self._daq_valid = False
         self._acquiring: asyncio.Future[Daq] | None = None
         """The controller read in flight (network controllers): one read per trial, whoever
-        asks (the site's own force request, or a same-step twin learning from it)."""
+        asks (the site's own force request, or a trial listener reading the published
+        trial's measurement)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
@@ -401,6 +403,16 @@ class ExperimentalSite:
             self._step_values = None if None in lean else tuple(lean)  # type: ignore[arg-type]
         if isinstance(listener, EventListener):
             self._event_listeners.append(listener)
+        if isinstance(listener, TrialListener):
+            self._trial_listeners.append(listener)
+
+    def _forwarded(self) -> None:
+        """The current trial reached the controller: its listeners get it (and a way to read
+        its one measurement)."""
+        if self._trial_listeners and self.state is RUNNING:
+            trial = SourceTrial(self, self.session, self.step + 1, self.time, self.ctrl)
+            for listener in self._trial_listeners:
+                listener.trial_forwarded(trial)
 
     def status_now(self) -> SiteStatus:
         """The site's state for telemetry (retained status)."""
@@ -472,11 +484,19 @@ class ExperimentalSite:
                 self._uncommitted = True
                 self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
                 self._sent(target)
+            if self._trial_listeners:
+                self._forwarded()
             return None
-        return self.gate.set_trial_later(trial, target)
+        return self._gated(trial, target)
+
+    async def _gated(self, trial: Signals, target: tuple[float, ...]) -> None:
+        await self.gate.set_trial_later(trial, target)
+        if self.guard.sent == self.ctrl:
+            self._forwarded()
 
     async def _send_later(self, command: tuple[float, ...]) -> None:
-        await self.send(command)
+        if await self.send(command):
+            self._forwarded()
 
     async def send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
@@ -518,11 +538,6 @@ class ExperimentalSite:
         self.guard.sent = self.gate.reference = command
         return True
 
-    async def acquire(self) -> Daq:
-        """The measurement for the current command, acquired once per trial."""
-        daq = self.acquire_eager()
-        return daq if isinstance(daq, Daq) else await daq
-
     def acquire_eager(self) -> Daq | Later[Daq]:
         """The measurement for the current command, acquired once per trial."""
         if self._daq_valid or self.state is HOLD:
@@ -552,12 +567,6 @@ class ExperimentalSite:
             self._acquiring = None
         fut.set_result(daq)
         return daq
-
-    @property
-    def trial_forwarded(self) -> bool:
-        """The current trial's command has reached the controller (or needed no move): a
-        measurement taken now is the trial's."""
-        return self.guard.sent == self.ctrl
 
     def _measured(self, daq: Daq | None) -> Daq:
         """Check and record what the controller measured (None: it failed, the site HOLDs)."""
@@ -709,3 +718,30 @@ class ExperimentalSite:
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)
         return self._k_initial if self._k_initial is not None else self._k_tangent
+
+
+class SourceTrial:
+    """A trial of an ``ExperimentalSite`` as its trial listeners get it (``ForwardedTrial``):
+    its step, time and command, and its one measurement, read through the site's
+    single-flight acquisition while it is the site's current trial."""
+
+    __slots__ = ("_site", "ctrl", "session", "step", "time")
+
+    def __init__(self, site: ExperimentalSite, session: int, step: int, time: float,
+                 ctrl: tuple[float, ...]) -> None:
+        self._site = site
+        self.session, self.step, self.time, self.ctrl = session, step, time, ctrl
+
+    def _current(self) -> bool:
+        site = self._site
+        return (site.state is RUNNING and site.session == self.session
+                and site.step + 1 == self.step and site.time == self.time
+                and site.ctrl == self.ctrl and site.guard.sent == self.ctrl)
+
+    async def read(self) -> Daq | None:
+        if not self._current():
+            return None
+        daq = self._site.acquire_eager()
+        if not isinstance(daq, Daq):
+            daq = await daq
+        return daq if self._current() else None

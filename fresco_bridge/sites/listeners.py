@@ -4,19 +4,24 @@
 A site holds an ordered list of listeners (``Site.add_listener``): the run record's writer
 (``record/site.py``), the telemetry taps with the online monitors (``telemetry/taps.py``), and
 whatever else needs a site's committed steps (an updater learning from a tested element).
-Each gets every committed step (``step_committed``) and/or every event (``site_event``), in
-the order they were added, on the bridge's loop: a listener must not block (a bounded-queue
+Each gets every committed step (``step_committed``), every event (``site_event``) and/or every
+trial that reached the controller (``trial_forwarded``, with its measurement to read), in the
+order they were added, on the bridge's loop: a listener must not block (a bounded-queue
 append, a buffered line, a counter).
 """
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from ..site_output import CommittedStep, SiteNotice
+
+if TYPE_CHECKING:
+    from ..controls.base import Daq
 from ..telemetry.schema import SiteStatus
 
-__all__ = ["EventListener", "StepListener", "StepValuesListener"]
+__all__ = ["EventListener", "ForwardedTrial", "StepListener", "StepValuesListener",
+           "TrialListener"]
 
 
 @runtime_checkable
@@ -43,4 +48,30 @@ class StepValuesListener(Protocol):
 class EventListener(Protocol):
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
         """``status``: the site's status right after the event (telemetry retains it)."""
+        ...
+
+
+class ForwardedTrial(Protocol):
+    """A trial that reached the site's controller, and the one measurement of it (read once,
+    shared with the site's own force request): what a site publishes to its trial listeners,
+    so that nothing else ever reaches into the site for it."""
+
+    session: int
+    step: int
+    """The step being tried (the last committed + 1)."""
+    time: float
+    """The trial's pseudo-time."""
+    ctrl: tuple[float, ...]
+    """The command that went to the controller."""
+
+    async def read(self) -> Daq | None:
+        """This trial's measurement; None once it is not the site's current trial any more
+        (committed, superseded) or the site stopped forwarding (HOLD, FAULT)."""
+        ...
+
+
+@runtime_checkable
+class TrialListener(Protocol):
+    def trial_forwarded(self, trial: ForwardedTrial) -> None:
+        """A trial reached the controller (every trial: an implicit scheme's iterations too)."""
         ...

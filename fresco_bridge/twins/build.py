@@ -8,14 +8,16 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..causality import Causality
 from ..config_model import ConfigError
 from ..record.export import committed_steps
 from ..sites import controlled_site
 from ..sites.base import Site
 from ..updating.base import UpdaterError
 from ..updating.histories import read_history
-from .controller import MeasuredSource, TwinController
+from .controller import TwinController
 from .learner import Learner
+from .source import SourceFeed
 from .worker import LearnerSpec, Message, TwinSpec
 
 if TYPE_CHECKING:
@@ -40,24 +42,30 @@ def twin_spec(cfg: UpdatableSiteConfig) -> TwinSpec:
 
 
 def build_twins(configs: Sequence[UpdatableSiteConfig], context: SiteContext
-                ) -> tuple[dict[str, Learner], dict[str, Site], dict[str, TwinController]]:
+                ) -> tuple[dict[str, Learner], dict[str, Site], dict[str, TwinController],
+                           dict[str, SourceFeed | None]]:
     """``({source site: its learner}, {updatable site: its site}, {updatable site: its twin
-    controller})`` (not started)."""
+    controller}, {source site: its feed of trials, if a twin of it is same-step})`` (not
+    started)."""
     groups: dict[str, list[UpdatableSiteConfig]] = {}
     for cfg in configs:
         groups.setdefault(cfg.learns_from, []).append(cfg)
     learners: dict[str, Learner] = {}
     sites: dict[str, Site] = {}
     controllers: dict[str, TwinController] = {}
+    feeds: dict[str, SourceFeed | None] = {}
     for source, twins in groups.items():
         spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
         learner = learners[source] = Learner(source, spec,
                                              deadline=min(t.learner_deadline for t in twins))
+        same_step = [t for t in twins if t.causality is Causality.SAME_STEP]
+        feed = feeds[source] = SourceFeed(source) if same_step else None
         for t in twins:
-            controller = controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
-                                        causality=t.causality)
+            controller = controllers[t.name] = TwinController(
+                learner, t.name, updater=t.updater, causality=t.causality,
+                feed=feed if t in same_step else None)
             sites[t.name] = controlled_site(t, controller, context)
-    return learners, sites, controllers
+    return learners, sites, controllers, feeds
 
 
 def _event_sink(site: Site, on_loss: str) -> Callable[[str, str, dict[str, object]],
@@ -72,20 +80,22 @@ def _event_sink(site: Site, on_loss: str) -> Callable[[str, str, dict[str, objec
 
 
 def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
-               controllers: Mapping[str, TwinController], sites: Mapping[str, Site]) -> None:
+               controllers: Mapping[str, TwinController],
+               feeds: Mapping[str, SourceFeed | None],
+               sites: Mapping[str, Site]) -> None:
     """Each learner listens to its source's committed steps; its events go to its twins, and
     each twin site writes its update lines after its step lines."""
     for source_name, learner in learners.items():
         source = sites[source_name]
+        feed = feeds.get(source_name)
+        if feed is not None:
+            source.add_listener(feed)  # its trials, commits and state
         source.add_listener(learner)
         for spec in learner.spec.twins:
             site = twins[spec.name]
             learner.add_event_sink(_event_sink(site, spec.on_loss))
             controller = controllers[spec.name]
-            if not isinstance(source, MeasuredSource):  # the config checks the source's kind
-                raise ConfigError(f"site {spec.name}: its source {source_name} has no "
-                                  "measurement to learn from")
-            controller.bind(site, source)
+            controller.bind(site)
             site.add_listener(controller)
 
 

@@ -35,7 +35,8 @@ class TwinGroup:
         from .build import build_twins
 
         self.learners: dict[str, Learner]
-        self.learners, self._sites, self._controllers = build_twins(configs, context)
+        self.learners, self._sites, self._controllers, self._feeds = build_twins(configs,
+                                                                                 context)
         self._resume = context.resume
         self._configs = list(configs)
 
@@ -62,7 +63,7 @@ class TwinGroup:
         """Each learner follows its source's trials and commits; its events go to its twins."""
         from .build import wire_twins
 
-        wire_twins(self.learners, self._sites, self._controllers, sites)
+        wire_twins(self.learners, self._sites, self._controllers, self._feeds, sites)
 
     def attach_metrics(self, metrics: Metrics) -> None:
         for learner in self.learners.values():

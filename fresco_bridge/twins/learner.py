@@ -438,10 +438,12 @@ class Learner:
         self._through[twin] = self.trained_through = int(through)
         return float(force), float(tangent), self.trained_through, float(seconds), error
 
-    def observe_same_step(self, step: int, d: float, f: float) -> None:
+    def observe_same_step(self, step: int, d: float, f: float, *, committed: bool = False
+                          ) -> None:
         """The source's measurement of the trial of ``step``, for a same-step twin (sent once
-        per step; its commit then sends nothing more)."""
-        if step in self._same_step_sent:
+        per step; its commit then sends nothing more). ``committed``: the source's commit of
+        that step came first and already sent it."""
+        if committed or step in self._same_step_sent:
             return
         self._same_step_sent[step] = (d, f)
         self._send(("observe", step, d, f))
