@@ -76,6 +76,9 @@ class TwinController(Controller):
         """The source's one-step error of the twin's current step (the last answer's)."""
         self._answered = False
         """Whether the last trial was answered by the learner (else no update line)."""
+        self._committed: tuple[int, float] | None = None
+        """The session and displacement of the twin's last commit: a trial of it again moves
+        nothing and asks nothing of the source (``twins/source.py``)."""
         self._site: TwinHost | None = None
         self._feed = feed
         """The source's published trials and commits (same-step)."""
@@ -89,7 +92,9 @@ class TwinController(Controller):
         self._site = site
 
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
-        same = self.causality is Causality.SAME_STEP and await self._source_measured()
+        site = self._site
+        moves = site is None or (site.session, disp[0]) != self._committed
+        same = self.causality is Causality.SAME_STEP and moves and await self._source_measured()
         self._answered = False
         try:
             force, tangent, through, seconds, error = await self.learner.trial(
@@ -134,6 +139,8 @@ class TwinController(Controller):
         return Daq((self._d,), (self._force,))
 
     async def commit(self) -> None:
+        if self._site is not None:
+            self._committed = (self._site.session, self._d)
         try:
             self.learner.commit(self.twin)
         except LearnerError as exc:

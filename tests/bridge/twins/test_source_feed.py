@@ -94,3 +94,20 @@ def test_a_source_that_stops_ends_the_wait_with_nothing_to_learn() -> None:
         assert await asyncio.wait_for(waiting, 1.0) is None
 
     asyncio.run(main())
+
+
+def test_a_trial_of_the_committed_command_is_neither_the_steps_trial_nor_an_iteration() -> None:
+    """``CentralDifference`` and Newmark's predictor begin each step with the committed
+    displacement again: the step's trial is the one that moves."""
+    async def main() -> None:
+        feed = SourceFeed("damper")
+        feed.step_committed(commit(2, 0.02, 0.3, 3.0))
+        waiting = asyncio.ensure_future(feed.measurement(3, 0.03, 1.0))
+        feed.trial_forwarded(Trial(1, 3, 0.03, (0.3,)))  # the committed state again
+        await asyncio.sleep(0.01)
+        assert not waiting.done() and feed.iterating is None
+        feed.trial_forwarded(Trial(1, 3, 0.03, (0.7,)))
+        assert await asyncio.wait_for(waiting, 1.0) == (0.7, 7.0, False)
+        assert feed.iterating is None
+
+    asyncio.run(main())
