@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..causality import Causality
 from ..config_model import ConfigError
-from ..record.export import committed_steps
+from ..record.export import read_record
 from ..sites import controlled_site
 from ..sites.base import Site
 from ..updating.base import UpdaterError
@@ -99,25 +100,70 @@ def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
             site.add_listener(controller)
 
 
+@dataclass
+class _Replayed:
+    """One learner's history being rebuilt from a record (``preload_from_record``)."""
+
+    log: list[Message] = field(default_factory=list)
+    source_session: int = 0
+    source_step: int = 0
+    commits: int = 0
+    awaiting: dict[str, tuple[float, int]] = field(default_factory=dict)
+    """Twin -> (its committed trial, its step) until its update line says how far it
+    learned."""
+
+    def twin_committed(self, twin: str, through: tuple[int, int] | None = None) -> None:
+        d, step = self.awaiting.pop(twin)
+        self.log += [("trial", 0, twin, d, through or (self.source_session, step - 1)),
+                     ("commit", twin)]
+        self.commits += 1
+
+
 def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
                         configs: Sequence[UpdatableSiteConfig]) -> None:
     """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
-    committed steps and each twin's committed trials, in the record's order (the order the
-    bridge saw them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
-    steps = committed_steps(run_dir)
-    same_step = {c.name for c in configs if c.causality == "same-step"}
-    for learner in learners.values():
-        twins = {t.name for t in learner.spec.twins}
-        log: list[Message] = []
-        source_step = commits = 0
-        for step in steps:
-            if step.site == learner.source:
-                d, f = step.meas_disp[0], step.meas_force[0]
-                source_step = step.step
+    committed steps keyed by (session, step) and each twin's committed trials with how far
+    each learned (the source's session open then; through the twin's step if its update line
+    says same-step, else the step before), in the record's order (the order the bridge saw
+    them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
+    same_step = {c.name for c in configs if c.causality is Causality.SAME_STEP}
+    by_source = {learner.source: _Replayed() for learner in learners.values()}
+    of_twin = {t.name: by_source[learner.source] for learner in learners.values()
+               for t in learner.spec.twins}
+    last_trial: dict[tuple[str, int], dict[str, Any]] = {}
+    last_daq: dict[tuple[str, int], dict[str, Any]] = {}
+    for rec in read_record(run_dir):
+        kind, site = rec["kind"], str(rec.get("site", ""))
+        key = (site, int(rec.get("session", 0)))
+        if kind == "trial":
+            last_trial[key] = rec
+            last_daq.pop(key, None)
+        elif kind == "daq":
+            last_daq[key] = rec
+        elif kind == "event" and site in by_source and rec.get("event") == "session-open":
+            by_source[site].source_session = key[1]
+        elif kind == "commit" and key in last_trial and key in last_daq:
+            step = int(rec["step"])
+            if site in by_source:
+                src = by_source[site]
+                d, f = float(last_daq[key]["disp"][0]), float(last_daq[key]["force"][0])
+                src.source_session, src.source_step = key[1], step
                 if math.isfinite(d) and math.isfinite(f):
-                    log.append(("observe", step.step, d, f))
-            elif step.site in twins:
-                log += [("trial", 0, step.site, step.cmd_disp[0], step.site in same_step),
-                        ("commit", step.site)]
-                commits += 1
-        learner.preload(log, source_step=source_step, commits=commits)
+                    src.log.append(("observe", key[1], step, d, f))
+            elif site in of_twin:
+                replayed = of_twin[site]
+                if site in replayed.awaiting:  # a commit without its update line
+                    replayed.twin_committed(site)
+                replayed.awaiting[site] = (float(last_trial[key]["ctrl"][0]), step)
+        elif kind == "update" and site in of_twin and site in of_twin[site].awaiting:
+            replayed = of_twin[site]
+            step = replayed.awaiting[site][1]
+            same = site in same_step and int(rec.get("through", -1)) == step
+            replayed.twin_committed(site, (replayed.source_session, step if same else step - 1))
+    for learner in learners.values():
+        replayed = by_source[learner.source]
+        for twin in list(replayed.awaiting):
+            replayed.twin_committed(twin)
+        learner.preload(replayed.log, source_step=replayed.source_step,
+                        commits=replayed.commits)
+        learner.source_session = replayed.source_session

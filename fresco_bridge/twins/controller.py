@@ -98,7 +98,8 @@ class TwinController(Controller):
         self._answered = False
         try:
             force, tangent, through, seconds, error = await self.learner.trial(
-                self.twin, disp[0], same_step=same)
+                self.twin, disp[0], step=site.step + 1 if site is not None else 1,
+                same_step=same)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent

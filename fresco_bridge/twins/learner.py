@@ -32,7 +32,8 @@ from collections.abc import Callable
 from multiprocessing.process import BaseProcess
 from typing import Any
 
-from ..site_output import CommittedStep
+from ..site_output import CommittedStep, SiteNotice
+from ..telemetry.schema import SiteStatus
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
 log = logging.getLogger("fresco_bridge.twins")
@@ -73,11 +74,15 @@ class Learner:
         self.losses = 0
         self.log: list[Message] = []
         """What changed the worker's state, in order: replayed to a new worker."""
-        self._last_trial: dict[str, tuple[float, bool]] = {}
-        """Each twin's last trial: its displacement and whether it was answered same-step."""
+        self.source_session = 0
+        """The source's current (or last) session: a twin's trial may learn every step of
+        the sessions before it (source-only sessions are learned from)."""
+        self._last_trial: dict[str, tuple[float, tuple[int, int]]] = {}
+        """Each twin's last trial: its displacement and how far it learned ((session,
+        step), inclusive)."""
         self._through: dict[str, int] = {}
         """The source step each twin's last live answer was learned through."""
-        self._same_step_sent: dict[int, tuple[float, float]] = {}
+        self._same_step_sent: dict[tuple[int, int], tuple[float, float]] = {}
         """Source steps already sent at their trial (same-step), until their commit."""
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
@@ -395,8 +400,8 @@ class Learner:
     def step_committed(self, step: CommittedStep) -> None:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
-        self.source_step = step.step
-        sent = self._same_step_sent.pop(step.step, None)
+        self.source_step, self.source_session = step.step, step.session
+        sent = self._same_step_sent.pop((step.session, step.step), None)
         if sent is not None:  # learned at its trial already (same-step)
             if sent != (d, f):
                 log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
@@ -414,28 +419,40 @@ class Learner:
                         f"measurement (d {d!r} mm, F {f!r} kN) not trained on",
                         source_step=step.step)
             return
-        self._send(("observe", step.step, d, f))
+        self._send(("observe", step.session, step.step, d, f))
 
-    async def trial(self, twin: str, d: float, *, same_step: bool = False
+    def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
+        """The source's events: a session that opens is the session its twins learn up to."""
+        if notice.kind == "session-open":
+            self.source_session = notice.session
+
+    def through(self, step: int, *, same_step: bool) -> tuple[int, int]:
+        """How far a twin's trial at its ``step`` may learn: the source's steps of earlier
+        sessions, and of its current session those before ``step`` (with ``same_step``,
+        ``step`` too)."""
+        return (self.source_session, step if same_step else step - 1)
+
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
                     ) -> tuple[float, float, int, float, float | None]:
-        """The twin's (force, tangent) at ``d``, the source step it learned through, the
-        update time and the source's one-step error of the twin's current step
+        """The twin's (force, tangent) at ``d`` (its ``step``), the source step it learned
+        through, the update time and the source's one-step error of the twin's current step
         (``LearnerState``); with ``same_step`` including the source step sent by
         ``observe_same_step`` just before."""
+        through = self.through(step, same_step=same_step)
         if self.state != "live":
-            return self._frozen_trial(twin, d, same_step)
-        self._last_trial[twin] = (d, same_step)
+            return self._frozen_trial(twin, d, through)
+        self._last_trial[twin] = (d, through)
         self._answered_locally.discard(twin)
         try:
-            force, tangent, through, seconds, error = await self._request(
-                ("trial", twin, d, same_step), self.deadline)
+            force, tangent, trained, seconds, error = await self._request(
+                ("trial", twin, d, through), self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
-            return self._frozen_trial(twin, d, same_step)
-        if int(through) > self._through.get(twin, 0) and self.update_observer is not None:
+            return self._frozen_trial(twin, d, through)
+        if int(trained) > self._through.get(twin, 0) and self.update_observer is not None:
             self.update_observer(float(seconds))  # each twin's newly learned step(s), once
-        self._through[twin] = self.trained_through = int(through)
+        self._through[twin] = self.trained_through = int(trained)
         return float(force), float(tangent), self.trained_through, float(seconds), error
 
     def observe_same_step(self, step: int, d: float, f: float, *, committed: bool = False
@@ -443,10 +460,11 @@ class Learner:
         """The source's measurement of the trial of ``step``, for a same-step twin (sent once
         per step; its commit then sends nothing more). ``committed``: the source's commit of
         that step came first and already sent it."""
-        if committed or step in self._same_step_sent:
+        key = (self.source_session, step)
+        if committed or key in self._same_step_sent:
             return
-        self._same_step_sent[step] = (d, f)
-        self._send(("observe", step, d, f))
+        self._same_step_sent[key] = (d, f)
+        self._send(("observe", *key, d, f))
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -455,12 +473,12 @@ class Learner:
                                + (f" ({self.reason})" if self.reason else ""))
         return self._local
 
-    def _frozen_trial(self, twin: str, d: float, same_step: bool
+    def _frozen_trial(self, twin: str, d: float, through: tuple[int, int]
                       ) -> tuple[float, float, int, float, float | None]:
         local = self._frozen(twin)
-        self._last_trial[twin] = (d, same_step)
+        self._last_trial[twin] = (d, through)
         self._answered_locally.add(twin)
-        reply = local.handle(("trial", 0, twin, d, same_step))
+        reply = local.handle(("trial", 0, twin, d, through))
         assert reply is not None
         if reply[0] == "error":
             raise LearnerError(reply[2])
@@ -468,7 +486,7 @@ class Learner:
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, False)))
+        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, (0, 0))))
         if self.state == "live" and twin not in self._answered_locally:
             self.log.append(trial)  # the live worker has it; a replay needs it before the commit
         else:

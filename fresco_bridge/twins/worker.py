@@ -2,11 +2,13 @@
 for the twins' forces, strictly in the order the bridge saw the messages.
 
 ``LearnerState.handle`` is the whole behaviour (tested in process); ``worker_main`` only moves
-messages between the queues. Causality ``previous-step`` is made exact here, whatever order the
-client commits its elements in: a source step is queued when it arrives and learned only by
-the first trial of a later twin step (the twin's step k answers from the source's steps
-through k − 1), so a twin commit is never preceded by the learning of its own step. A trial
-marked ``same_step`` also learns the source's step k, which the bridge sent just before it.
+messages between the queues. Source steps are keyed by ``(source session, step)`` and each
+twin trial says how far it may learn (``through``, inclusive), so causality is exact whatever
+order the client commits its elements in and whatever session it is: a source step is queued
+when it arrives and learned only by a twin trial allowed to (``previous-step``: the twin's step
+k of the source's session S answers from ``(S, k − 1)``; ``same-step`` from ``(S, k)``, the
+bridge having sent it just before). Source-only sessions are learned from: every step of an
+earlier source session lies before ``(S, ·)``, so the twin's next trial learns them.
 
 Each twin has its own updater, fed the same observations: a twin cloned from another's updater
 would not follow every updater's parameter changes (a UKF's retargeted Bilinear, an ANN's new
@@ -40,7 +42,8 @@ NICE = 10
 """How much lower than the bridge the worker runs (``os.nice``)."""
 
 Message = tuple[Any, ...]
-"""``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
+"""``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step))``,
+``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through, update_seconds,
@@ -93,7 +96,8 @@ class LearnerState:
 
     spec: LearnerSpec
     twins: dict[str, _Twin] = field(default_factory=dict)
-    observations: list[tuple[int, float, float]] = field(default_factory=list)
+    observations: list[tuple[int, int, float, float]] = field(default_factory=list)
+    """``(source session, step, d, F)`` in the order the source committed them."""
     rejected: int = 0
 
     def __post_init__(self) -> None:
@@ -103,8 +107,8 @@ class LearnerState:
     def handle(self, msg: Message) -> Reply | None:
         kind = msg[0]
         if kind == "observe":
-            _, step, d, f = msg
-            self.observations.append((int(step), float(d), float(f)))
+            _, session, step, d, f = msg
+            self.observations.append((int(session), int(step), float(d), float(f)))
             return None
         if kind == "commit":
             twin = self.twins[msg[1]]
@@ -112,8 +116,8 @@ class LearnerState:
             twin.commits += 1
             return None
         if kind == "trial":
-            _, rid, name, d, same_step = msg
-            twin = self._learned(name, same_step)
+            _, rid, name, d, through = msg
+            twin = self._learned(name, (int(through[0]), int(through[1])))
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -136,16 +140,15 @@ class LearnerState:
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str, same_step: bool) -> _Twin:
-        """Twin ``name`` with every source step before its current one learned, and with
-        ``same_step`` its current one too."""
+    def _learned(self, name: str, through: tuple[int, int]) -> _Twin:
+        """Twin ``name`` with every source step up to ``through`` ((session, step),
+        inclusive) learned."""
         twin = self.twins[name]
         obs = self.observations
-        last = twin.commits + (1 if same_step else 0)
         if twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
-        while twin.applied < len(obs) and obs[twin.applied][0] <= last:
-            step, d, f = obs[twin.applied]
+        while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
+            _, step, d, f = obs[twin.applied]
             twin.applied += 1
             try:
                 twin.updater.observe(d, f)

@@ -22,7 +22,7 @@ class FakeLearner:
         self.lost = False
         self.commits: list[str] = []
 
-    async def trial(self, twin: str, d: float, *, same_step: bool = False
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
                     ) -> tuple[float, float, int, float, float | None]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
@@ -80,7 +80,7 @@ def test_non_finite_source_data_is_never_sent_for_training() -> None:
     learner.step_committed(step(2, 0.6, math.nan))
     learner.step_committed(step(3, math.inf, 1.0))
     learner.step_committed(step(4, 0.7, 2.5))
-    assert learner.log == [("observe", 1, 0.5, 2.0), ("observe", 4, 0.7, 2.5)]
+    assert learner.log == [("observe", 1, 1, 0.5, 2.0), ("observe", 1, 4, 0.7, 2.5)]
     assert learner.not_trained == 2 and learner.source_step == 4
     assert [(k, x["source_step"]) for k, _, x in events] == [("not-trained", 2),
                                                              ("not-trained", 3)]
