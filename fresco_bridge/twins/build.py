@@ -80,6 +80,10 @@ def _event_sink(site: Site, on_loss: str) -> Callable[[str, str, dict[str, objec
     return sink
 
 
+def _any_in_session(sites: list[Site]) -> Callable[[], bool]:
+    return lambda: any(site.in_session for site in sites)
+
+
 def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
                controllers: Mapping[str, TwinController],
                feeds: Mapping[str, SourceFeed | None],
@@ -92,6 +96,7 @@ def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
         if feed is not None:
             source.add_listener(feed)  # its trials, commits and state
         source.add_listener(learner)
+        learner.twins_active = _any_in_session([twins[t.name] for t in learner.spec.twins])
         for spec in learner.spec.twins:
             site = twins[spec.name]
             learner.add_event_sink(_event_sink(site, spec.on_loss))

@@ -45,7 +45,14 @@ QUEUE_SIZE = 4096
 FLUSH_PAUSE = 0.002
 """Seconds the flush task waits for room in the queue between two attempts."""
 SNAPSHOT_EVERY = 50
-"""Twin steps between two snapshots of the worker (kept for ``on_learner_loss = "freeze"``)."""
+"""Twin steps between two snapshots of the worker when a twin may freeze
+(``on_learner_loss = "freeze"``: the frozen copy starts from the last one)."""
+CHECKPOINT_EVERY = 2000
+"""Messages to the worker between two snapshots otherwise: a new worker starts from the last
+one and replays only what came after it, and the log behind it is dropped (memory bounded)."""
+LEARN_AHEAD = 64
+"""Source steps committed while no twin of the source is in a session, sent to the worker to
+be learned at once in batches of this many (a twin's next trial finds them learned)."""
 STOP_DEADLINE = 5.0
 """Seconds a worker is given to end after the stop message, then it is killed."""
 
@@ -73,7 +80,18 @@ class Learner:
         """Source steps with a non-finite measurement, never sent for training."""
         self.losses = 0
         self.log: list[Message] = []
-        """What changed the worker's state, in order: replayed to a new worker."""
+        """What changed the worker's state since the last snapshot, in order: replayed to a
+        new worker started from that snapshot."""
+        self._log_base = 0
+        """The absolute position of ``log[0]`` (what the snapshots dropped before it)."""
+        self._asked_at = 0
+        """The absolute log position of the last snapshot asked."""
+        self._ahead = 0
+        self._learning: deque[asyncio.Future[tuple[Any, ...]]] = deque()
+        """Background learning asked of the worker and not answered yet, in order."""
+        self.twins_active: Callable[[], bool] = lambda: True
+        """Whether a twin of this source is in a session (set by the wiring); while none is,
+        the source's steps are learned as they come (``LEARN_AHEAD``)."""
         self.source_session = 0
         """The source's current (or last) session: a twin's trial may learn every step of
         the sessions before it (source-only sessions are learned from)."""
@@ -120,6 +138,7 @@ class Learner:
         """Start from a recorded history (``serve --resume``): the worker replays ``log_``
         before it answers, as a new worker after a loss does."""
         self.log = list(log_)
+        self._log_base = 0
         self.source_step = source_step
         self._commits = commits
 
@@ -155,7 +174,8 @@ class Learner:
         ctx = multiprocessing.get_context("spawn")
         inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
-        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
+        start = None if self._snapshot is None else self._snapshot[2]
+        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox, start),
                            name=f"fresco-learner-{self.source}", daemon=True)
         self._generation += 1
         self._ready = self._loop.create_future()
@@ -221,6 +241,7 @@ class Learner:
         if asked is not None:
             if kind == "snapshot":
                 self._snapshot = (*asked, reply[2])
+                self._trim(asked[0])
             else:
                 log.error("learner of %s: %s; freeze answers from an older snapshot or HOLDs",
                           self.source, reply[2])
@@ -247,6 +268,7 @@ class Learner:
             if not fut.done():
                 fut.set_exception(LearnerError(f"learner lost: {reason}"))
         self._pending.clear()
+        self._learning.clear()
         self._event("learner-lost", f"learner of {self.source} lost: {reason}",
                     losses=self.losses)
         if self._freezes:
@@ -279,11 +301,49 @@ class Learner:
         self._ask_snapshot()
 
     def _ask_snapshot(self) -> None:
-        """Ask the worker for a snapshot of its state (only when a twin may freeze)."""
-        if self._freezes:
-            rid = next(self._ids)
-            self._snapshot_asked[rid] = (len(self.log), self._commits // len(self.spec.twins))
-            self._put(("snapshot", rid))
+        """Ask the worker for a snapshot of its state: where a new worker starts, and the
+        frozen copy of ``freeze`` twins."""
+        rid = next(self._ids)
+        self._snapshot_asked[rid] = (self._log_base + len(self.log),
+                                     self._commits // len(self.spec.twins))
+        self._asked_at = self._log_base + len(self.log)
+        self._put(("snapshot", rid))
+
+    def _learn_ahead(self, through: tuple[int, int]) -> None:
+        """Have the worker learn through ``through`` now (its answer is awaited by the next
+        trial: background learning is not that trial's work, and its own deadline starts
+        once it is done)."""
+        assert self._loop is not None
+        rid = next(self._ids)
+        fut: asyncio.Future[tuple[Any, ...]] = self._loop.create_future()
+        self._pending[rid] = fut
+        self._learning.append(fut)
+        self._put(("learn", rid, through))
+
+    async def _caught_up(self) -> None:
+        """Wait until the background learning asked before is done, each batch within the
+        deadline of the one before it (the worker progresses; a silent one is lost)."""
+        while self._learning:
+            fut = self._learning[0]
+            try:
+                await asyncio.wait_for(asyncio.shield(fut), self.deadline)
+            except TimeoutError:
+                self._lose(f"no progress in the background learning within {self.deadline:g} s")
+                raise LearnerError(f"learner lost: {self.reason}") from None
+            if self._learning and self._learning[0] is fut:
+                self._learning.popleft()
+
+    def _trim(self, position: int) -> None:
+        """The snapshot covers the log up to ``position`` (absolute): drop what is behind."""
+        cut = position - self._log_base
+        if cut > 0:
+            del self.log[:cut]
+            self._log_base = position
+
+    def _maybe_checkpoint(self) -> None:
+        if (self.state == "live"
+                and self._log_base + len(self.log) - self._asked_at >= CHECKPOINT_EVERY):
+            self._ask_snapshot()
 
     def _freeze(self) -> None:
         """The local copy for ``freeze`` twins: the last snapshot, the twins' commits since
@@ -295,7 +355,7 @@ class Learner:
             return
         position, steps, data = self._snapshot
         local: LearnerState = pickle.loads(data)
-        for msg in self.log[position:]:
+        for msg in self.log[position - self._log_base:]:
             if msg[0] != "observe":
                 local.handle(msg)
         self._local = local
@@ -420,6 +480,12 @@ class Learner:
                         source_step=step.step)
             return
         self._send(("observe", step.session, step.step, d, f))
+        if not self.twins_active():  # nobody can ask for it later than now: learn it now
+            self._ahead += 1
+            if self._ahead >= LEARN_AHEAD and self.state == "live":
+                self._ahead = 0
+                self._learn_ahead((step.session, step.step))
+        self._maybe_checkpoint()
 
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
         """The source's events: a session that opens is the session its twins learn up to."""
@@ -444,6 +510,7 @@ class Learner:
         self._last_trial[twin] = (d, through)
         self._answered_locally.discard(twin)
         try:
+            await self._caught_up()
             force, tangent, trained, seconds, error = await self._request(
                 ("trial", twin, d, through), self.deadline)
         except LearnerError:
@@ -495,8 +562,11 @@ class Learner:
             self._send(trial)  # answered locally: the worker has not seen this trial
         self._send(("commit", twin))
         self._commits += 1
-        if self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0 and self.state == "live":
+        if self._freezes and self.state == "live" \
+                and self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0:
             self._ask_snapshot()
+        else:
+            self._maybe_checkpoint()
 
     async def initial(self, twin: str) -> float:
         if self.state != "live":

@@ -44,12 +44,13 @@ NICE = 10
 Message = tuple[Any, ...]
 """``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step))``,
 ``("commit", twin)``,
-``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
+``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
+step))``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through, update_seconds,
 one_step_error)``, ``("initial", id, tangent)``,
-``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
-reason)``, ``("ready",)``, ``("fatal", reason)``."""
+``("sync", id, trained_through)``, ``("learned", id)``, ``("snapshot", id, pickled
+LearnerState)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
 
 @dataclass(frozen=True)
@@ -135,17 +136,22 @@ class LearnerState:
                 return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
             except (pickle.PicklingError, AttributeError, TypeError) as exc:
                 return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
+        if kind == "learn":  # steps no twin can ask for later: learned now, in the background
+            _, rid, (session, step) = msg
+            for name in self.twins:
+                self._learned(name, (int(session), int(step)), timed=False)
+            return ("learned", rid)
         if kind == "sync":
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str, through: tuple[int, int]) -> _Twin:
+    def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True) -> _Twin:
         """Twin ``name`` with every source step up to ``through`` ((session, step),
-        inclusive) learned."""
+        inclusive) learned (``timed``: for a trial, whose update time it is)."""
         twin = self.twins[name]
         obs = self.observations
-        if twin.timed_step != twin.commits:  # a new twin step: its own update time
+        if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
         while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
             _, step, d, f = obs[twin.applied]
@@ -157,8 +163,9 @@ class LearnerState:
                 log.warning("learner: source step %d not learned: %s", step, exc)
                 continue
             twin.trained_through = step
-            twin.update_seconds += twin.updater.last_update_seconds
-            twin.one_step_error = twin.updater.last_one_step_error
+            if timed:
+                twin.update_seconds += twin.updater.last_update_seconds
+                twin.one_step_error = twin.updater.last_one_step_error
         learned = min(t.applied for t in self.twins.values())
         if learned >= TRIM:  # what every twin has learned is not needed any more
             del obs[:learned]
@@ -168,17 +175,18 @@ class LearnerState:
 
 
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
-                outbox: multiprocessing.queues.Queue[Reply]) -> None:
-    """The worker process: build, say ready, then answer batches of messages in order until
-    ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
-    BLAS thread, so training takes the CPU the bridge's step loop leaves."""
+                outbox: multiprocessing.queues.Queue[Reply], start: bytes | None = None) -> None:
+    """The worker process: build (or start from the snapshot ``start``), say ready, then
+    answer batches of messages in order until ``None`` (or until the bridge process is gone).
+    It runs at a lower priority and with one BLAS thread, so training takes the CPU the
+    bridge's step loop leaves."""
     _end_with_the_bridge()
     with contextlib.suppress(OSError):
         os.nice(NICE)
     limits = _one_blas_thread()
     try:
-        state = LearnerState(spec)
-    except (UpdaterError, OSError, ValueError) as exc:
+        state = LearnerState(spec) if start is None else pickle.loads(start)
+    except (UpdaterError, OSError, ValueError, pickle.UnpicklingError) as exc:
         outbox.put(("fatal", f"the learner of {spec.source} could not build its updaters: "
                     f"{exc}"))
         return
@@ -220,7 +228,7 @@ def _handled(state: LearnerState, msg: Message) -> Reply | None:
     try:
         return state.handle(msg)
     except Exception as exc:  # an updater bug must not kill the twin silently
-        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
+        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot", "learn") else None
         return ("error", rid, f"{type(exc).__name__}: {exc}")
 
 

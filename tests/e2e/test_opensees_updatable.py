@@ -52,6 +52,12 @@ def run_frame(toml: str, tmp_path: Path, **extra: Any) -> tuple[dict[str, Any], 
     with RunningBridge(toml, tmp_path) as bridge:
         ports = [bridge.ports["story1"], bridge.ports["story2"]]
         result = run_opensees("frame2", **frame_params(ports=ports, nsteps=NSTEPS, **extra))
+        # OpenSees' last commit and DIE need no reply: let the bridge handle them before it
+        # stops (a twin's last step may still be with its learner)
+        end = time.monotonic() + 30
+        while bridge.call(lambda: any(s.busy for s in bridge.bridge.sites.values())):
+            assert time.monotonic() < end, "the sessions did not end after the client's DIE"
+            time.sleep(0.02)
         run_dir = bridge.run_dir
     return result["runs"][0], run_dir
 
