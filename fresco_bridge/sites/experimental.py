@@ -83,7 +83,8 @@ class ExperimentalSite:
         self.controller = controller
         self._reset_on_new_session = bool(getattr(getattr(cfg, "controller", None),
                                                   "reset_on_new_session", False))
-        """``[sites.controller] reset_on_new_session``: a new session starts a fresh specimen."""
+        """``[sites.controller] reset_on_new_session``: a new session starts a fresh specimen
+        (not the session that continues a resumed run)."""
         self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
         self._plain = self.setup.kind == "NoTransformation"
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
@@ -153,6 +154,10 @@ class ExperimentalSite:
         self.stop_reason: str | None = None  # set: this session's answers are NaN
 
     @property
+    def resets_on_new_session(self) -> bool:
+        return self._reset_on_new_session
+
+    @property
     def busy(self) -> bool:
         return self.peer != ""
 
@@ -195,12 +200,13 @@ class ExperimentalSite:
         self.claim(peer)
         self.session += 1
         self._reset_signals()
-        if self._resume_at is not None:  # the first session after a crash: numbering goes on
-            self.step, self.time = self._resume_at
+        resumed = self._resume_at is not None
+        if self._resume_at is not None:  # the first session after a crash: it goes on (its
+            self.step, self.time = self._resume_at  # numbering; the specimen is not reset)
             self.commit_time = self.time
             self._resume_at = None
         reset = getattr(self.controller, "reset", None)
-        if reset is not None and self._reset_on_new_session:
+        if reset is not None and self._reset_on_new_session and not resumed:
             reset()
             self.gate.reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)

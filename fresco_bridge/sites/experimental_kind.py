@@ -11,14 +11,18 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 from pydantic import Discriminator, Field, Tag
 
-from ..controls.base import Controller, ControllerError
+from ..config_model import ConfigError
+from ..controls.base import Controller, ControllerError, InlineController
 from ..controls.kind import ControllerConfigBase
 from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controller
 from ..controls.sim import SimControllerConfig
+from ..record import RecordError
+from ..record.export import read_record
 from .base import Site
 from .experimental import ExperimentalSite
 from .kind import SiteConfigBase, SiteContext, SiteKind
@@ -85,12 +89,15 @@ class ExperimentalGroup:
             controller_timeout=context.controller_timeout,
             controller_recovery=context.controller_recovery) for cfg in configs}
         self._timeout = context.controller_timeout
+        self._resume = context.resume
 
     @property
     def sites(self) -> Mapping[str, Site]:
         return self._sites
 
     async def start(self) -> None:
+        if self._resume is not None:
+            restore_specimens(self._sites, self._resume)
         for site in self._sites.values():
             try:
                 await asyncio.wait_for(site.controller.connect(), self._timeout)
@@ -112,6 +119,51 @@ class ExperimentalGroup:
                 await asyncio.wait_for(site.controller.close(), self._timeout)
             except Exception as exc:  # closing must go on for the other sites
                 log.warning("site %s: controller close failed: %s", site.name, exc)
+
+
+def restore_specimens(sites: Mapping[str, ExperimentalSite], run_dir: Path) -> None:
+    """``serve --resume``: every in-process specimen (``sim``, ``rig``) gets back the state
+    the interrupted run left it in, by replaying the record's commands in their order: each
+    trial that went to the controller, each commit, a fresh specimen at each new session
+    where the controller resets then. A controller outside the bridge (a real specimen) is
+    where the test left it: resume assumes the lab kept it there (``docs/architecture.md``,
+    "Crash and resume")."""
+    inline = {name: site for name, site in sites.items()
+              if isinstance(site.controller, InlineController)}
+    if not inline:
+        return
+    session: dict[str, int] = {}
+    sent: dict[str, tuple[float, ...] | None] = {}
+    counts = dict.fromkeys(inline, 0)
+    try:
+        for rec in read_record(run_dir):
+            name = rec.get("site")
+            site = inline.get(name) if isinstance(name, str) else None
+            if site is None or rec["kind"] not in ("trial", "commit"):
+                continue
+            controller = site.controller
+            assert isinstance(controller, InlineController)
+            number = int(rec.get("session", 0))
+            if session.get(site.name) != number:
+                if site.name in session and site.resets_on_new_session:
+                    reset = getattr(controller, "reset", None)
+                    if reset is not None:
+                        reset()
+                session[site.name], sent[site.name] = number, None
+            if rec["kind"] == "trial":
+                command = tuple(float(v) for v in rec["ctrl"])
+                if command != sent[site.name]:  # the site sends a command once
+                    controller.set_ctrl_now(command)
+                    sent[site.name] = command
+            else:
+                controller.commit_now()
+                counts[site.name] += 1
+    except (OSError, RecordError, KeyError, ValueError, ControllerError) as exc:
+        raise ConfigError(f"resuming {run_dir}: the in-process specimens could not be "
+                          f"restored from the record: {exc}") from exc
+    for name, steps in counts.items():
+        log.warning("site %s: in-process specimen restored from the record (%d committed "
+                    "step(s) replayed)", name, steps)
 
 
 KIND = SiteKind(
