@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..causality import Causality
 from ..config_model import ConfigError
 from ..record.export import read_record
 from ..sites import controlled_site
@@ -59,7 +58,7 @@ def build_twins(configs: Sequence[UpdatableSiteConfig], context: SiteContext
         spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
         learner = learners[source] = Learner(source, spec,
                                              deadline=min(t.learner_deadline for t in twins))
-        same_step = [t for t in twins if t.causality is Causality.SAME_STEP]
+        same_step = [t for t in twins if t.causality == "same-step"]
         feed = feeds[source] = SourceFeed(source) if same_step else None
         for t in twins:
             controller = controllers[t.name] = TwinController(
@@ -131,7 +130,7 @@ def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
     each learned (the source's session open then; through the twin's step if its update line
     says same-step, else the step before), in the record's order (the order the bridge saw
     them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
-    same_step = {c.name for c in configs if c.causality is Causality.SAME_STEP}
+    same_step = {c.name for c in configs if c.causality == "same-step"}
     by_source = {learner.source: _Replayed() for learner in learners.values()}
     of_twin = {t.name: by_source[learner.source] for learner in learners.values()
                for t in learner.spec.twins}

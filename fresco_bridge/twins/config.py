@@ -4,7 +4,7 @@ against ``bridge.controller_timeout``; the updater, its options and its data).""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 from pydantic import Field
 
@@ -30,7 +30,7 @@ class UpdatableSiteConfig(SiteConfigBase):
     directory), relative to the config file's folder."""
     model: ConfigPath | None = None
     """An ANN model file (``updater pretrain``), relative to the config file's folder."""
-    causality: Annotated[Causality, Field(strict=False)] = Causality.PREVIOUS_STEP
+    causality: Causality = "previous-step"
     """``previous-step``: the twin's step i answers from what was learned through the source's
     step i-1; ``same-step``: also from the source's measurement of step i (``causality.py``)."""
     on_learner_loss: Literal["hold", "freeze"] = "hold"
@@ -74,7 +74,7 @@ def resolve(cfg: UpdatableSiteConfig, lab: LabView) -> tuple[UpdatableSiteConfig
     if cfg.learner_deadline >= lab.controller_timeout:
         problems.append(f"learner_deadline: {cfg.learner_deadline:g} s must be shorter than "
                         f"bridge.controller_timeout ({lab.controller_timeout:g} s)")
-    if cfg.causality is Causality.SAME_STEP and 2 * cfg.learner_deadline >= lab.controller_timeout:
+    if cfg.causality == "same-step" and 2 * cfg.learner_deadline >= lab.controller_timeout:
         problems.append("learner_deadline: same-step waits up to it for the source's trial, "
                         "then for the learner: twice it must be shorter than "
                         f"bridge.controller_timeout ({lab.controller_timeout:g} s)")

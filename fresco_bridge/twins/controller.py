@@ -94,7 +94,7 @@ class TwinController(Controller):
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
         site = self._site
         moves = site is None or (site.session, disp[0]) != self._committed
-        same = self.causality is Causality.SAME_STEP and moves and await self._source_measured()
+        same = self.causality == "same-step" and moves and await self._source_measured()
         self._answered = False
         try:
             force, tangent, through, seconds, error = await self.learner.trial(
@@ -174,6 +174,6 @@ class TwinController(Controller):
         site = self._site
         fallen = site is not None and self._fallback_session == site.session
         return {"kind": "updatable", "source": self.learner.source, "updater": self.updater,
-                "causality": str(self.causality) + (" (fell back to previous-step)" if fallen
+                "causality": self.causality + (" (fell back to previous-step)" if fallen
                                                     else ""),
                 **self.learner.status(self.twin, active=site is not None and site.in_session)}
