@@ -16,7 +16,7 @@ from tests.support.paths import REPO
 
 PACKAGE = REPO / "fresco_bridge"
 TWIN_TYPES = ("TwinController", "Learner", "LearnerState", "LearnerSpec", "TwinSpec",
-              "TwinGroup", "UpdatableSiteConfig", "MeasuredSource", "TwinHost")
+              "TwinGroup", "UpdatableSiteConfig", "SourceFeed", "TwinHost")
 
 
 def _names_in(path: str) -> set[str]:
