@@ -47,7 +47,7 @@ from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
 from .guard import ControllerGuard
-from .listeners import EventListener, StepListener, TrialListener
+from .listeners import EventListener, Listeners, StepListener
 from .site_config import SiteConfigBase
 from .sizes import column_major, size_problems
 
@@ -107,12 +107,8 @@ class ExperimentalSite:
         self.mass = column_major(cfg.mass, cfg.dofs)
         self.holds = 0
         self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
-        self._step_listeners: list[StepListener] = []
-        self._step_values: tuple[Callable[[int, int, float, tuple[float, ...],
-                                           tuple[float, ...]], None], ...] | None = None
-        """Every step listener's ``step_values``, when they all have one (``_committed``)."""
-        self._event_listeners: list[EventListener] = []
-        self._trial_listeners: list[TrialListener] = []
+        self.listeners = Listeners()
+        """Who takes the committed steps, events and forwarded trials of this site."""
         self.recorder = None if record is None else SiteRecorder(record, cfg.name)
         """The one writer of this site's lines in the run record (None: recording off)."""
         if self.recorder is not None:
@@ -401,24 +397,16 @@ class ExperimentalSite:
 
     # -- listeners ------------------------------------------------------------------------------
     def add_listener(self, listener: StepListener | EventListener) -> None:
-        """Committed steps (``step_committed``) and/or events (``site_event``) go to
-        ``listener`` from now on, after those added before it."""
-        if isinstance(listener, StepListener):
-            self._step_listeners.append(listener)
-            lean = [getattr(x, "step_values", None) for x in self._step_listeners]
-            self._step_values = None if None in lean else tuple(lean)  # type: ignore[arg-type]
-        if isinstance(listener, EventListener):
-            self._event_listeners.append(listener)
-        if isinstance(listener, TrialListener):
-            self._trial_listeners.append(listener)
+        """Committed steps (``step_committed``), events (``site_event``) and/or forwarded
+        trials (``trial_forwarded``) go to ``listener`` from now on, after the earlier ones."""
+        self.listeners.add(listener)
 
     def _forwarded(self) -> None:
         """The current trial reached the controller: its listeners get it (and a way to read
         its one measurement)."""
-        if self._trial_listeners and self.state is RUNNING:
-            trial = SourceTrial(self, self.session, self.step + 1, self.time, self.ctrl)
-            for listener in self._trial_listeners:
-                listener.trial_forwarded(trial)
+        if self.listeners.trials and self.state is RUNNING:
+            self.listeners.trial(SourceTrial(self, self.session, self.step + 1, self.time,
+                                             self.ctrl))
 
     def status_now(self) -> SiteStatus:
         """The site's state for telemetry (retained status)."""
@@ -427,12 +415,9 @@ class ExperimentalSite:
 
     def event(self, kind: str, reason: str, **extra: object) -> None:
         """An event of this site (a state change, a limit hit, a fault…) to its listeners."""
-        if not self._event_listeners:
-            return
-        notice = SiteNotice(self.name, self.session, self.step, self.time, kind, reason, extra)
-        status = self.status_now()
-        for listener in self._event_listeners:
-            listener.site_event(notice, status)
+        if self.listeners.events:
+            self.listeners.event(SiteNotice(self.name, self.session, self.step, self.time, kind,
+                                            reason, extra), self.status_now())
 
     def monitor_warning(self, reason: str, step: int) -> None:
         """An online monitor's warning at committed ``step`` (the taps raise it)."""
@@ -490,7 +475,7 @@ class ExperimentalSite:
                 self._uncommitted = True
                 self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
                 self._sent(target)
-            if self._trial_listeners:
+            if self.listeners.trials:
                 self._forwarded()
             return None
         return self._gated(trial, target)
@@ -632,18 +617,19 @@ class ExperimentalSite:
         self.step += 1
         self._uncommitted = False
         commit_time, self.commit_time = self.commit_time, self.time
-        lean = self._step_values
+        outlets = self.listeners
+        lean = outlets.step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
                 session, step, time_, ctrl, disp = (self.session, self.step, self.time,
                                                     self.ctrl, self.daq.disp)
                 for listener_values in lean:
                     listener_values(session, step, time_, ctrl, disp)
-            elif self._step_listeners:
+            elif outlets.steps:
                 committed = CommittedStep(self.name, self.session, self.step, self.time,
                                           self.trial.disp, self.ctrl, self.daq.disp,
                                           self.daq.force, str(self.state))
-                for listener in self._step_listeners:
+                for listener in outlets.steps:
                     listener.step_committed(committed)
         except RecordError as exc:  # the record is the first listener: nobody saw the step
             self.step -= 1

@@ -12,6 +12,7 @@ append, a buffered line, a counter).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from ..site_output import CommittedStep, SiteNotice
@@ -20,8 +21,8 @@ if TYPE_CHECKING:
     from ..controls.base import Daq
 from ..telemetry.schema import SiteStatus
 
-__all__ = ["EventListener", "ForwardedTrial", "StepListener", "StepValuesListener",
-           "TrialListener"]
+__all__ = ["EventListener", "ForwardedTrial", "Listeners", "StepListener",
+           "StepValuesListener", "TrialListener"]
 
 
 @runtime_checkable
@@ -75,3 +76,39 @@ class TrialListener(Protocol):
     def trial_forwarded(self, trial: ForwardedTrial) -> None:
         """A trial reached the controller (every trial: an implicit scheme's iterations too)."""
         ...
+
+
+StepValues = Callable[[int, int, float, tuple[float, ...], tuple[float, ...]], None]
+
+
+class Listeners:
+    """A site's listeners, by what they take, in the order they were added (composed into
+    every site: what leaves a site goes through here)."""
+
+    def __init__(self) -> None:
+        self.steps: list[StepListener] = []
+        self.step_values: tuple[StepValues, ...] | None = None
+        """Every step listener's ``step_values``, when they all have one (no
+        ``CommittedStep`` to build per commit)."""
+        self.events: list[EventListener] = []
+        self.trials: list[TrialListener] = []
+
+    def add(self, listener: object) -> None:
+        """Committed steps, events and/or forwarded trials go to ``listener`` from now on,
+        after those added before it."""
+        if isinstance(listener, StepListener):
+            self.steps.append(listener)
+            lean = [getattr(x, "step_values", None) for x in self.steps]
+            self.step_values = None if None in lean else tuple(lean)  # type: ignore[arg-type]
+        if isinstance(listener, EventListener):
+            self.events.append(listener)
+        if isinstance(listener, TrialListener):
+            self.trials.append(listener)
+
+    def event(self, notice: SiteNotice, status: SiteStatus) -> None:
+        for listener in self.events:
+            listener.site_event(notice, status)
+
+    def trial(self, trial: ForwardedTrial) -> None:
+        for listener in self.trials:
+            listener.trial_forwarded(trial)

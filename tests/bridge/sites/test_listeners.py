@@ -130,9 +130,9 @@ def test_listeners_that_all_take_values_get_no_committed_step(tmp_path: Path) ->
         site.add_listener(values)
         if extra is not None:  # a listener that needs the CommittedStep: every one gets it
             site.add_listener(extra)
-            assert site._step_values is None
+            assert site.listeners.step_values is None
         else:
-            assert site._step_values is not None  # the record's writer takes values too
+            assert site.listeners.step_values is not None  # the record's writer takes values too
         site.open_session("127.0.0.1:1")
         for i in range(1, 4):
             _step(site, 0.1 * i, 0.01 * i)
