@@ -3,7 +3,7 @@ PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test build lint bench clean apt-test-deps
+.PHONY: demo test docs build lint bench clean apt-test-deps
 
 $(BIN)/python:
 	@echo "make: creating the virtual environment $(VENV)/"
@@ -28,7 +28,13 @@ $(VENV)/.runtime: pyproject.toml | $(BIN)/python
 $(VENV)/.test: pyproject.toml | $(BIN)/python
 	@echo "make: installing the test dependencies into $(VENV)/ (torch, OpenSeesPy; first run: several minutes)..."
 	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[test]'
-	touch $@ $(VENV)/.runtime
+	touch $@ $(VENV)/.runtime $(VENV)/.docs
+
+# The `docs` extra: mkdocs-material alone (no torch), for `make docs`.
+$(VENV)/.docs: pyproject.toml | $(BIN)/python
+	@echo "make: installing the documentation tools into $(VENV)/ (mkdocs-material)..."
+	FRESCO_BRIDGE_PURE=1 $(BIN)/pip install -q -e '.[docs]'
+	touch $@
 
 $(VENV)/.build: $(BUILD_INPUTS) $(VENV)/.runtime
 	@echo "make: compiling the step path with mypyc (first run, or after a change to it: ~1 min)..."
@@ -66,6 +72,12 @@ test: $(VENV)/.test $(VENV)/.build apt-test-deps
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet  # docs/ -> build/site (mkdocs.yml)
 	$(BIN)/python -m pytest -q
 	FRESCO_BRIDGE_PURE=1 $(BIN)/python -m pytest -q -p no:cacheprovider $(PURE_TESTS)
+
+# The documentation site, strictly (a broken link, anchor or included file fails), into
+# build/site: it browses from file:// (mkdocs.yml: use_directory_urls false), no server needed.
+docs: $(VENV)/.docs
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	@echo "make: the documentation site: file://$(CURDIR)/build/site/index.html"
 
 # Every benchmark as BENCHMARKS.md measured it (hours); `make bench BENCH=--quick` for the short
 # versions (a smoke run), `BENCH="--only NAME"` for one (benchmarks/run_all.py).

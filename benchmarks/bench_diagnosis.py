@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._shared import MEASURED, require_shared
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.model import DZ_MAX
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 from sim_actuator.models import make_model
 from sim_actuator.models.paths import drive, law_vector
@@ -87,7 +87,7 @@ def diagnoses(rounds: int, long: bool = True) -> None:
         verdict = ""
         for _ in range(rounds):
             started = time.perf_counter()
-            result = diagnose(record)
+            result = diagnose(record).to_json()
             samples.append(time.perf_counter() - started)
             verdict = result["verdict"]["effect"]
         print(f"diagnose {name}: {_stats(samples)} (verdict {verdict}, "
@@ -152,10 +152,10 @@ cols = {h: i for i, h in enumerate(rows[0])}
 body = np.array([[float(r[cols[k]]) for k in 't D F'.split()] for r in rows[1:] if r and r[0]])
 body = body[:int(sys.argv[2])]
 warm = record_from_arrays(body[:300, 0], body[:300, 1] * 10.0, body[:300, 2] * 1e-3)
-diagnose(warm)  # JIT code loaded before the clock starts
+diagnose(warm).to_json()  # JIT code loaded before the clock starts
 record = record_from_arrays(body[:, 0], body[:, 1] * 10.0, body[:, 2] * 1e-3, source='mr')
 started = time.process_time()
-result = diagnose(record)
+result = diagnose(record).to_json()
 print(time.process_time() - started, result['baseline']['kind'], result['verdict']['effect'])
 """
 

@@ -23,9 +23,9 @@ import statistics
 import time
 from typing import Any
 
-from fresco_bridge.diagnosis.independent import independent_record
+from benchmarks.diagnosis.independent import independent_record
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import Record
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 
 PLAIN = ("friction", "backlash", "pinching", "degradation", "actuator_delay", "none")
@@ -46,7 +46,7 @@ def _records(steps: int, quick: bool) -> list[tuple[str, Record]]:
 
 def _time(record: Record) -> tuple[float, float, str]:
     cpu, wall = time.process_time(), time.perf_counter()
-    result = diagnose(record)
+    result = diagnose(record).to_json()
     return (time.process_time() - cpu, time.perf_counter() - wall,
             str(result["verdict"]["effect"]))
 

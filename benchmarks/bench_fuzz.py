@@ -9,14 +9,18 @@ Method: the same live bridge and actions as the CI state machine
 sites ``good`` / ``fuzz`` (TCP) / ``fuzzu`` (UDP) behind absolute limits ±5 mm and an
 increment limit; the actions are garbage bytes, absurd size IDs with arbitrary vectors,
 well-formed sessions with hostile values (NaN, ±inf, 1e308, beyond the limits) and any action
-codes that may vanish mid-step (RST), UDP datagrams, held connections dropped (FIN or RST), and
-operator commands (pause, resume, abort, status). Here a ``random.Random(seed)`` draws each
+codes that may vanish mid-step (RST), UDP datagrams, held connections dropped (FIN or RST),
+operator commands (pause, resume, abort, status), and hostile lines on the control socket
+(garbage bytes, nesting up to 4,000 levels, huge numbers, control characters in a site or an
+id), each of which must get a one-line answer. Here a ``random.Random(seed)`` draws each
 action's arguments (hypothesis draws them in CI). After every action the commands forwarded
 since the last one are checked (finite, within ±5 mm); every ``--check-every`` actions the full
 invariant (a good client served correctly, fds and RSS bounded after a settle deadline); every
 ``--record-every`` actions the whole record is parsed. A violated invariant is counted and the
 run goes on; an internal error of the bridge (a ``log.exception`` of a session ended by a bug)
-is counted as a crash, and so is a bridge thread that died.
+is counted as a crash, and so is a bridge thread that died. Every line the bridge logs goes
+through the daemon's own formatter and filters (``logs.configure``'s): a line that is not one
+line, holds a control character or a traceback is counted as a bad log line.
 
     .venv/bin/python -m benchmarks.bench_fuzz [--quick] --inputs 100000 --seed 2026
 
@@ -32,6 +36,8 @@ import logging
 import math
 import os
 import random
+import re
+import socket
 import struct
 import sys
 import tempfile
@@ -40,6 +46,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from fresco_bridge import ctl
+from fresco_bridge.logs import OneLineFormatter, OutsideLineFilter, RateLimitFilter
 from fresco_bridge.record import read_record
 from tests.bridge.server.fuzz_driver import LIMIT, FuzzTarget, valid_size_id
 
@@ -60,6 +68,70 @@ class _Crashes(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         if record.exc_info is not None:
             self.records.append(record.getMessage())
+
+
+CONTROL_CHARS = "\n\r\x1b\x00\x7f\x85\u2028\u202e\t"
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+
+
+class _LogLines(logging.Handler):
+    """The daemon's log as ``configure`` writes it (formatter and filters): every line counted,
+    a bad one (several lines, a control character, a traceback) kept as a sample."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.setFormatter(OneLineFormatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+        self.addFilter(OutsideLineFilter())
+        self.addFilter(RateLimitFilter())
+        self.lines = 0
+        self.bad: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = self.format(record)
+        self.lines += 1
+        if "\n" in text or _UNPRINTABLE.search(text) or "Traceback" in text:
+            self.bad.append(text[:300])
+
+
+def _hostile_text(rng: random.Random, most: int) -> str:
+    return "".join(rng.choice(CONTROL_CHARS) if rng.random() < 0.3 else chr(rng.randint(32, 0x2fff))
+                   for _ in range(rng.randint(0, most)))
+
+
+def control_line(t: FuzzTarget, rng: random.Random) -> bool:
+    """One hostile line on the control socket; True if it was answered with one JSON line
+    (a line over the 4 KiB cap may be answered or cut: True either way)."""
+    which = rng.randrange(4)
+    if which == 0:
+        line = _bytes(rng, 600).replace(b"\n", b" ")
+    elif which == 1:
+        line = rng.choice([b"[", b"{", b'{"a":', b'[{"command":']) * rng.randint(1, 4000)
+    elif which == 2:
+        line = json.dumps({"command": rng.choice(["status", "pause", "resume", "abort"]),
+                           "site": _hostile_text(rng, 40), "id": _hostile_text(rng, 40)}).encode()
+    else:
+        line = b'{"command": "status", "id": ' + b"9" * rng.randint(1, 4080) + b"}"
+    t.inputs += 1
+    path = ctl.find_socket(None, t.run_dir, t.run_dir)
+    answer = b""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(10.0)
+        try:
+            s.connect(str(path))
+            s.sendall(line + b"\n")
+            while not answer.endswith(b"\n"):
+                chunk = s.recv(65536)
+                if not chunk:
+                    break
+                answer += chunk
+        except ConnectionError:
+            return len(line) >= ctl.MAX_LINE
+    if len(line) >= ctl.MAX_LINE and not answer:
+        return True
+    try:
+        return answer.count(b"\n") == 1 and isinstance(json.loads(answer), dict)
+    except ValueError:
+        return False
 
 
 def _any_float(rng: random.Random) -> float:
@@ -85,8 +157,8 @@ def _bytes(rng: random.Random, most: int) -> bytes:
 
 def action(t: FuzzTarget, rng: random.Random) -> str:
     """One fuzz action with arguments drawn as the CI state machine's rules draw them."""
-    kind = rng.choices(["garbage", "frames", "session", "udp", "drop", "operator"],
-                       weights=[3, 3, 6, 3, 2, 1])[0]
+    kind = rng.choices(["garbage", "frames", "session", "udp", "drop", "operator", "control"],
+                       weights=[3, 3, 6, 3, 2, 1, 1])[0]
     if kind == "garbage":
         t.garbage(_bytes(rng, 600), rng.random() < KEEP_OPEN)
     elif kind == "frames":
@@ -109,6 +181,9 @@ def action(t: FuzzTarget, rng: random.Random) -> str:
                for _ in range(rng.randint(0, 5))])
     elif kind == "drop":
         t.drop(rng.randint(0, 7), rng.random() < 0.5)
+    elif kind == "control":
+        if not control_line(t, rng):
+            return "control-unanswered"
     else:
         # resume more often than pause/abort, so the fuzz sites are not held paused for long
         t.operator(rng.choices(["pause", "resume", "abort", "status"], weights=[1, 3, 1, 1])[0],
@@ -122,6 +197,8 @@ def run(inputs: int, seed: int, check_every: int, record_every: int,
     crashes = _Crashes()
     logging.getLogger("fresco_bridge").addHandler(crashes)
     logging.getLogger("fresco_bridge").setLevel(logging.WARNING)
+    log_lines = _LogLines()
+    logging.getLogger().addHandler(log_lines)
     root = Path(tempfile.mkdtemp(prefix="fresco-fuzz-bench-"))
     t = FuzzTarget(root)
     actions: Counter[str] = Counter()
@@ -170,6 +247,7 @@ def run(inputs: int, seed: int, check_every: int, record_every: int,
         elapsed = time.monotonic() - t0
         t.close()
         logging.getLogger("fresco_bridge").removeHandler(crashes)
+        logging.getLogger().removeHandler(log_lines)
     return {
         "seed": seed, "inputs": t.inputs, "actions": n, "actions_by_kind": dict(actions),
         "elapsed_s": round(elapsed, 1), "inputs_per_s": round(t.inputs / elapsed, 1),
@@ -182,6 +260,9 @@ def run(inputs: int, seed: int, check_every: int, record_every: int,
         "rss_peak_mib": round(t.peak_rss / 2**20, 1),
         "record_bytes": record_bytes, "sessions_opened_by_site": dict(opened),
         "refused_by_site": refused,
+        "control_lines_unanswered": actions["control-unanswered"],
+        "log_lines": log_lines.lines, "log_lines_bad": len(log_lines.bad),
+        "log_bad_samples": log_lines.bad[:5],
         "load_average_start": load_start, "load_average_end": os.getloadavg(),
     }
 
@@ -205,7 +286,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json is not None:
         args.json.write_text(text + "\n", encoding="utf-8")
     bad = (summary["commands_out_of_limit_or_non_finite"] or summary["crashes_internal_errors"]
-           or summary["invariant_violations"])
+           or summary["invariant_violations"] or summary["log_lines_bad"]
+           or summary["control_lines_unanswered"])
     return 1 if bad else 0
 
 

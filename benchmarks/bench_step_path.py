@@ -8,14 +8,16 @@ No socket, no event-loop round trip: what is left is exactly the code a ``data_r
 
     python -m benchmarks.bench_step_path [--quick] [--dofs 1] [--steps 20000] [--no-record]
         [--limits] [--whole-steps] [--set SECTION.KEY=VALUE ...] [--profile FILE]
-        [--sort tottime]
+        [--sort tottime] [--controller sim|rig] [--elastic]
 
 Feeds BENCHMARKS.md, "Step cost and scaling". ``--quick``: 200 steps, one repeat (a smoke run).
 
 Each message is fed on its own, as a socket delivers a genericClient's requests (it waits for
 every reply); ``--whole-steps`` feeds a step's 14 messages as one chunk instead. ``--set``
 overrides a TOML key for attribution (e.g. ``--set telemetry.monitors=false``,
-``--set record.fsync='"off"'``).
+``--set record.fsync='"off"'``). ``--controller rig``: one in-process simulated rig per
+actuator (preset ``ideal-elastic``, 10 ms ramps) instead of the ``sim`` models; ``--elastic``:
+an elastic specimen at 1 DOF too (as at more DOFs), to compare actuator counts.
 
 Reported: µs of process CPU per step (``time.process_time``, best of ``--repeats``), and with
 ``--profile`` the cProfile table (top 30 by ``--sort``).
@@ -39,9 +41,16 @@ from ._step_peers import DT, STEP_CODES
 
 
 def config_text(run_dir: Path, dofs: int, record: bool, limits: bool,
-                overrides: dict[str, dict[str, str]] | None = None) -> str:
-    model = ('model = "elastic"\nparams = { k = 100.0 }' if dofs > 1
+                overrides: dict[str, dict[str, str]] | None = None,
+                site: str | None = None, *,
+                controller: str = "sim", elastic: bool = False) -> str:
+    """The bench's TOML; ``site`` replaces the ``[[sites]]`` table (named ``spec``)."""
+    model = ('model = "elastic"\nparams = { k = 100.0 }' if dofs > 1 or elastic
              else 'model = "bilinear"\nparams = { k0 = 100.0, fy = 20.0, alpha = 0.02 }')
+    if controller == "rig":
+        model = 'preset = "ideal-elastic"\nramp_time = 0.01'
+    elif controller != "sim":
+        raise ValueError(f"controller must be sim or rig, got {controller!r}")
     lim = "".join(f"\n[[sites.limits]]\nactuator = {a}\ndisp_min = -50.0\ndisp_max = 50.0\n"
                   "disp_increment = 10.0\nforce_min = -1e6\nforce_max = 1e6\n"
                   for a in range(1, dofs + 1)) if limits else ""
@@ -60,14 +69,18 @@ enabled = {"true" if record else "false"}
 {section("record")}
 [telemetry]
 {section("telemetry")}
+{site or default_site(dofs, model, lim, controller)}"""
 
+
+def default_site(dofs: int, model: str, lim: str, controller: str = "sim") -> str:
+    return f"""
 [[sites]]
 name = "spec"
 port = 0
 dofs = {dofs}
 setup = "NoTransformation"
 [sites.controller]
-kind = "sim"
+kind = "{controller}"
 {model}
 {lim}"""
 
@@ -103,7 +116,9 @@ def session_bytes(dofs: int, steps: int, per_message: bool = False
 
 async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
               profile: Path | None, *, per_message: bool = True,
-              overrides: dict[str, dict[str, str]] | None = None) -> list[float]:
+              overrides: dict[str, dict[str, str]] | None = None,
+              site: str | None = None, controller: str = "sim",
+              elastic: bool = False) -> list[float]:
     from fresco_bridge.config import parse_config
     from fresco_bridge.daemon import Bridge
     from fresco_bridge.server.connection import SessionPump, SiteListener
@@ -111,7 +126,8 @@ async def run(dofs: int, steps: int, record: bool, limits: bool, repeats: int,
 
     per_step: list[float] = []
     with tempfile.TemporaryDirectory(prefix="fb-path-") as tmp:
-        text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides)
+        text = config_text(Path(tmp) / "runs", dofs, record, limits, overrides, site,
+                           controller=controller, elastic=elastic)
         bridge = Bridge(parse_config(text), text)
         await bridge.start()
         try:
@@ -164,6 +180,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--profile", type=Path, default=None)
     parser.add_argument("--sort", default="tottime")
     parser.add_argument("--quick", action="store_true", help="200 steps, one repeat")
+    parser.add_argument("--controller", choices=["sim", "rig"], default="sim")
+    parser.add_argument("--elastic", action="store_true",
+                        help="an elastic specimen at 1 DOF too")
     args = parser.parse_args(argv)
     if args.quick:
         args.steps, args.repeats = min(args.steps, 200), 1
@@ -176,10 +195,12 @@ def main(argv: list[str] | None = None) -> None:
         overrides.setdefault(sect, {})[name] = value
     per_step = asyncio.run(run(args.dofs, args.steps, not args.no_record, args.limits,
                                args.repeats, args.profile, per_message=not args.whole_steps,
-                               overrides=overrides))
+                               overrides=overrides, controller=args.controller,
+                               elastic=args.elastic))
     feed = "whole steps" if args.whole_steps else "per message"
     sets = "".join(f", {item}" for item in args.set)
-    print(f"step path, {args.dofs} DOF, record {'off' if args.no_record else 'on'}, limits "
+    who = "" if args.controller == "sim" else f" ({args.controller} controller)"
+    print(f"step path{who}, {args.dofs} DOF, record {'off' if args.no_record else 'on'}, limits "
           f"{'on' if args.limits else 'off'}, {feed}{sets}: {min(per_step):.1f} µs CPU/step best, "
           f"{sorted(per_step)[len(per_step) // 2]:.1f} median of {len(per_step)}", flush=True)
     if args.profile is not None:

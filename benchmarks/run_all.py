@@ -37,6 +37,9 @@ BENCHMARKS: dict[str, str] = {
     "diagnose_measured": "Diagnosis",
     "diagnosis_speed": "Diagnosis",
     "first_output": "First output of long commands",
+    "setups": "Multi-actuator setups",
+    "tangent": "Measured tangent",
+    "correction": "Displacement correction",
 }
 """Benchmark name -> the BENCHMARKS.md section it feeds. The module is ``bench_NAME`` if that
 exists, else ``NAME``; each has ``main(argv)`` accepting ``--quick``."""
@@ -45,6 +48,7 @@ HELPERS: dict[str, str] = {
     "_step_peers": ("the peer processes of bench_opensees_bridge (and the message sequence "
                     "bench_step_path replays): not a benchmark itself"),
     "_shared": "where ../shared is, for the benchmarks that read its measured data",
+    "_tangent_peer": "the OpenSeesPy processes of bench_tangent and bench_setups",
     "run_all": "this runner",
 }
 """Modules of ``benchmarks/`` that are not benchmarks, and why."""

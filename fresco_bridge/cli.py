@@ -16,13 +16,13 @@ from .config_model import REDACTED
 from .ctl import ControlError, add_ctl_parser, ctl_command
 from .diagnosis.cli import COMMANDS as DIAGNOSIS_COMMANDS
 from .diagnosis.cli import add_diagnosis_parsers, diagnosis_command
-from .exit_codes import exit_code, reader_gone
+from .exit_codes import Interrupted, exit_code, reader_gone
 from .lab import LabError, add_lab_parser, lab_command
 from .logs import configure as configure_logging
 from .progress import command_name
 from .report.cli import COMMANDS as REPORT_COMMANDS
 from .report.cli import add_report_parsers, report_command
-from .runs import RunDirError, check_resumable, resolve_run
+from .runs import RunDirError, check_resumable, mark_interrupted, resolve_run
 from .study import add_study_parser, study_command
 from .updating.cli import add_updater_parser, updater_command
 
@@ -39,10 +39,17 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
     cfg, text = load_config(config_path)
     bridge = Bridge(cfg, text, resume=resume)
     stop = asyncio.Event()
+    caught: list[signal.Signals] = []
     loop = asyncio.get_running_loop()
+
+    def on_signal(sig: signal.Signals) -> None:
+        caught.append(sig)
+        stop.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+        loop.add_signal_handler(sig, on_signal, sig)
     await bridge.start()
+    serving: list[str] = []
     try:
         ports = ", ".join(f"{n}={p}" for n, p in bridge.ports.items())
         try:
@@ -52,13 +59,34 @@ async def _serve(config_path: Path | None, resume: Path | None = None) -> int:
             logging.getLogger("fresco_bridge").warning(
                 "stdout's reader went away before the ready line (%s); serving on", ports)
         await stop.wait()
+        serving = [name for name, site in bridge.sites.items() if site.busy]
     finally:
         await bridge.close()
-    if bridge.record is not None:  # Ctrl-C: say where the run went and what to do with it
-        run, cmd = bridge.record.directory, command_name()
+    record = bridge.record
+    if serving and caught:  # stopped mid-test: the run was interrupted, not finished
+        raise _interrupted_serve(caught[0], serving, config_path,
+                                 None if record is None else record.directory)
+    if record is not None:  # between tests: say where the run went and what to do with it
+        run, cmd = record.directory, command_name()
         logging.getLogger("fresco_bridge").info(
             "stopped; run record %s (next: %s runs show %s)", run, cmd, run)
     return 0
+
+
+def _interrupted_serve(sig: signal.Signals, serving: list[str], config: Path,
+                       run: Path | None) -> Interrupted:
+    """The one line of a bridge stopped while its sites served clients: the run is recorded
+    as interrupted (resumable), the exit code 128 + the signal."""
+    how = "Ctrl-C" if sig == signal.SIGINT else sig.name
+    what = (f"fresco-bridge serve stopped by {how} while site(s) {', '.join(serving)} served a "
+            "client")
+    if run is None:
+        return Interrupted(f"{what} (recording is off: nothing was recorded)", 128 + sig)
+    mark_interrupted(run)
+    cmd = command_name()
+    return Interrupted(f"{what}; the run is recorded as interrupted: {run} (next: {cmd} runs "
+                       f"show {run}; to continue it: {cmd} serve --config {config} --resume "
+                       f"{run})", 128 + sig)
 
 
 def _warn_if_stale() -> None:
@@ -96,9 +124,16 @@ def main(argv: list[str] | None = None) -> int:
                               "the config's run_dir) instead of starting a new one")
     p_check = sub.add_parser("check", help="validate a lab config and exit")
     p_check.add_argument("--config", type=Path, required=True)
+    demo_help = ("the source paper's story end to end: the two-story frame, the tested "
+                 "damper on the simulated rig, its twin learned online, the diagnosis")
     p_demo = sub.add_parser(
-        "demo", help="the source paper's story end to end: the two-story frame, the tested "
-                     "damper on the simulated rig, its twin learned online, the diagnosis")
+        "demo", help=demo_help,
+        description=f"Run {demo_help}, in one process on embedded defaults (no broker, no "
+                    "hardware, no file from outside the package). Four acts: 1 the "
+                    "characterisation test, 2 the hybrid test through the bridge, 3 the twin's "
+                    "scores against the calibrated Bilinear, 4 the diagnosis; then the report. "
+                    "Each act's bridge logs into its run directory's bridge.log.",
+        epilog="Ctrl-C stops it with one line; the run is then recorded as interrupted.")
     p_demo.add_argument("--simple", action="store_true",
                         help="the plumbing alone: an ideal bilinear damper, no rig, no twin")
     p_demo.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -108,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--duration", type=float, default=20.0, help="seconds of synthetic record")
     p_demo.add_argument("--seed", type=int, default=1, help="synthetic record seed")
     p_demo.add_argument("--runs", type=Path, default=Path("runs"), help="run directory root")
-    p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp")
+    p_demo.add_argument("--transport", choices=("tcp", "udp"), default="tcp",
+                        help="how the integrator reaches the bridge's sites, as genericClient's "
+                             "default or its -udp (default: tcp)")
     p_demo.add_argument("--mqtt", metavar="HOST[:PORT]", default=None,
                         help="publish live telemetry to this MQTT broker (default: off)")
     p_demo.add_argument("--mqtt-prefix", default="fresco", help="MQTT topic prefix")
@@ -166,17 +203,18 @@ def _run(args: argparse.Namespace) -> int:
                           for s in cfg.sites) + ")")
         return 0
     if args.command == "demo":
-        from .demo import run_demo
+        from .demo import run_demo, story_terminal
         from .demo_story import run_story
 
         common = {"record": args.record, "pga": args.pga, "duration": args.duration,
                   "seed": args.seed, "runs": args.runs, "transport": args.transport,
                   "mqtt": args.mqtt, "mqtt_prefix": args.mqtt_prefix,
                   "metrics_port": args.metrics_port}
-        if args.simple:
-            run_demo(**common)
-        else:
-            run_story(**common, progress=not args.no_progress)
+        with story_terminal():
+            if args.simple:
+                run_demo(**common)
+            else:
+                run_story(**common, progress=not args.no_progress)
         return 0
     if args.command == "lab":
         return lab_command(args)

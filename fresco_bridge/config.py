@@ -19,6 +19,7 @@ from pydantic import (
     model_validator,
 )
 
+from .config_lines import locate
 from .config_model import (
     ClientAddress,
     ConfigError,
@@ -220,22 +221,25 @@ class LabConfig(_Strict):
         return self
 
 
-def _format_errors(source: str, exc: ValidationError) -> str:
+def _format_errors(source: str, exc: ValidationError, text: str = "",
+                   raw: dict[str, Any] | None = None) -> str:
     lines = [f"{source}: invalid configuration ({exc.error_count()} problem(s))"]
     for err in exc.errors():
-        raw = list(err["loc"])
-        parts = [p for i, p in enumerate(raw) if not (
-            (i and raw[i - 1] == "controller" and p in CONTROLLER_KINDS)
-            or (i > 1 and raw[i - 2] == "sites" and p in SITE_KINDS))]
+        at = list(err["loc"])
+        parts = [p for i, p in enumerate(at) if not (
+            (i and at[i - 1] == "controller" and p in CONTROLLER_KINDS)
+            or (i > 1 and at[i - 2] == "sites" and p in SITE_KINDS))]
         loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in parts)
         loc = loc.replace(".[", "[")
+        where = locate(text, raw or {}, parts)  # "line 12, site damper"
+        loc = f"{where}: {loc}" if where else loc
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
-            msg = _unknown_key(raw)
+            msg = _unknown_key(at)
         elif err["type"] == "union_tag_invalid":
             tag = err["ctx"]["tag"]
             msg = (f"unknown site kind {tag!r}; expected {known_site_kinds()}"
-                   if raw[-1] != "controller" and raw[:1] == ["sites"] and len(raw) == 2
+                   if at[-1] != "controller" and at[:1] == ["sites"] and len(at) == 2
                    else f"unknown controller kind {tag!r}; expected {known_kinds()}")
         got = err.get("input")
         quiet = err["type"] in ("missing", "extra_forbidden") or isinstance(got, dict | list)
@@ -268,7 +272,7 @@ def parse_config(text: str, source: str = "<config>", *, base: Path | None = Non
     try:
         cfg = LabConfig.model_validate(raw)
     except ValidationError as exc:
-        raise ConfigError(_format_errors(source, exc)) from None
+        raise ConfigError(_format_errors(source, exc, text, raw)) from None
     lab = LabView({s.name: s for s in cfg.sites}, cfg.bridge.controller_timeout,
                   Path.cwd() if base is None else base, lambda k: SITE_KINDS[k].predicted)
     sites: list[SiteConfigBase] = []

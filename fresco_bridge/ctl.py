@@ -19,6 +19,7 @@ import contextlib
 import hashlib
 import json
 import logging
+import math
 import os
 import socket
 import stat
@@ -27,6 +28,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .jsonline import RequestJsonError, decode
+from .logs import printable
 from .numbers import fmt
 from .record.recovery import socket_answers
 from .safety import TransitionRefused
@@ -180,7 +183,12 @@ class ControlServer:
                     return
                 if not line:
                     return
-                await _reply(writer, self.answer(line))
+                try:
+                    body = self.answer(line)
+                except Exception as exc:  # a bug of the bridge: logged, and still answered
+                    log.exception("ctl: internal error answering a request")
+                    body = {"ok": False, "error": f"internal error: {type(exc).__name__}"}
+                await _reply(writer, body)
         except (ConnectionError, TimeoutError, asyncio.CancelledError):
             pass  # the client went away, stopped reading its answers, or the bridge stops
         finally:
@@ -190,8 +198,9 @@ class ControlServer:
     def answer(self, line: bytes) -> dict[str, Any]:
         """One request line → one response object (errors are responses, never exceptions)."""
         try:
-            body = json.loads(line.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            body = decode(line)
+        except RequestJsonError as exc:
+            log.warning("ctl: request refused: %s", exc)
             return {"ok": False, "error": f"request is not a JSON line: {exc}"}
         if not isinstance(body, dict):
             return {"ok": False, "error": "request must be a JSON object"}
@@ -266,16 +275,42 @@ def request(path: Path, command: str, site: str | None = None, *,
                 data += chunk
         except TimeoutError:
             raise ControlError(f"control socket {path}: no answer within {timeout:g} s") from None
+        except ConnectionRefusedError:
+            raise ControlError(f"control socket {path}: no bridge listens on it (a bridge that "
+                               "stopped without removing it?)") from None
         except OSError as exc:
             raise ControlError(f"control socket {path}: {exc.strerror or exc}") from None
     if not data:
         raise ControlError(f"control socket {path} closed without an answer")
-    answer: dict[str, Any] = json.loads(data)
+    try:
+        answer = decode(data, max_depth=64)
+    except RequestJsonError as exc:
+        raise ControlError(f"control socket {path} answered something that is not a bridge's "
+                           f"JSON line: {exc}") from None
+    if not isinstance(answer, dict):
+        raise ControlError(f"control socket {path} answered a JSON {type(answer).__name__}, "
+                           "not a bridge's object")
     return answer
 
 
 def format_answer(answer: dict[str, Any]) -> str:
-    """Human-readable lines for ``fresco-bridge ctl``."""
+    """Human-readable lines for ``fresco-bridge ctl``; whatever the sites' texts quote (a
+    client's name, a reason) cannot act on the operator's terminal."""
+    return _answer_lines(_printable(answer))
+
+
+def _printable(value: Any) -> Any:
+    """``value`` with every string in it ``printable``."""
+    if isinstance(value, str):
+        return printable(value)
+    if isinstance(value, dict):
+        return {k: _printable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_printable(v) for v in value]
+    return value
+
+
+def _answer_lines(answer: dict[str, Any]) -> str:
     if "error" in answer:
         return f"error: {answer['error']}"
     lines = [f"{r['site']}: {'ok' if r['ok'] else 'REFUSED'}: {r['message']}"
@@ -338,7 +373,8 @@ def add_ctl_parser(sub: Any) -> None:
     """``fresco-bridge ctl status|pause|resume|abort [--site S] [--socket P | --run-dir D]``."""
     p = sub.add_parser("ctl", help="operator control of a running bridge (status, pause, "
                                    "resume, abort)")
-    p.add_argument("action", choices=COMMANDS)
+    p.add_argument("action", metavar="{" + ",".join(COMMANDS) + "}",
+                   help="status (read only), pause, resume or abort")  # checked in ctl_command
     p.add_argument("--site", default=None, help="one site (default: every site)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--socket", type=Path, default=None, help="control socket path")
@@ -347,13 +383,74 @@ def add_ctl_parser(sub: Any) -> None:
     p.add_argument("--runs", type=Path, default=Path("runs"),
                    help="run root searched for the newest live bridge (default: runs)")
     p.add_argument("--json", action="store_true", help="print the raw JSON answer")
-    p.add_argument("--timeout", type=float, default=5.0, help="answer deadline in s")
+    p.add_argument("--timeout", default="5", help=f"answer deadline in s (0 < s <= "
+                                                  f"{MAX_TIMEOUT:g}; default 5)")
+
+
+MAX_TIMEOUT = 3600.0
+"""The longest answer deadline ``ctl`` accepts (s): the bridge answers in milliseconds."""
 
 
 def ctl_command(args: Any) -> int:
-    """0: done; 1: refused by a site (or an error answer). Raises ControlError (no bridge)."""
-    path = find_socket(args.socket, args.run_dir, args.runs)
-    answer = request(path, args.action, args.site, timeout=args.timeout)
+    """0: done; 1: refused by a site (or an error answer). Raises ControlError (no bridge, a
+    bad argument: one line, exit code 2)."""
+    if args.action not in COMMANDS:
+        raise ControlError(f"ctl {printable(str(args.action))}: not an action; expected one of "
+                           f"{', '.join(COMMANDS)}")
+    timeout = _timeout(args.timeout)
+    _check_site(args.site)
+    socket_path = _checked_socket(args.socket)
+    run_dir = _checked_dir(args.run_dir, "--run-dir")
+    if socket_path is None and run_dir is None:
+        _checked_dir(args.runs, "--runs")
+    path = find_socket(socket_path, run_dir, args.runs)
+    answer = request(path, args.action, args.site, timeout=timeout)
     print(json.dumps(answer, indent=2, ensure_ascii=False) if args.json
           else format_answer(answer))
     return 0 if answer.get("ok") else 1
+
+
+def _timeout(text: object) -> float:
+    """``--timeout``: a finite number of seconds in (0, ``MAX_TIMEOUT``]."""
+    try:
+        value = float(str(text))
+    except ValueError:
+        raise ControlError(f"--timeout {printable(str(text))}: not a number of seconds"
+                           ) from None
+    if not math.isfinite(value) or not 0.0 < value <= MAX_TIMEOUT:
+        raise ControlError(f"--timeout {printable(str(text))}: must be a finite number of "
+                           "seconds above 0 and "
+                           f"at most {MAX_TIMEOUT:g}")
+    return value
+
+
+def _check_site(site: str | None) -> None:
+    """``--site``: a name a bridge can have (non-empty, printable)."""
+    if site is not None and (not site.strip() or printable(site) != site):
+        raise ControlError(f"--site {printable(site)}: not a site name (empty or with control "
+                           "characters)")
+
+
+def _checked_socket(path: Path | None) -> Path | None:
+    """``--socket``: an existing Unix socket (a file that is not one is named as such, not
+    reported as a refused connection)."""
+    if path is None:
+        return None
+    try:
+        mode = path.stat().st_mode
+    except OSError as exc:
+        raise ControlError(f"--socket {printable(str(path))}: {exc.strerror or exc}") from None
+    if not stat.S_ISSOCK(mode):
+        kind = "a directory" if stat.S_ISDIR(mode) else "a regular file" if \
+            stat.S_ISREG(mode) else "a device or a pipe"
+        raise ControlError(f"--socket {printable(str(path))}: is {kind}, not a socket (a "
+                           f"bridge's control socket is {SOCKET_NAME} in its run directory)")
+    return path
+
+
+def _checked_dir(path: Path | None, option: str) -> Path | None:
+    """``--run-dir`` / ``--runs``: an existing directory."""
+    if path is not None and not path.is_dir():
+        what = "does not exist" if not path.exists() else "is not a directory"
+        raise ControlError(f"{option} {printable(str(path))}: {what}")
+    return path

@@ -9,16 +9,22 @@ hardware, no files from outside the package. An ideal specimen and no twin: the 
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
+import signal
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
 
-from .config import parse_config
+from .config import LabConfig, parse_config
 from .daemon import BridgeThread
+from .exit_codes import Interrupted
 from .integrator import (
     DEMO_DAMPER,
     DEMO_DT,
@@ -33,8 +39,105 @@ from .integrator import (
 )
 from .integrator.link import GenericClientLink
 from .numbers import fmt
-from .progress import ProgressBar
+from .progress import ProgressBar, command_name
 from .record import export_csv
+from .runs import mark_interrupted
+
+BRIDGE_LOG = "bridge.log"
+"""The demo's bridge's log lines, in its run directory (not between the story's lines)."""
+
+
+class _RunLog(logging.Handler):
+    """Every log line of one bridge run into its ``bridge.log``; the lines logged before its
+    run directory exists (the bridge's start) are held and written first."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+        self._held: list[logging.LogRecord] = []
+        self._file: logging.FileHandler | None = None
+
+    def open(self, path: Path) -> None:
+        self._file = logging.FileHandler(path, encoding="utf-8")
+        self._file.setFormatter(self.formatter)
+        for record in self._held:
+            self._file.emit(record)
+        self._held.clear()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._file is None:
+            self._held.append(record)
+        else:
+            self._file.emit(record)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+        super().close()
+
+
+def _terminal_handlers() -> list[logging.Handler]:
+    return [h for h in logging.getLogger().handlers
+            if isinstance(h, logging.StreamHandler) and not isinstance(h, logging.FileHandler)]
+
+
+@contextlib.contextmanager
+def story_terminal() -> Iterator[None]:
+    """The demo's terminal is its story: the log lines below warnings (a bridge's session
+    lines, protocol sizes, a font cache) stay off it for the whole demo (each bridge's go to
+    its ``bridge.log``, ``bridge_act``), and after Ctrl-C none at all (what the closing
+    bridges log then, a HOLD of the session cut short, is in ``bridge.log``): the one
+    ``interrupted:`` line follows. In the main thread (it sets the SIGINT handler)."""
+    handlers = [(h, h.level) for h in _terminal_handlers()]
+    for handler, level in handlers:
+        handler.setLevel(max(level, logging.WARNING))
+
+    def interrupted(signum: int, frame: FrameType | None) -> None:
+        for handler, _ in handlers:
+            handler.setLevel(logging.CRITICAL + 1)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, interrupted)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        for handler, level in handlers:
+            handler.setLevel(level)
+
+
+@contextlib.contextmanager
+def bridge_act(cfg: LabConfig, text: str, runs: Path, act: str) -> Iterator[BridgeThread]:
+    """One act's bridge, its log in its run directory's ``bridge.log``. Ctrl-C during the act:
+    the bridge closes quietly, the run is recorded as interrupted and ``Interrupted`` says
+    so in one line."""
+    root = logging.getLogger()
+    run_log, level = _RunLog(), root.level
+    root.addHandler(run_log)
+    root.setLevel(min(level, logging.INFO) if level != logging.NOTSET else logging.INFO)
+    thread = BridgeThread(cfg, text, run_dir=runs)
+    try:
+        with thread as bridge:
+            run_log.open(bridge.run_dir / BRIDGE_LOG)
+            yield bridge
+    except KeyboardInterrupt as exc:  # in the act, or while its bridge was starting
+        if isinstance(exc, Interrupted):
+            raise
+        thread.stop()
+        record = thread.bridge.record
+        if record is None:
+            raise Interrupted(f"fresco-bridge demo stopped by Ctrl-C in {act}, before its "
+                              "run was recorded") from None
+        run = record.directory
+        mark_interrupted(run)
+        raise Interrupted(
+            f"fresco-bridge demo stopped by Ctrl-C in {act}; the run is recorded as "
+            f"interrupted: {run} (its bridge's log: {run}/{BRIDGE_LOG}; next: "
+            f"{command_name()} runs show {run})") from None
+    finally:
+        root.removeHandler(run_log)
+        root.setLevel(level)
+        run_log.close()
 
 
 def telemetry_text(mqtt: str | None = None, mqtt_prefix: str = "fresco",
@@ -105,7 +208,7 @@ def run_demo(
     print(f"fresco-bridge demo: two-story frame, damper in story 1 served by the bridge "
           f"({transport.upper()}), record {motion.name} scaled to PGA {pga:g} m/s²",
           file=sys.stderr)
-    with BridgeThread(cfg, text, run_dir=runs) as bridge:
+    with bridge_act(cfg, text, runs, "the run") as bridge:
         port = bridge.ports["damper"]
         link = GenericClientLink("127.0.0.1", port, 2, transport=transport, timeout=10.0)
         coupling = demo_site_coupling(link)

@@ -32,8 +32,8 @@ import numpy as np
 import numpy.typing as npt
 
 from .config import parse_config
-from .daemon import BridgeThread
-from .demo import telemetry_text
+from .demo import bridge_act, telemetry_text
+from .exit_codes import Interrupted
 from .integrator import (
     DEMO_DT,
     GroundMotion,
@@ -120,8 +120,8 @@ def _characterise(runs: Path, transport: str, progress: bool) -> Path:
     """Act 1: the cyclic test through the bridge; returns its run directory."""
     path = characterisation_path()
     text = story_config_text(None, transport, "demo-characterisation")
-    with BridgeThread(parse_config(text, "<demo characterisation>"), text,
-                      run_dir=runs) as bridge:
+    with bridge_act(parse_config(text, "<demo characterisation>"), text, runs,
+                    "act 1 (the characterisation)") as bridge:
         link = GenericClientLink("127.0.0.1", bridge.ports[SOURCE], 2, transport=transport,
                                  timeout=10.0)
         element = SiteElement(link, DAMPER_K0)
@@ -164,7 +164,8 @@ def run_story(
     runs.mkdir(parents=True, exist_ok=True)
     char_dir = _characterise(runs, transport, progress)
     text = story_config_text(char_dir.resolve(), transport, telemetry=telemetry)
-    with BridgeThread(parse_config(text, "<demo config>"), text, run_dir=runs) as bridge:
+    with bridge_act(parse_config(text, "<demo config>"), text, runs,
+                    "act 2 (the hybrid test)") as bridge:
         links = {site: GenericClientLink("127.0.0.1", bridge.ports[site], 2,
                                          transport=transport, timeout=10.0)
                  for site in (SOURCE, TWIN)}
@@ -180,16 +181,26 @@ def run_story(
             response = run_coupled(integ, coupling, progress=bar)
         wall = time.perf_counter() - t0
         run_dir = bridge.run_dir
-    n_rows = export_csv(run_dir, run_dir / "steps.csv")
-    scores = twin_scores(run_dir, char_dir, run_dir / TWIN_FIGURE)
-    diagnosis = _diagnose(run_dir, progress)
-    summary = _summary(response, motion, wall, integ.n_steps, run_dir, char_dir, n_rows,
-                       scores, diagnosis)
-    from .report.html import write_report
+    try:
+        n_rows = export_csv(run_dir, run_dir / "steps.csv")
+        with ProgressBar("act 3, scores", 1, enabled=progress) as scoring:
+            scores = twin_scores(run_dir, char_dir, run_dir / TWIN_FIGURE)
+            scoring(1)
+        diagnosis = _diagnose(run_dir, progress)
+        summary = _summary(response, motion, wall, integ.n_steps, run_dir, char_dir, n_rows,
+                           scores, diagnosis)
+        from .report.html import write_report
 
-    write_report(run_dir)
+        summary_file = run_dir / "summary.json"  # the report's overview quotes its scores
+        summary_file.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+        write_report(run_dir)
+    except KeyboardInterrupt:
+        raise Interrupted(
+            f"fresco-bridge demo stopped by Ctrl-C after the hybrid test: its run {run_dir} is "
+            "recorded and closed; the scores, diagnosis or report were not finished (next: "
+            f"{command_name()} report {run_dir} --diagnose {SOURCE})") from None
     summary["total_wall_s"] = round(time.perf_counter() - started, 1)
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    summary_file.write_text(json.dumps(summary, indent=2), encoding="utf-8")
     print(format_story(summary), file=sys.stderr)
     return summary
 
@@ -279,7 +290,8 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
 
     drift = resp.drift
     force = resp.experimental_force[:, 0]
-    site = next(s for s in summarise(load_run(run_dir)) if s.site == SOURCE)
+    sites = summarise(load_run(run_dir))
+    site = next(s for s in sites if s.site == SOURCE)
     detail = site.sessions_detail[-1]
     return {
         "run_dir": str(run_dir),
@@ -302,6 +314,8 @@ def _summary(resp: Any, motion: GroundMotion, wall: float, n_steps: int, run_dir
         "twin": scores,
         "diagnosis": diagnosis,
         "committed_steps_in_record": n_rows,
+        "committed_steps_per_site": site.steps,
+        "holds": sum(s.holds for s in sites),
         "files": ["config.toml", "run.json", "record.jsonl", "steps.csv", "summary.json",
                   "report.html", TWIN_FIGURE, f"diagnosis-{SOURCE}/summary.txt"],
     }
@@ -321,8 +335,9 @@ def format_story(s: dict[str, Any]) -> str:
     peak_f = s["peak_damper_force_kN"]
     return "\n".join([
         "",
-        f"run directory  {run}  ({s['steps']} steps in {fmt(s['wall_s'], 's', 3)} through the "
-        f"bridge; demo {fmt(s['total_wall_s'], 's', 3)} in all)",
+        f"run directory  {run}  ({s['steps']} time steps in {fmt(s['wall_s'], 's', 3)} through "
+        f"the bridge; {s['committed_steps_per_site']} committed per site with the initial "
+        f"state at t = 0; demo {fmt(s['total_wall_s'], 's', 3)} in all)",
         f"peaks          story drift {drift} mm, roof {fmt(s['peak_roof_disp_mm'], 'mm', 3)}; "
         f"tested damper {fmt(peak_f[0], digits=3)} / {fmt(peak_f[1], 'kN', 3)}; "
         f"rig tracking error up to {fmt(s['max_tracking_error_mm'], 'mm', 2)}",
@@ -335,7 +350,7 @@ def format_story(s: dict[str, Any]) -> str:
         f"{fmt(bil['rmseth_kN'], 'kN', 2)}, max {fmt(bil['maeth_kN'], 'kN', 2)} -> updating "
         f"cuts the RMS error by {pct(tw['rmseth_reduction_pct'], 0)}",
         diagnosis,
-        f"report         {run}/report.html (tracking, the served twin, updating, diagnosis)"
+        f"report         {run}/report.html (opens with the run at a glance and what to do next)"
         f" and {run}/{TWIN_FIGURE}",
         f"next           {cmd} report {run} --diagnose {SOURCE}   (again, from the record)",
         f"               {cmd} diagnose {run} --site {SOURCE}",
@@ -352,7 +367,7 @@ def _diagnosis_line(dg: dict[str, Any]) -> str:
         return f"diagnosis      {dg['effect']}: {dg['explanation']}"
     magnitude = ", ".join(f"{k} {fmt(v['value'], '' if v['unit'] == '1' else v['unit'], 3)}"
                           for k, v in dg["magnitude"].items()) or "–"
-    return (f"diagnosis      {dg['effect']} ({magnitude}; confidence {dg['confidence']:.2f}) "
+    return (f"diagnosis      {dg['effect']} ({magnitude}; confidence {dg['confidence_text']}) "
             f"against a {dg['baseline']} sim: adding it shrinks the withheld gap from "
             f"{pct(dg['gap_before_pct'], 1)} to {pct(dg['gap_after_pct'], 1)} "
             f"({pct(dg['shrink_pct'], 1)})")

@@ -2,12 +2,17 @@
 
 The one reader behind the commands that learn from or judge a test (``diagnose``, ``updater
 pretrain``, ``updater replay``): one site, one integrator session, one actuator, committed step
-by committed step. A CSV is the bridge's own export (``fresco-bridge export``:
+by committed step. Values come back as written (a run directory is in mm, kN and s; a CSV in
+its own units, which the caller converts). Every problem is a :class:`HistoryInputError`
+naming the file, the line or column, and why, so each command can print it as one line.
+
+**One CSV vocabulary** (:data:`COLUMNS`, :data:`ALIASES`; ``docs/run-record.md`` shows it to
+users): the bridge's export (``fresco-bridge export``:
 ``time,step,site,cmd_disp,meas_disp,meas_force,session``, with ``_1.._n`` suffixes when a site
-has n actuators) or any file whose header names the columns the caller asks for. Values come
-back as written (a run directory is in mm, kN and s; a CSV in its own units, which the caller
-converts). Every problem is a :class:`HistoryInputError` naming the file, the line or column,
-and why, so each command can print it as one line.
+has n actuators) names every column; a CSV from elsewhere may use the short names of
+:data:`ALIASES` (``time,disp,force``: the measured displacement and force, as the shipped
+``examples/data`` records have them). Callers ask for the canonical names; every error lists the
+same accepted set (:func:`vocabulary`).
 """
 
 from __future__ import annotations
@@ -25,16 +30,43 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 __all__ = [
+    "ALIASES",
+    "COLUMNS",
     "RUN_COLUMNS",
     "ElementHistory",
     "HistoryInputError",
     "SessionChoice",
     "check_increasing",
     "read_element_history",
+    "vocabulary",
 ]
 
 RUN_COLUMNS = ("time", "step", "cmd_disp", "meas_disp", "meas_force")
 """What a run directory holds per committed step (the export's numeric columns)."""
+COLUMNS: Mapping[str, str] = {
+    "time": "s, strictly increasing",
+    "cmd_disp": "the commanded displacement, mm",
+    "meas_disp": "the measured displacement, mm",
+    "meas_force": "the measured force, kN",
+}
+"""The history columns a caller may ask for, by their canonical (the export's) names, with
+their meaning and the units of a run directory (a CSV's may differ: the commands' ``--units``)."""
+ALIASES: Mapping[str, tuple[str, ...]] = {
+    "cmd_disp": ("cmd",),
+    "meas_disp": ("disp",),
+    "meas_force": ("force",),
+}
+"""Other header names accepted for a canonical column, tried when it is absent: ``disp`` and
+``force`` are the *measured* displacement and force (a characterisation test's file), ``cmd``
+the command. A header that holds both a name and its alias is read by the canonical name."""
+
+
+def vocabulary(names: Sequence[str] | None = None) -> str:
+    """The accepted header names of ``names`` (default: every column), as every message and
+    help text says them: ``time, cmd_disp (or cmd), meas_disp (or disp), meas_force (or
+    force)``."""
+    return ", ".join(n + (f" (or {' or '.join(ALIASES[n])})" if n in ALIASES else "")
+                     for n in (COLUMNS if names is None else names))
 
 SessionChoice = int | Literal["last", "longest"]
 """An integrator session by number, or the rule that picks one when a record holds several."""
@@ -73,20 +105,21 @@ def check_increasing(name: str, values: FloatArray, source: str,
 def read_element_history(
     path: Path, required: Sequence[str], optional: Sequence[str] = (), *,
     site: str | None = None, session: SessionChoice | None = None, actuator: int = 1,
-    aliases: Mapping[str, str] | None = None,
 ) -> ElementHistory:
-    """The ``required`` (and present ``optional``) columns of one element's history.
+    """The ``required`` (and present ``optional``) columns of one element's history, by their
+    canonical names (:data:`COLUMNS`; a CSV may use their :data:`ALIASES`).
 
     ``site`` may be omitted only when the record holds one; ``session`` defaults to ``last``.
-    In a CSV, ``aliases`` name another column read when a wanted one is absent (``disp`` read
-    from the export's ``meas_disp``); a run directory has the :data:`RUN_COLUMNS`.
     """
+    unknown = [n for n in (*required, *optional) if n not in COLUMNS]
+    if unknown:
+        raise ValueError(f"not history columns: {', '.join(unknown)} (known: {vocabulary()})")
     choice: SessionChoice = "last" if session is None else session
     if path.is_dir():
-        return _read_run(path, [*required, *optional], aliases or {}, site, choice, actuator)
+        return _read_run(path, [*required, *optional], site, choice, actuator)
     if not path.exists():
         raise HistoryInputError(f"{path}: no such file or run directory")
-    return _read_csv(path, required, optional, aliases or {}, site, choice, actuator)
+    return _read_csv(path, required, optional, site, choice, actuator)
 
 
 def _choose_site(path: Path, sites: list[str], site: str | None) -> str:
@@ -119,8 +152,8 @@ def _choose_session(where: str, sizes: Mapping[int, int],
                     f"{sizes[chosen]} steps) used")
 
 
-def _read_run(path: Path, wanted: Sequence[str], aliases: Mapping[str, str], site: str | None,
-              choice: SessionChoice, actuator: int) -> ElementHistory:
+def _read_run(path: Path, wanted: Sequence[str], site: str | None, choice: SessionChoice,
+              actuator: int) -> ElementHistory:
     from .runs import RunDirError, load_run, session_signals
 
     try:
@@ -144,9 +177,7 @@ def _read_run(path: Path, wanted: Sequence[str], aliases: Mapping[str, str], sit
     source = f"{path} (site {name}, session {number}, actuator {actuator})"
     columns: dict[str, FloatArray] = {}
     for col in wanted:
-        values = available.get(col, available.get(aliases.get(col, "")))
-        if values is None:
-            raise HistoryInputError(f"{path}: a run directory has no column {col!r}")
+        values = available[col]
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise HistoryInputError(
@@ -165,8 +196,7 @@ def _column(header: list[str], name: str, actuator: int) -> int | None:
 
 
 def _read_csv(path: Path, required: Sequence[str], optional: Sequence[str],
-              aliases: Mapping[str, str], site: str | None, choice: SessionChoice,
-              actuator: int) -> ElementHistory:
+              site: str | None, choice: SessionChoice, actuator: int) -> ElementHistory:
     try:
         with path.open(newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
@@ -175,24 +205,23 @@ def _read_csv(path: Path, required: Sequence[str], optional: Sequence[str],
     except UnicodeDecodeError:
         raise HistoryInputError(f"{path}: not a UTF-8 text CSV") from None
     if not rows or not any(cell.strip() for cell in rows[0]):
-        raise HistoryInputError(f"{path}: empty file (expected a header line: "
-                                f"{','.join([*required, *optional])})")
+        raise HistoryInputError(f"{path}: empty file (expected a header line naming "
+                                f"{vocabulary([*required, *optional])})")
     header = [h.strip() for h in rows[0]]
     if "step" in header and "step" not in (*required, *optional):
         optional = (*optional, "step")  # checked for order below
     cols: dict[str, tuple[str, int]] = {}
     for name in (*required, *optional):
-        for candidate in (name, aliases.get(name)):
-            index = None if candidate is None else _column(header, candidate, actuator)
+        for candidate in (name, *ALIASES.get(name, ())):
+            index = _column(header, candidate, actuator)
             if index is not None:
                 cols[name] = (header[index], index)
                 break
-    missing = [n + (f" (or {aliases[n]})" if n in aliases else "") for n in required
-               if n not in cols]
+    missing = [n for n in required if n not in cols]
     if missing:
         raise HistoryInputError(
-            f"{path}:1: missing column(s) {', '.join(missing)} (the header has "
-            f"{', '.join(header)}; needed: {', '.join(required)})")
+            f"{path}:1: missing column(s) {vocabulary(missing)} (the header has "
+            f"{', '.join(header)}; needed: {vocabulary(required)})")
     notes: list[str] = []
     width = sum(1 for h in header if h.startswith("meas_force_"))
     if width and actuator > width:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from .progress import close_all
 
 __all__ = ["BAD_INPUT_EXIT", "BROKEN_PIPE_EXIT", "FAILURE_EXIT", "INTERRUPTED_EXIT",
-           "exit_code", "reader_gone"]
+           "Interrupted", "exit_code", "reader_gone"]
 
 BAD_INPUT_EXIT = 2
 """The command line, the config or a file named on it is wrong: the user can fix it."""
@@ -26,6 +26,17 @@ INTERRUPTED_EXIT = 130
 """128 + SIGINT: Ctrl-C."""
 BROKEN_PIPE_EXIT = 141
 """128 + SIGPIPE: what a coreutils command returns when its reader went away (``| head``)."""
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C (or a stop signal) that a command caught to say what it left behind: its text is
+    the one line the user reads after ``interrupted:`` (what stopped, where the run is, what
+    to do next); ``code`` the exit code (128 + the signal). A ``KeyboardInterrupt``, so every
+    ``finally`` and cleanup on the way out still runs."""
+
+    def __init__(self, text: str, code: int = 130) -> None:
+        super().__init__(text)
+        self.code = code
+
 
 def reader_gone() -> int:
     """The reader of stdout went away (``| head``): the user's choice, not a failure, so no
@@ -50,8 +61,12 @@ def exit_code(command: Callable[[], int],
     except bad_input as exc:
         print(f"error: {exc}", file=sys.stderr)
         return BAD_INPUT_EXIT
-    except KeyboardInterrupt:
-        return INTERRUPTED_EXIT
+    except KeyboardInterrupt as exc:
+        text = str(exc) or f"{_command()} stopped by Ctrl-C before it finished"
+        # on a terminal, after the ^C it echoed: the line starts on a line of its own
+        fresh = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+        print(f"{fresh}interrupted: {text}", file=sys.stderr)
+        return exc.code if isinstance(exc, Interrupted) else INTERRUPTED_EXIT
     except BrokenPipeError:
         return reader_gone()
     except OSError as exc:  # a port in use, a run directory that cannot be written, …
@@ -63,6 +78,12 @@ def exit_code(command: Callable[[], int],
         _debug_traceback()
         print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return FAILURE_EXIT
+
+
+def _command() -> str:
+    """``fresco-bridge study paper``: the command line's first words, for the generic line."""
+    words = [a for a in sys.argv[1:3] if not a.startswith("-")]
+    return " ".join(["fresco-bridge", *words])
 
 
 def _debug_traceback() -> None:

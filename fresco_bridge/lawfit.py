@@ -7,6 +7,9 @@ types):
 
 * :func:`bounded_least_squares`: scipy's trust-region least squares inside bounds, from a start
   clipped into them; every caller's tolerances, scales and Jacobian pass through unchanged;
+* :func:`difference_step` and :func:`parameter_std`: the forward-difference step of a
+  Jacobian column and the Gauss-Newton uncertainty of a fit, for every caller that builds its
+  own (batched or per-record) Jacobian;
 * :func:`multi_start`: a few evaluations from each start, then the best one to convergence
   (a law's misfit surface has local minima: a smooth and a sharp transition fit apart);
 * :class:`LawFamily` and :func:`fit_law`: a law with named free parameters, fitted on one or
@@ -32,11 +35,14 @@ __all__ = [
     "FitSpace",
     "LawFamily",
     "Solution",
+    "autocorrelation",
     "bounded_least_squares",
     "calibrate_bilinear",
+    "difference_step",
     "fit_law",
     "law_forces",
     "multi_start",
+    "parameter_std",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -73,6 +79,31 @@ def bounded_least_squares(residual: Callable[[FloatArray], FloatArray],
                              gtol=1e-8)  # fmt: skip
     return Solution(np.asarray(fit.x, dtype=np.float64), np.asarray(fit.fun, dtype=np.float64),
                     np.asarray(fit.jac, dtype=np.float64), bool(fit.success), str(fit.message))
+
+
+def difference_step(x: float, lower: float, upper: float) -> float:
+    """The forward-difference step of a Jacobian column: 1e-3 of the parameter's magnitude (of
+    1 % of its range when nearer zero), taken backwards when it would cross the upper bound."""
+    h = 1e-3 * max(abs(x), 1e-2 * (upper - lower))
+    return -h if x + h > upper else h
+
+
+def autocorrelation(r: FloatArray) -> float:
+    """The lag-1 autocorrelation of a residual (0 for a constant one)."""
+    r = r - r.mean()
+    denom = float(np.dot(r, r))
+    return float(np.dot(r[1:], r[:-1])) / denom if denom > 0.0 else 0.0
+
+
+def parameter_std(residual: FloatArray, jacobian: FloatArray) -> FloatArray:
+    """Each parameter's std from the Gauss-Newton covariance ``s² (JᵀJ)⁺`` at a fit, with s²
+    inflated by (1 + ρ)/(1 − ρ) for the residual's lag-1 autocorrelation ρ (clipped to
+    [0, 0.99]): correlated residuals carry less information than their count says."""
+    dof = max(residual.size - jacobian.shape[1], 1)
+    rho = min(max(autocorrelation(residual), 0.0), 0.99)
+    s2 = float(np.dot(residual, residual)) / dof * (1.0 + rho) / (1.0 - rho)
+    cov = s2 * np.linalg.pinv(jacobian.T @ jacobian)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
 def multi_start(fit: Callable[[Start, int], Result], starts: Sequence[Start], *,

@@ -14,31 +14,81 @@ so ``Handler.handleError`` drops the line silently and the caller (the step path
 ``RateLimitedLog`` is the same rule where the caller names the cause itself (a transport's
 refusals, ICMP errors, ignored action codes): it holds wherever the bridge runs, with or
 without ``configure`` (an embedded ``BridgeThread`` in a test or a notebook).
+
+The log is evidence, so a line is one line whatever it quotes: ``printable`` escapes control
+characters, line and paragraph separators, bidirectional overrides and lone surrogates, and
+``OneLineFormatter`` applies it to every message, ours and the libraries', after its arguments
+are in (an MQTT request id, a peer's name, a config string cannot forge a line or clear the
+operator's screen). Libraries log in their own words: ``OutsideLineFilter`` keeps the first line
+of a library's message (pymodbus appends its last 20 frames as hex to an error) and turns its
+traceback into one line (type, message, where) unless the log is verbose; ``configure`` sets
+the libraries' loggers to WARNING, verbose or not, and routes Python warnings (numpy's) into
+the log.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import sys
 import time
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
-__all__ = ["LOG_INTERVAL", "RateLimitFilter", "RateLimitedLog", "configure"]
+__all__ = ["LOG_INTERVAL", "OUTSIDE_LOGGERS", "OneLineFormatter", "OutsideLineFilter",
+           "RateLimitFilter", "RateLimitedLog", "cause_of", "configure", "printable"]
 
 LOG_INTERVAL = 10.0
 """Seconds between two warning or error lines of one cause."""
 MAX_CAUSES = 1024
 """Causes remembered at once (the oldest is forgotten first): the filter's memory is bounded."""
+OUTSIDE_LOGGERS = ("asyncio", "pymodbus", "paho", "aiomqtt", "py.warnings", "concurrent",
+                   "distributed", "torch", "numba", "matplotlib", "PIL")
+"""Libraries whose loggers ``configure`` sets to WARNING (their per-frame chatter and hex dumps
+are debug content even when the bridge's own log is verbose)."""
+MAX_CAUSE_TEXT = 200
+
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029"
+                          "\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def printable(text: str) -> str:
+    """``text`` on one line, with nothing a terminal would act on: newlines as ``\\n``, other
+    control characters, separators, bidirectional overrides and lone surrogates as ``\\xNN`` or
+    ``\\uNNNN``. The one escape for whatever reaches the log or the operator's terminal."""
+    if _UNPRINTABLE.search(text) is None:
+        return text
+    return _UNPRINTABLE.sub(_escape, text)
+
+
+def _escape(match: re.Match[str]) -> str:
+    ch = match.group()
+    named = _NAMED.get(ch)
+    if named is not None:
+        return named
+    code = ord(ch)
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def cause_of(text: str) -> Mapping[str, str]:
+    """``extra=`` for a line whose cause is its text's words, not its numbers (a HOLD's reason:
+    a limit, a lost controller, a non-finite trial are three causes; the step and the values
+    in it are not): ``log.error("site %s: HOLD at step %d: %s", site, step, reason,
+    extra=cause_of(reason))``."""
+    return {"log_cause": _NUMBER.sub("#", text)[:MAX_CAUSE_TEXT]}
 
 
 class RateLimitFilter(logging.Filter):
     """At most one line per cause per ``interval`` for warnings and errors.
 
-    A cause is the logger, the level, the message's format string and its first argument (the
-    site's name, by this project's convention): two sites' HOLDs are two causes, one site's
-    thousand failed writes are one. A line with a traceback is caused by its exception's type
-    and the line that raised it, whatever its message says.
+    A cause is the logger, the level, the message's format string with its numbers masked (a
+    library's preformatted text), its first argument (the site's name, by this project's
+    convention) and the caller's ``cause_of``, if given: two sites' HOLDs are two causes, one
+    site's thousand failed writes are one, and a limit's HOLD does not hide a lost controller's.
+    A line with a traceback is caused by its exception's type and the line that raised it,
+    whatever its message says.
     """
 
     def __init__(self, interval: float = LOG_INTERVAL,
@@ -64,8 +114,10 @@ class RateLimitFilter(logging.Filter):
                     tb.tb_frame.f_code.co_filename, tb.tb_lineno)
         args = record.args
         first = args[0] if isinstance(args, tuple) and args else None
-        return (record.name, record.levelno, str(record.msg),
-                first if isinstance(first, str | int) else None)
+        named = getattr(record, "log_cause", None)
+        text = None if named is not None else _NUMBER.sub("#", str(record.msg))[:MAX_CAUSE_TEXT]
+        return (record.name, record.levelno, text,
+                first if isinstance(first, str | int) else None, named)
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.levelno < self.level:
@@ -87,13 +139,58 @@ class RateLimitFilter(logging.Filter):
         return True
 
 
+class OneLineFormatter(logging.Formatter):
+    """Every message on one line (``printable``), its arguments in; a traceback of the bridge's
+    own (a bug) keeps its lines below it."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        record.message = printable(record.message)
+        return super().formatMessage(record)
+
+
+class OutsideLineFilter(logging.Filter):
+    """A library's line in the bridge's words: its message's first line (pymodbus appends hex
+    frames to an error), its traceback as one line (``ValueError: boom (streams.py:42)``) unless
+    ``tracebacks`` (a verbose log). Lines of ``fresco_bridge`` pass untouched."""
+
+    def __init__(self, own: str = "fresco_bridge", *, tracebacks: bool = False) -> None:
+        super().__init__()
+        self.own = own
+        self.tracebacks = tracebacks
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.name == self.own or record.name.startswith(self.own + "."):
+            return True
+        text = record.getMessage()
+        first, newline, _ = text.partition("\n")
+        exc = record.exc_info
+        if exc and exc[1] is not None and not self.tracebacks:
+            tb = exc[2]
+            while tb is not None and tb.tb_next is not None:
+                tb = tb.tb_next
+            where = "" if tb is None else \
+                f"{tb.tb_frame.f_code.co_filename.rsplit('/', 1)[-1]}:{tb.tb_lineno}"
+            first = f"{first.rstrip()}: {type(exc[1]).__name__}: {exc[1]} ({where})"
+            record.exc_info, record.exc_text = None, None
+            record.log_cause = f"{type(exc[1]).__qualname__} at {where}"  # as a traceback's
+        elif not newline:
+            return True
+        record.msg, record.args = first.rstrip(), None
+        return True
+
+
 def configure(verbose: bool, interval: float = LOG_INTERVAL) -> None:
-    """The daemon's logging: stderr, rate-limited, silent about its own write failures."""
+    """The daemon's logging: stderr, one line per message, rate-limited, silent about its own
+    write failures; libraries at WARNING in one line each, Python warnings through it too."""
     logging.raiseExceptions = False
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    handler.setFormatter(OneLineFormatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    handler.addFilter(OutsideLineFilter(tracebacks=verbose))
     handler.addFilter(RateLimitFilter(interval))
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO, handlers=[handler])
+    for name in OUTSIDE_LOGGERS:
+        logging.getLogger(name).setLevel(logging.WARNING)
+    logging.captureWarnings(True)
 
 
 class RateLimitedLog:

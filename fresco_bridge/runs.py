@@ -14,6 +14,7 @@ import math
 import tomllib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from .record.export import (
 )
 from .record.lines import RecordFormatError
 from .record.recovery import open_sessions, run_state
-from .record.rundir import CONFIG_FILE, META_FILE, RECORD_FILE
+from .record.rundir import CONFIG_FILE, META_FILE, RECORD_FILE, update_meta
 
 DEFAULT_DT = 0.01  # TelemetryConfig.monitor_dt's default, for records without integrator time
 XCORR_MAX_LAG = 50  # samples either side for the cross-correlation delay estimate
@@ -72,18 +73,22 @@ class Run:
                 names.append(s.site)
         return names
 
-    def sources(self) -> dict[str, str]:
-        """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
-        snapshot, or no updatable site)."""
+    def site_configs(self) -> dict[str, dict[str, Any]]:
+        """``{site: its [[sites]] table}`` from the config snapshot (``{}``: no snapshot, or
+        one that does not parse)."""
         if self.config_text is None:
             return {}
         try:
             sites = tomllib.loads(self.config_text).get("sites", [])
         except tomllib.TOMLDecodeError:
             return {}
-        return {str(s["name"]): str(s["learns_from"]) for s in sites
-                if isinstance(s, dict) and s.get("kind") == "updatable" and "name" in s
-                and "learns_from" in s}
+        return {str(s["name"]): s for s in sites if isinstance(s, dict) and "name" in s}
+
+    def sources(self) -> dict[str, str]:
+        """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
+        snapshot, or no updatable site)."""
+        return {name: str(s["learns_from"]) for name, s in self.site_configs().items()
+                if s.get("kind") == "updatable" and "learns_from" in s}
 
     def config_value(self, section: str, key: str, default: Any) -> Any:
         """A value from the config snapshot (``default`` when absent or unreadable)."""
@@ -174,8 +179,10 @@ def load_run(path: Path) -> Run:
                      "it was skipped, everything before it is intact")
     state = run_state(directory, meta)
     if state == "interrupted":
-        notes.append("the run ended without a clean close (bridge killed or host lost); "
-                     "'fresco-bridge runs resume' continues it")
+        how = ("the bridge was stopped (Ctrl-C or SIGTERM) while a client was served"
+               if "interrupted_utc" in meta else
+               "the run ended without a clean close (bridge killed or host lost)")
+        notes.append(f"{how}; 'fresco-bridge runs resume' continues it")
     for site, session in open_sessions(directory):
         if state != "running":
             notes.append(f"site {site} session {session} was opened and never closed")
@@ -192,6 +199,14 @@ def check_resumable(path: Path) -> Path:
     return path
 
 
+def mark_interrupted(path: Path) -> None:
+    """A run stopped mid-test (Ctrl-C while a client was served): ``run.json`` says
+    ``interrupted``, as for a bridge killed and found later, so ``runs list`` shows it and
+    ``runs resume`` continues it. Called after the record closed (its clean close says
+    ``closed``)."""
+    update_meta(path, state="interrupted", interrupted_utc=datetime.now(UTC).isoformat())
+
+
 def resolve_run(name: str | Path, runs_root: Path) -> Path:
     """A run given as a path, or as a directory name (or unique prefix) under ``runs_root``."""
     path = Path(name)
@@ -205,8 +220,10 @@ def resolve_run(name: str | Path, runs_root: Path) -> Path:
         if len(hits) == 1:
             return hits[0]
         if len(hits) > 1:
-            raise RunDirError(f"{name!r} matches {len(hits)} runs under {runs_root}: "
-                              + ", ".join(p.name for p in hits[:5]))
+            more = f" and {len(hits) - 5} more" if len(hits) > 5 else ""
+            shown = ", ".join(p.name for p in hits[:5]) + more
+            raise RunDirError(f"{name!r} matches {len(hits)} runs under {runs_root}: {shown} "
+                              "(give more of the name)")
     raise RunDirError(f"{name}: no such run (not a path, and not a run under {runs_root})")
 
 
@@ -443,13 +460,13 @@ def summarise(run: Run) -> list[SiteSummary]:
 
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
     """``runs show``: metadata, then one block per site."""
-    lines = [f"run        {run.directory}"]
-    lines.append(f"{'state':<10} {run_state(run.directory, run.meta)}")
-    for key in ("started_utc", "host", "fresco_bridge", "format"):
-        if key in run.meta:
-            lines.append(f"{key:<10} {run.meta[key]}")
-    lines.append(f"size       {human_size(run.size_bytes)}")
-    lines.extend(f"note       {n}" for n in run.notes)
+    head = [("run", str(run.directory)), ("state", run_state(run.directory, run.meta))]
+    head += [(key, str(run.meta[key])) for key in ("started_utc", "host", "fresco_bridge",
+                                                    "format") if key in run.meta]
+    head += [("size", human_size(run.size_bytes)), *(("note", n) for n in run.notes)]
+    width = max(len(k) for k, _ in head)
+    lines = [f"{k:<{width}}  {v}" for k, v in head]
+    twins = run.sources()
     for s in summaries:
         events = ", ".join(f"{k} {n}" for k, n in sorted(s.events.items())) or "none"
         lines += ["", f"site {s.site}: {s.steps} committed step(s), {s.sessions} session(s), "
@@ -460,6 +477,10 @@ def format_show(run: Run, summaries: list[SiteSummary]) -> str:
                 f"{fmt(d.time_start)}..{fmt(d.time_end)} s; peak |cmd| {fmt(d.peak_cmd, 'mm')}, "
                 f"|meas| {fmt(d.peak_meas, 'mm')}; force {fmt(d.force_min)}..{fmt(d.force_max)} kN"
             )
+            if s.site in twins:  # no actuator: its "measurement" is its trial, zeros say nothing
+                lines.append(f"    updatable site (the twin of {twins[s.site]}): no actuator, no "
+                             "tracking error")
+                continue
             lines.append(
                 f"    max |error| {fmt(d.max_tracking_error, 'mm')}, NRMS {fmt(d.nrms)}, "
                 f"TI {fmt(d.ti_final, 'mm²')}, FEI amplitude {fmt(d.fei_amplitude)}, "

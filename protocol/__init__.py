@@ -22,6 +22,12 @@ from protocol.events import (
     SizeReceived,
     TrialReceived,
 )
+from protocol.generic_tcp import (
+    DaqReplyReceived,
+    GenericTcpClientSession,
+    GenericTcpServerSession,
+    SetupLineReceived,
+)
 from protocol.site import ActorSession, ShadowSession
 from protocol.site_events import (
     OPENFRESCO_VERSION,
@@ -74,6 +80,7 @@ __all__ = [
     "CommitReceived",
     "ConnectionClosed",
     "DaqReceived",
+    "DaqReplyReceived",
     "DaqRequested",
     "DieReceived",
     "DieReplyReceived",
@@ -81,6 +88,8 @@ __all__ = [
     "ElementClientSession",
     "ElementServerEvent",
     "ElementServerSession",
+    "GenericTcpClientSession",
+    "GenericTcpServerSession",
     "Ignored",
     "LocalProtocolError",
     "OpenReceived",
@@ -93,6 +102,7 @@ __all__ = [
     "ReplyRequested",
     "Sentinel",
     "ServerState",
+    "SetupLineReceived",
     "SetupReceived",
     "ShadowEvent",
     "ShadowSession",

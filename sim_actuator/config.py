@@ -22,7 +22,7 @@ from pydantic import (
 )
 
 from sim_actuator.actuator import Actuator, FirstOrderLag, IdealServo, SecondOrderServo, ServoStage
-from sim_actuator.effects import LoadPath, Sensor
+from sim_actuator.effects import LoadPath, Sensor, SpecimenModel
 from sim_actuator.models import MODEL_KINDS, ModelParameterError, make_model
 from sim_actuator.rig import Rig
 
@@ -36,6 +36,7 @@ __all__ = [
     "SensorsConfig",
     "SpecimenConfig",
     "build_rig",
+    "channel_config",
     "load_rig_config",
     "parse_rig_config",
     "preset",
@@ -255,10 +256,21 @@ def _servo(config: ActuatorConfig, dt: float) -> ServoStage:
     return IdealServo()
 
 
-def build_rig(config: RigConfig) -> Rig:
-    """A fresh rig (virgin specimen, clock at zero) from a validated description."""
+def channel_config(config: RigConfig, channel: int) -> RigConfig:
+    """The rig of channel ``channel`` (0-based) of a multi-actuator rig built from ``config``:
+    the same description with its own noise streams (seed + channel), so channel 0 is the
+    one-actuator rig itself and no two channels share a noise sample."""
+    if channel < 0:
+        raise ValueError(f"channel must be >= 0, got {channel}")
+    return config if channel == 0 else config.model_copy(update={"seed": config.seed + channel})
+
+
+def build_rig(config: RigConfig, specimen: SpecimenModel | None = None) -> Rig:
+    """A fresh rig (virgin specimen, clock at zero) from a validated description; ``specimen``
+    replaces the described one (an actuator of a platform several rigs load together)."""
     dt = 1.0 / config.substep_rate
-    specimen = make_model(config.specimen.kind, **config.specimen.params)
+    if specimen is None:
+        specimen = make_model(config.specimen.kind, **config.specimen.params)
     act = config.actuator
     actuator = Actuator(
         dt=dt,

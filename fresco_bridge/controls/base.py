@@ -24,6 +24,13 @@ class ControllerLinkError(ControllerError):
     fault, an interlock, a refused command, a malformed reply) needs a human."""
 
 
+def wrong_count(where: str, n_actuators: int, disp: tuple[float, ...]) -> ControllerError:
+    """The error for a ctrl vector whose length is not the controller's actuator count."""
+    plural = "" if n_actuators == 1 else "s"
+    return ControllerError(f"{where}: drives {n_actuators} actuator{plural}, got {len(disp)} "
+                           f"ctrl values {list(disp)}")
+
+
 class Daq(NamedTuple):
     """Measured signals at the control points, one entry per actuator (mm, kN).
 
@@ -32,6 +39,11 @@ class Daq(NamedTuple):
 
     disp: tuple[float, ...]
     force: tuple[float, ...]
+    external: tuple[float, ...] | None = None
+    """A second displacement per actuator (mm) from a separate transducer, e.g. on the
+    specimen behind the frame's compliance and the pin's play, where the controller provides
+    one and its config names it (``Controller.external_channel``); None otherwise (the default
+    costs nothing: no field is read, no value made)."""
 
 
 class Controller(abc.ABC):
@@ -44,6 +56,11 @@ class Controller(abc.ABC):
     n_actuators: int = 1
     inline: bool = False
     """True when every call completes without suspending (in-process); then no deadline task."""
+    external_channel: str | None = None
+    """What ``Daq.external`` measures when this controller fills it (its config named an
+    external channel), e.g. ``"specimen displacement"``; None: ``Daq.external`` is always None.
+    The outer-loop correction (``sites/correction_loop.py``) reads it when a site asks for
+    ``measured = "external"``."""
 
     async def connect(self) -> None:  # noqa: B027 - optional hook
         """Open the link to the controller (no-op for in-process controllers)."""
@@ -130,7 +147,8 @@ class InlineController(Controller):
 class PhysicalController(Controller):
     """A controller of a physical (or physically simulated) rig: every move really happens, so
     there is no trial state to commit, and the rig cannot report its stiffness: tangent and
-    initial stiffness are the configured estimate ``stiffness`` (kN/mm)."""
+    initial stiffness are the configured estimate ``stiffness`` (kN/mm) of every actuator,
+    uncoupled."""
 
     stiffness: float
 
@@ -138,7 +156,15 @@ class PhysicalController(Controller):
         """A physical rig has no trial state to commit."""
 
     async def tangent_stiffness(self) -> tuple[float, ...]:
-        return (self.stiffness,)
+        return diagonal((self.stiffness,) * self.n_actuators)
 
     async def initial_stiffness(self) -> tuple[float, ...]:
-        return (self.stiffness,)
+        return diagonal((self.stiffness,) * self.n_actuators)
+
+
+def diagonal(values: tuple[float, ...]) -> tuple[float, ...]:
+    """diag(values), n×n column-major (slice assignment: no Python loop over n² entries)."""
+    n = len(values)
+    out = [0.0] * (n * n)
+    out[:: n + 1] = values
+    return tuple(out)

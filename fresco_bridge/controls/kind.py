@@ -37,6 +37,17 @@ class ControllerKind:
     """The kind's description in docs/configuration.md's table (markdown, one cell)."""
     max_actuators: int | None = 1
     """How many actuators one controller of this kind drives (None: any number)."""
+    fits: Callable[[Any, int], str | None] | None = None
+    """``fits(config, n_actuators)``: why this kind's table cannot drive ``n_actuators``
+    (e.g. a table per channel, and not that many), or None."""
+
+    def actuators_problem(self, config: ControllerConfigBase, n_actuators: int) -> str | None:
+        """Why ``config`` cannot drive a site of ``n_actuators`` control points, or None."""
+        most = self.max_actuators
+        if most is not None and n_actuators > most:
+            return (f"controller {self.name} drives {most} actuator(s); this site needs "
+                    f"{n_actuators}")
+        return None if self.fits is None else self.fits(config, n_actuators)
 
     def build(self, config: ControllerConfigBase, n_actuators: int) -> Controller:
         return self.factory(config, n_actuators)

@@ -1,23 +1,29 @@
 """Modbus TCP controller adapter (register map version 1 of ``sim_actuator`` servers).
 
-One actuator (the link's rules are ``network.py``'s). A move is one FC23 transaction: write
-COMMAND, RAMP_TIME and EXECUTE=1 and read the status block back; then poll STATE until it leaves
-MOVING. A motion command whose outcome is unknown (timeout, lost link, cancelled by the site's
-deadline) raises ``ControllerError`` and is never re-sent by the adapter: the site goes to HOLD.
-Link loss and silence raise ``ControllerLinkError`` (the site may wait for the controller to
-answer again); a refusal, fault or malformed reply raises a plain ``ControllerError``. Every
-call reconnects after a loss, with jittered backoff; a *new* command is sent on a fresh link
-only after the status read shows the controller healthy and idle (so the lost command is never
-replayed, and setpoints are absolute).
+One actuator per register block (channel c at ``c * 32``; the link's rules are
+``network.py``'s). A move is one FC23 transaction per channel: write COMMAND, RAMP_TIME and
+EXECUTE=1 and read the status block back (every channel's move starts before any is waited for);
+then poll STATE until each leaves MOVING. A multi-channel site checks at connection that the
+controller serves that many channels (register 23, CHANNELS); HOLD engages the interlock of
+every channel. A motion command whose outcome is unknown (timeout, lost link, cancelled by the
+site's deadline) raises ``ControllerError`` and is never re-sent by the adapter: the site goes
+to HOLD. Link loss and silence raise ``ControllerLinkError`` (the site may wait for the
+controller to answer again); a refusal, fault or malformed reply raises a plain
+``ControllerError``. Every call reconnects after a loss, with jittered backoff; a *new* command
+is sent on a fresh link only after the status read shows the controller healthy and idle (so the
+lost command is never replayed, and setpoints are absolute).
 
 ``hold`` engages the program interlock. The next motion command the site forwards (the site
 forwards nothing while it holds, so this is a new session or an operator's resume) releases it
 again, but only if this adapter engaged it: an interlock engaged by an operator or another
 master, or a latched fault, is reported and left alone.
 
-Float32 values are IEEE-754 in two registers, high word first. The heartbeat register must keep
-changing (checked on every status read); a physical rig cannot report its stiffness, so the
-tangent and initial stiffness are a configured estimate.
+With ``external_register`` the measurement also reads each channel's external displacement
+(``Daq.external``, in the same request as the status block when the controller maps every
+register between them, else one more read per channel; the outer-loop correction's
+``measured = "external"``). Float32 values are IEEE-754 in two registers, high word first.
+The heartbeat register must keep changing (checked on every status read); a physical rig cannot
+report its stiffness, so the tangent and initial stiffness are a configured estimate.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from sim_actuator.wire.modbus_map import (  # the one register map, shared with the server
+    CHANNEL_STRIDE,
     CONTROL_HOLD,
     CONTROL_RESET,
     EXCEPTION_MEANINGS,
@@ -56,7 +63,8 @@ _FAULT, _INTERLOCK = ControllerState.FAULT, ControllerState.INTERLOCK
 
 
 class ModbusControllerConfig(NetworkControllerConfig):
-    """A Modbus TCP actuator controller (one actuator, ``sim_actuator`` map version 1)."""
+    """A Modbus TCP actuator controller (``sim_actuator`` map version 1, a register block per
+    actuator)."""
 
     kind: Literal["modbus"] = "modbus"
     port: int = Field(5020, ge=1, le=65535)
@@ -65,16 +73,27 @@ class ModbusControllerConfig(NetworkControllerConfig):
     """Pause between STATE polls while a move runs, s."""
     move_timeout: float = Field(10.0, gt=0.0, le=3600.0, allow_inf_nan=False)
     """A move still MOVING after this long (wall s) is an error (like the MTS WAIT bound)."""
+    external_register: int | None = Field(None, ge=0, le=CHANNEL_STRIDE - 2)
+    """The external channel (``Daq.external``): the address, within each channel's register
+    block, of a float32 displacement (mm) from a second transducer; ``sim-actuator serve``
+    serves the specimen's displacement at 24 (EXT_DISP). None: no external channel."""
 
 
 class ModbusController(NetworkController):
-    """One actuator behind a Modbus TCP controller; every call is a network round trip."""
+    """Actuators behind a Modbus TCP controller, a register block each; every call is a
+    network round trip."""
 
     config: ModbusControllerConfig
 
-    def __init__(self, config: ModbusControllerConfig) -> None:
-        super().__init__(config, f"modbus controller {config.host}:{config.port}")
+    def __init__(self, config: ModbusControllerConfig, n_actuators: int = 1) -> None:
+        super().__init__(config, f"modbus controller {config.host}:{config.port}", n_actuators)
         self._client: AsyncModbusTcpClient | None = None
+        if config.external_register is not None:
+            self.external_channel = f"register {config.external_register}"
+        self._external_in_one_read = True
+        """The external register is read with the status block (until a controller refuses)."""
+        self._external: tuple[float, ...] | None = None
+        """The external displacements read with the last status blocks, if they were."""
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -115,7 +134,15 @@ class ModbusController(NetworkController):
             self._drop(failed=False)
             raise ControllerError(f"{self.where}: register map version {version[0]}, "
                                   f"this adapter speaks version {MAP_VERSION}")
-        await self._read_status()
+        if self.n_actuators > 1:
+            served = (await self._read(Reg.CHANNELS, 1, "read CHANNELS",
+                                       missing=0))[0]
+            if served < self.n_actuators:
+                self._drop(failed=False)
+                raise ControllerError(f"{self.where}: serves {served or 1} channel(s); this "
+                                      f"site drives {self.n_actuators} actuators")
+        for channel in range(self.n_actuators):
+            await self._read_status(channel)
 
     async def _request(self, what: str, make: Callable[[AsyncModbusTcpClient], Awaitable[Any]],
                        *, motion: bool = False) -> Any:
@@ -147,10 +174,16 @@ class ModbusController(NetworkController):
         name = EXCEPTION_MEANINGS.get(code, "unknown exception code")
         return f"{self.where}: {what} refused with Modbus exception {code:02d} {name}"
 
-    async def _read(self, address: int, count: int, what: str) -> list[int]:
+    async def _read(self, address: int, count: int, what: str,
+                    missing: int | None = None) -> list[int]:
+        """``count`` registers from ``address``; with ``missing``, an unmapped address reads
+        as that value (a register an older map lacks)."""
         cfg = self.config
         response = await self._request(what, lambda c: c.read_holding_registers(
             address, count=count, device_id=cfg.device_id))
+        if missing is not None and response.isError() and \
+                int(getattr(response, "exception_code", -1)) == 2:
+            return [missing] * count
         problem = self._exception(response, what)
         if problem is not None:
             raise ControllerError(problem)
@@ -161,62 +194,85 @@ class ModbusController(NetworkController):
                                   f"expected {count}")
         return words
 
-    def _status(self, words: list[int]) -> Status:
+    def _status(self, words: list[int], channel: int = 0) -> Status:
         if len(words) != STATUS_COUNT:
             self._drop()
             raise ControllerError(f"{self.where}: status reply has {len(words)} registers, "
                                   f"expected {STATUS_COUNT}")
         status = Status.parse(words)
-        self._heartbeat.observe(status.heartbeat)
+        self._heartbeats[channel].observe(status.heartbeat)
         return status
 
-    async def _read_status(self) -> Status:
-        return self._status(await self._read(Reg.STATE, STATUS_COUNT, "read status"))
+    def _channel(self, channel: int) -> str:
+        return "" if self.n_actuators == 1 else f" channel {channel + 1}"
+
+    async def _read_status(self, channel: int = 0) -> Status:
+        return self._status(await self._read(channel * CHANNEL_STRIDE + Reg.STATE, STATUS_COUNT,
+                                             f"read status{self._channel(channel)}"), channel)
 
     # -- the wire of the controller interface -------------------------------------------------
 
-    async def _move(self, target: float) -> None:
-        before = await self._read_status()
-        if before.state == _INTERLOCK and self._interlock_ours:
-            await self._write_control(0, "release the interlock it engaged at HOLD")
+    async def _move(self, targets: tuple[float, ...]) -> None:
+        channels = range(self.n_actuators)
+        befores = [await self._read_status(c) for c in channels]
+        if self._interlock_ours and any(b.state == _INTERLOCK for b in befores):
+            for c in channels:
+                if befores[c].state == _INTERLOCK:
+                    await self._write_control(c, 0, "release the interlock it engaged at HOLD")
             self._interlock_ours = False
-            before = await self._read_status()
-        if before.state != _INTERLOCK:
+            befores = [await self._read_status(c) for c in channels]
+        if all(b.state != _INTERLOCK for b in befores):
             self._interlock_ours = False  # released elsewhere, or a restarted controller
-        if before.state in (_FAULT, _INTERLOCK, _MOVING):
+        for c, (before, target) in enumerate(zip(befores, targets, strict=True)):
             if before.state == _INTERLOCK:
                 raise ControllerError(
-                    f"{self.where}: cannot move to {target!r} mm: the program interlock is "
-                    "engaged and not by this bridge (operator or another master); release "
-                    "it at the controller")
-            raise ControllerError(f"{self.where}: cannot move to {target!r} mm: "
-                                  f"{before.describe()}")
+                    f"{self.where}{self._channel(c)}: cannot move to {target!r} mm: the program "
+                    "interlock is engaged and not by this bridge (operator or another master); "
+                    "release it at the controller")
+            if before.state in (_FAULT, _MOVING):
+                raise ControllerError(f"{self.where}{self._channel(c)}: cannot move to "
+                                      f"{target!r} mm: {before.describe()}")
+        started = [await self._start_move(c, t) for c, t in zip(channels, targets, strict=True)]
         cfg = self.config
+        deadline = asyncio.get_running_loop().time() + cfg.move_timeout
+        for c, (status, target, before) in enumerate(zip(started, targets, befores,
+                                                         strict=True)):
+            what = f"move{self._channel(c)} to {target!r} mm"
+            try:
+                while status.state == _MOVING:
+                    if asyncio.get_running_loop().time() > deadline:
+                        raise ControllerError(f"{self.where}{self._channel(c)}: still MOVING "
+                                              f"after move_timeout {cfg.move_timeout:g} s")
+                    await asyncio.sleep(cfg.poll_interval)
+                    status = await self._read_status(c)
+            except ControllerError as exc:  # keeps its kind: a lost link stays a lost link
+                raise type(exc)(f"{exc}; the {what} was accepted but its completion is "
+                                "unknown; it is not retried") from None
+            self._check_done(c, status, target, before.sequence)
+
+    async def _start_move(self, channel: int, target: float) -> Status:
+        """One FC23: write the channel's COMMAND, RAMP_TIME, EXECUTE=1, read its status."""
+        cfg = self.config
+        base = channel * CHANNEL_STRIDE
         values = [*encode_float32(target), *encode_float32(cfg.ramp_time), 1]
-        what = f"move to {target!r} mm"
+        what = f"move{self._channel(channel)} to {target!r} mm"
         response = await self._request(what, lambda c: c.readwrite_registers(
-            read_address=Reg.STATE, read_count=STATUS_COUNT, write_address=Reg.COMMAND,
-            values=values, device_id=cfg.device_id), motion=True)
+            read_address=base + Reg.STATE, read_count=STATUS_COUNT,
+            write_address=base + Reg.COMMAND, values=values, device_id=cfg.device_id),
+            motion=True)
         problem = self._exception(response, what)
         if problem is not None:
-            after = await self._read_status()
+            after = await self._read_status(channel)
             raise ControllerError(f"{problem}; controller {after.describe()}")
         try:
-            status = self._status(list(response.registers))
-            deadline = asyncio.get_running_loop().time() + cfg.move_timeout
-            while status.state == _MOVING:
-                if asyncio.get_running_loop().time() > deadline:
-                    raise ControllerError(f"{self.where}: still MOVING after move_timeout "
-                                          f"{cfg.move_timeout:g} s")
-                await asyncio.sleep(cfg.poll_interval)
-                status = await self._read_status()
-        except ControllerError as exc:  # keeps its kind: a lost link stays a lost link
-            raise type(exc)(f"{exc}; the {what} was accepted but its completion is "
-                            "unknown; it is not retried") from None
-        self._check_done(status, target, before.sequence)
+            return self._status(list(response.registers), channel)
+        except ControllerError as exc:
+            raise type(exc)(f"{exc}; the {what} was accepted but its completion is unknown; "
+                            "it is not retried") from None
 
-    def _check_done(self, status: Status, target: float, sequence_before: int) -> None:
-        what = f"{self.where}: move to {target!r} mm"
+    def _check_done(self, channel: int, status: Status, target: float,
+                    sequence_before: int) -> None:
+        what = f"{self.where}{self._channel(channel)}: move to {target!r} mm"
         if status.state == _FAULT:
             raise ControllerError(f"{what} tripped: {status.describe()} at "
                                   f"{status.disp!r} mm, {status.force!r} kN")
@@ -231,20 +287,53 @@ class ModbusController(NetworkController):
                 f"{what}: controller reports target {status.target!r} mm, sequence "
                 f"{status.sequence} (expected {expected}); another master is commanding it?")
 
-    async def _measure(self) -> tuple[float, float]:
-        status = await self._read_status()
-        return status.disp, status.force
+    async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        address = self.config.external_register
+        if address is None or address < Reg.STATE or not self._external_in_one_read:
+            statuses = [await self._read_status(c) for c in range(self.n_actuators)]
+            self._external = None
+            return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+        # the status block and the external register in one request per channel (no extra
+        # round trip); a controller with an unmapped register between them answers exception
+        # 02 once, and from then on the external register is read on its own
+        count = max(STATUS_COUNT, address + 2 - Reg.STATE)
+        statuses, external = [], []
+        for c in range(self.n_actuators):
+            words = await self._read(c * CHANNEL_STRIDE + Reg.STATE, count,
+                                     f"read status and external channel{self._channel(c)}",
+                                     missing=-1)
+            if words[0] == -1:
+                self._external_in_one_read = False
+                return await self._measure()
+            statuses.append(self._status(words[:STATUS_COUNT], c))
+            external.append(decode_float32(words[address - Reg.STATE:address - Reg.STATE + 2]))
+        self._external = tuple(external)
+        return tuple(s.disp for s in statuses), tuple(s.force for s in statuses)
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        if self._external is not None:
+            return self._external
+        address = self.config.external_register
+        assert address is not None  # only called with an external channel
+        values = []
+        for c in range(self.n_actuators):
+            values.append(decode_float32(await self._read(
+                c * CHANNEL_STRIDE + address, 2,
+                f"read the external channel{self._channel(c)} (register {address})")))
+        return tuple(values)
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
-        if on:
-            await self._write_control(CONTROL_HOLD, "engage the interlock")
-        else:
-            await self._write_control(CONTROL_RESET if reset_fault else 0,
-                                      "release the interlock")
+        for channel in range(self.n_actuators):  # HOLD holds every actuator
+            if on:
+                await self._write_control(channel, CONTROL_HOLD, "engage the interlock")
+            else:
+                await self._write_control(channel, CONTROL_RESET if reset_fault else 0,
+                                          "release the interlock")
 
-    async def _write_control(self, word: int, what: str) -> None:
+    async def _write_control(self, channel: int, word: int, what: str) -> None:
+        what = f"{what}{self._channel(channel)}"
         response = await self._request(what, lambda c: c.write_register(
-            Reg.CONTROL, word, device_id=self.config.device_id))
+            channel * CHANNEL_STRIDE + Reg.CONTROL, word, device_id=self.config.device_id))
         problem = self._exception(response, what)
         if problem is not None:
             raise ControllerError(problem)
@@ -253,12 +342,14 @@ class ModbusController(NetworkController):
         """Completed moves as the controller counts them (diagnostics, tests)."""
         async with self._lock:
             await self._ensure_link()
-            return (await self._read_status()).sequence
+            return (await self._read_status(0)).sequence
 
 
 KIND = ControllerKind(
     name="modbus",
     config=ModbusControllerConfig,
-    factory=lambda config, n: ModbusController(config),
-    summary="a Modbus TCP controller speaking the register map of `sim-actuator serve`",
+    factory=ModbusController,
+    summary="a Modbus TCP controller speaking the register map of `sim-actuator serve`, a "
+    "register block per actuator",
+    max_actuators=None,
 )

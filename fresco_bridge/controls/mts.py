@@ -1,6 +1,7 @@
 """Controller adapter for the MTS-CSI-like line protocol of ``sim_actuator`` (version 1).
 
-One actuator (the link's rules are ``network.py``'s). The adapter owns the test (``OPEN``) and
+One or several actuators (the link's rules are ``network.py``'s; several: one ramp drives every
+channel, readings are comma-separated lists). The adapter owns the test (``OPEN``) and
 sends each move as one ``RUN <mm> <wait_timeout>`` request (command + execute + wait + acquire
 in a round trip), after a ``STATUS`` that checks the state and the heartbeat. A request whose
 reply does not come (lost link, timeout, cancelled by the site's deadline) drops the link and
@@ -37,12 +38,16 @@ __all__ = ["MtsController", "MtsControllerConfig"]
 
 
 class MtsControllerConfig(NetworkControllerConfig):
-    """A controller speaking the MTS-like stub line protocol (one actuator)."""
+    """A controller speaking the MTS-like stub line protocol (its channels, one per actuator)."""
 
     kind: Literal["mts"] = "mts"
     port: int = Field(5021, ge=1, le=65535)
     wait_timeout: float = Field(10.0, gt=0.0, le=3600.0)
     """Server-side WAIT bound of a move, s; a ramp still running then is an error."""
+    external_field: str | None = Field(None, pattern=r"^[a-z_]+$")
+    """The external channel (``Daq.external``): the key of the ``ACQUIRE`` reply that carries
+    a second transducer's displacement (mm), read from the same reply (no extra round trip);
+    ``sim-actuator serve --protocol mts`` sends the specimen's as ``specimen``. None: none."""
 
 
 def _float(fields: dict[str, str], key: str, where: str) -> float:
@@ -52,17 +57,32 @@ def _float(fields: dict[str, str], key: str, where: str) -> float:
         raise ControllerError(f"{where}: reply lacks a numeric {key!r}: {fields}") from None
 
 
+def _floats(fields: dict[str, str], key: str, where: str, n: int) -> tuple[float, ...]:
+    """``key``'s n comma-separated numbers (one channel: one number)."""
+    try:
+        values = tuple(float(v) for v in fields[key].split(","))
+    except (KeyError, ValueError):
+        values = ()
+    if len(values) != n:
+        raise ControllerError(f"{where}: reply lacks {n} numeric {key!r} value(s): {fields}")
+    return values
+
+
 class MtsController(NetworkController):
     """One actuator behind the MTS-like stub; every call is one or two pipelined lines."""
 
     config: MtsControllerConfig
 
-    def __init__(self, config: MtsControllerConfig) -> None:
-        super().__init__(config, f"mts controller {config.host}:{config.port}")
+    def __init__(self, config: MtsControllerConfig, n_actuators: int = 1) -> None:
+        super().__init__(config, f"mts controller {config.host}:{config.port}", n_actuators)
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._ramp: int | None = None
         """Id of the last ramp this adapter completed (for ``ACQUIRE <id>``)."""
+        self._acquired: dict[str, str] = {}
+        """The last ``ACQUIRE`` reply (the external channel is read from it)."""
+        if config.external_field is not None:
+            self.external_channel = f"ACQUIRE {config.external_field}"
 
     # -- the transport -------------------------------------------------------------------------
 
@@ -98,11 +118,12 @@ class MtsController(NetworkController):
                 raise ControllerError(
                     f"{self.where}: speaks protocol {info.get('protocol')!r} version "
                     f"{info.get('version')!r}; this adapter needs {PROTOCOL} {PROTOCOL_VERSION}")
-            if info.get("dofs") != "1":
-                raise ControllerError(f"{self.where}: has {info.get('dofs')} dofs, expected 1")
+            if info.get("dofs") != str(self.n_actuators):
+                raise ControllerError(f"{self.where}: has {info.get('dofs')} dofs, expected "
+                                      f"{self.n_actuators}")
             await self._ask(["OPEN", f"SET_RAMP_TIME {cfg.ramp_time!r}"])
             self._ramp = None  # a restarted controller forgot the old link's ramp ids
-            self._heartbeat.observe(int(_float(await self._ask(["STATUS"]), "heartbeat",
+            self._heartbeats[0].observe(int(_float(await self._ask(["STATUS"]), "heartbeat",
                                                self.where)))
         except Refused as exc:
             self._drop(failed=False)
@@ -159,12 +180,13 @@ class MtsController(NetworkController):
             status = await self._ask(["STATUS"])
         except Refused as exc:
             raise ControllerError(f"{self.where}: STATUS refused: {exc}") from None
-        self._heartbeat.observe(int(_float(status, "heartbeat", self.where)))
+        self._heartbeats[0].observe(int(_float(status, "heartbeat", self.where)))
         return status
 
     # -- the wire of the controller interface -------------------------------------------------
 
-    async def _move(self, target: float) -> None:
+    async def _move(self, targets: tuple[float, ...]) -> None:
+        target: float | list[float] = targets[0] if len(targets) == 1 else list(targets)
         status = await self._status()
         if status.get("state") == "INTERLOCK" and self._interlock_ours:
             await self._ask_control(["INTERLOCK OFF"])
@@ -183,7 +205,7 @@ class MtsController(NetworkController):
                 f"fault {status.get('fault')}")
         wait = self.config.wait_timeout
         try:
-            reply = await self._ask([f"RUN {target!r} {wait!r}"],
+            reply = await self._ask([f"RUN {' '.join(map(repr, targets))} {wait!r}"],
                                     timeout=wait + self.config.request_timeout, motion=True)
         except Refused as exc:
             if exc.code == "TIMEOUT":
@@ -192,18 +214,26 @@ class MtsController(NetworkController):
             raise ControllerError(f"{self.where}: move to {target!r} mm refused: {exc}"
                                   ) from None
         self._ramp = int(_float(reply, "ramp", self.where))
-        if _float(reply, "command", self.where) != target:
+        if _floats(reply, "command", self.where, self.n_actuators) != targets:
             raise ControllerError(f"{self.where}: ramp {self._ramp} ran to "
                                   f"{reply.get('command')} mm, commanded {target!r} mm")
 
-    async def _measure(self) -> tuple[float, float]:
+    async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         ramp = -1 if self._ramp is None else self._ramp
         try:
             status, reply = await self._ask_all(["STATUS", f"ACQUIRE {ramp}"])
         except Refused as exc:
             raise ControllerError(f"{self.where}: ACQUIRE {ramp} refused: {exc}") from None
-        self._heartbeat.observe(int(_float(status, "heartbeat", self.where)))
-        return (_float(reply, "displacement", self.where), _float(reply, "force", self.where))
+        self._heartbeats[0].observe(int(_float(status, "heartbeat", self.where)))
+        n = self.n_actuators
+        self._acquired = reply
+        return (_floats(reply, "displacement", self.where, n),
+                _floats(reply, "force", self.where, n))
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        field = self.config.external_field
+        assert field is not None  # only called with an external channel
+        return _floats(self._acquired, field, self.where, self.n_actuators)
 
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
         await self._ask_control(["INTERLOCK ON"] if on
@@ -220,6 +250,8 @@ class MtsController(NetworkController):
 KIND = ControllerKind(
     name="mts",
     config=MtsControllerConfig,
-    factory=lambda config, n: MtsController(config),
-    summary="an MTS-CSI-like line controller over TCP, e.g. `sim-actuator serve --protocol mts`",
+    factory=MtsController,
+    summary="an MTS-CSI-like line controller over TCP, e.g. `sim-actuator serve --protocol mts`, "
+    "its channels one ramp",
+    max_actuators=None,
 )

@@ -1,6 +1,7 @@
 """What the networked controller adapters (Modbus, MTS-like) share: the link and its rules.
 
-One actuator behind a controller over TCP. Every call takes the adapter's lock, reconnects after
+Actuators behind a controller over TCP (``n_actuators`` channels where the wire has them).
+Every call takes the adapter's lock, reconnects after
 a loss with jittered backoff (``backoff.py``), and checks a heartbeat that must keep changing
 (``_link.HeartbeatWatch``). A motion command whose outcome is unknown (timeout, lost link,
 cancelled by the site's deadline) raises and is never re-sent by the adapter; a *new* command
@@ -21,23 +22,27 @@ import math
 
 from ..backoff import Backoff
 from ._link import HeartbeatWatch, NetworkControllerConfig
-from .base import ControllerError, Daq, PhysicalController
+from .base import ControllerError, Daq, PhysicalController, wrong_count
 
 __all__ = ["NetworkController"]
 
 
 class NetworkController(PhysicalController, abc.ABC):
-    """One actuator behind a networked controller; every call is a network round trip."""
+    """Actuators behind a networked controller; every call is a network round trip."""
 
     inline = False
-    n_actuators = 1
 
-    def __init__(self, config: NetworkControllerConfig, where: str) -> None:
+    def __init__(self, config: NetworkControllerConfig, where: str,
+                 n_actuators: int = 1) -> None:
         self.config = config
         self.stiffness = config.stiffness
         self.where = where
+        self.n_actuators = n_actuators
         self._lock = asyncio.Lock()
-        self._heartbeat = HeartbeatWatch(config.heartbeat_timeout, where)
+        self._heartbeats = [HeartbeatWatch(config.heartbeat_timeout, where if n_actuators == 1
+                                           else f"{where} channel {c + 1}")
+                            for c in range(n_actuators)]
+        """One per channel: each channel's counter must keep changing."""
         self._backoff = Backoff(config.reconnect_min,
                                 max(config.reconnect_min, config.reconnect_max))
         self._interlock_ours = False
@@ -65,12 +70,18 @@ class NetworkController(PhysicalController, abc.ABC):
         """Tell the controller the bridge leaves (the lock is held, the link alive)."""
 
     @abc.abstractmethod
-    async def _move(self, target: float) -> None:
-        """Move to ``target`` mm (the lock is held, the link is fresh or alive)."""
+    async def _move(self, targets: tuple[float, ...]) -> None:
+        """Move every actuator to its target, mm (the lock is held, the link is fresh or
+        alive)."""
 
     @abc.abstractmethod
-    async def _measure(self) -> tuple[float, float]:
-        """(displacement mm, force kN) of the last move (the lock is held)."""
+    async def _measure(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(displacements mm, forces kN) of the last move (the lock is held)."""
+
+    async def _measure_external(self) -> tuple[float, ...]:
+        """The external channel's displacements, mm (the lock is held, right after
+        ``_measure``); only called when ``external_channel`` is set."""
+        raise ControllerError(f"{self.where}: this controller kind has no external channel")
 
     @abc.abstractmethod
     async def _set_interlock(self, on: bool, reset_fault: bool = False) -> None:
@@ -89,7 +100,8 @@ class NetworkController(PhysicalController, abc.ABC):
 
     def _drop(self, *, failed: bool = True) -> None:
         self._close_transport()
-        self._heartbeat.reset()
+        for watch in self._heartbeats:
+            watch.reset()
         if failed:
             self._backoff.failed()
 
@@ -106,30 +118,36 @@ class NetworkController(PhysicalController, abc.ABC):
         self._backoff.succeeded()
 
     # -- the controller interface --------------------------------------------------------------
-    def _target(self, disp: tuple[float, ...]) -> float:
-        if len(disp) != 1:
-            raise ControllerError(f"{self.where}: drives 1 actuator, got {len(disp)} ctrl "
-                                  f"values {list(disp)}")
-        target = float(disp[0])
-        if not math.isfinite(target):
-            raise ControllerError(f"{self.where}: ctrl displacement {target!r} is not finite; "
+    def _targets(self, disp: tuple[float, ...]) -> tuple[float, ...]:
+        if len(disp) != self.n_actuators:
+            raise wrong_count(self.where, self.n_actuators, disp)
+        targets = tuple(float(d) for d in disp)
+        if not all(math.isfinite(t) for t in targets):
+            shown = targets[0] if len(targets) == 1 else list(targets)
+            raise ControllerError(f"{self.where}: ctrl displacement {shown!r} is not finite; "
                                   "not sent")
-        return target
+        return targets
 
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
-        target = self._target(disp)
+        targets = self._targets(disp)
         async with self._lock:
             await self._ensure_link()  # a fresh link reads the status before any motion
-            await self._move(target)
+            await self._move(targets)
 
     async def get_daq(self) -> Daq:
         async with self._lock:
             await self._ensure_link()
             disp, force = await self._measure()
-        if not (math.isfinite(disp) and math.isfinite(force)):
+            external = None if self.external_channel is None else \
+                await self._measure_external()
+        if not all(math.isfinite(v) for v in (*disp, *force, *(external or ()))):
+            one = len(disp) == 1
+            also = "" if external is None else \
+                f", {self.external_channel} {external[0] if one else list(external)!r} mm"
             raise ControllerError(f"{self.where}: non-finite measurement: displacement "
-                                  f"{disp!r} mm, force {force!r} kN")
-        return Daq((disp,), (force,))
+                                  f"{disp[0] if one else list(disp)!r} mm, force "
+                                  f"{force[0] if one else list(force)!r} kN{also}")
+        return Daq(disp, force, external)
 
     async def hold(self) -> None:
         """Engage the program interlock (stops a running move where it is)."""

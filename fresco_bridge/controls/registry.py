@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 
 from .base import Controller
+from .generic_tcp import KIND as GENERIC_TCP
 from .kind import ControllerConfigBase, ControllerKind
 from .modbus import KIND as MODBUS
 from .mts import KIND as MTS
@@ -24,12 +25,13 @@ CONTROLLER_KINDS: Mapping[str, ControllerKind] = MappingProxyType({kind.name: ki
     RIG,
     MODBUS,
     MTS,
+    GENERIC_TCP,
 )})  # fmt: skip
 """Controller kind name -> its declaration, in documentation order (``sim`` is the default)."""
 
 
 def known_kinds() -> str:
-    """``sim, rig, modbus or mts``: the kinds, as error texts name them."""
+    """``sim, rig, modbus, mts or generic-tcp``: the kinds, as error texts name them."""
     names = list(CONTROLLER_KINDS)
     return ", ".join(names[:-1]) + f" or {names[-1]}" if len(names) > 1 else names[0]
 
@@ -52,7 +54,7 @@ def controller_kinds_markdown() -> str:
     parts = []
     for kind in CONTROLLER_KINDS.values():
         keys = ", ".join(f"`{k}`" for k in kind.config.model_fields if k != "kind")
-        actuators = {None: "one model per actuator", 1: "one actuator"}.get(
+        actuators = {None: "any number of actuators", 1: "one actuator"}.get(
             kind.max_actuators, f"up to {kind.max_actuators} actuators")
         parts.append(f"`{kind.name}`: {kind.summary}; {actuators}; keys {keys}")
     return "<br>".join(parts)

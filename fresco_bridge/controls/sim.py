@@ -16,7 +16,7 @@ from sim_actuator.config import ModelKindName
 from sim_actuator.effects import Sensor
 from sim_actuator.models import MODEL_PARAMETERS, HysteresisModel, ModelParameterError, make_model
 
-from .base import Daq, InlineController
+from .base import Daq, InlineController, diagonal
 from .kind import ControllerConfigBase, ControllerKind
 
 
@@ -101,11 +101,11 @@ class SimController(InlineController):
     def tangent_stiffness_now(self) -> tuple[float, ...]:
         tangent = self._tangent
         if tangent != self._diag_of:  # the same matrix object while the tangent is unchanged
-            self._diag_of, self._diag = tangent, _diagonal(tangent)
+            self._diag_of, self._diag = tangent, diagonal(tangent)
         return self._diag
 
     def initial_stiffness_now(self) -> tuple[float, ...]:
-        return _diagonal(tuple(m.initial_tangent for m in self._models))
+        return diagonal(tuple(m.initial_tangent for m in self._models))
 
     def reset(self) -> None:
         """Back to the virgin specimen (a new integrator session starts from zero)."""
@@ -116,20 +116,13 @@ class SimController(InlineController):
         self._tangent = tuple(m.initial_tangent for m in self._models)
 
 
-def _diagonal(values: tuple[float, ...]) -> tuple[float, ...]:
-    """diag(values), n×n column-major (slice assignment: no Python loop over n² entries)."""
-    n = len(values)
-    out = [0.0] * (n * n)
-    out[:: n + 1] = values
-    return tuple(out)
-
-
 KIND = ControllerKind(
     name="sim",
     config=SimControllerConfig,
     factory=lambda config, n: SimController.from_params(
         n, config.model, dict(config.params), load_cell_noise=config.load_cell_noise,
         noise_seed=config.noise_seed),
-    summary="in-process specimen model (`controller.model`), material semantics = OpenSees",
+    summary="in-process specimen model (`controller.model`) per actuator, material semantics = "
+    "OpenSees",
     max_actuators=None,
 )

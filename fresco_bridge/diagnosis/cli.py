@@ -13,6 +13,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from ..element_history import vocabulary
 from ..progress import status
 from .load import UNITS, DiagnosisInputError, Record, load_record
 from .names import AUTO, AUTO_FAMILIES, BASELINES
@@ -41,8 +42,10 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
         "diagnose", help="where a test departs from its simulation, which unmodelled effect "
                          "causes it, and how far the gap shrinks once it is added")
     p.add_argument("record", type=Path, nargs="+",
-                   help="a bridge run directory, or a CSV with time,cmd_disp,meas_force "
-                        "(meas_disp optional); several records of one device with "
+                   help="a bridge run directory, or a CSV whose header names time, "
+                        "meas_force and a displacement (accepted names: "
+                        f"{vocabulary().replace('%', '%%')}; without cmd_disp the record has "
+                        "no command channel); several records of one device with "
                         "--same-device")
     p.add_argument("--baseline", default=AUTO,
                    help=f"the sim's law: {AUTO} (default: each of "
@@ -175,7 +178,7 @@ def _diagnose(args: argparse.Namespace) -> int:
                 if kind == AUTO else f"fitting the {kind} baseline, then each candidate effect")
     status(f"diagnose: {record.size} samples; {baseline}")
     from ..progress import ProgressBar
-    from .report import summary, write_json, write_report
+    from .outputs import summary, write_json, write_report
     from .verdict import diagnose
 
     with ProgressBar("diagnose", 0, enabled=not args.no_progress) as bar:  # total: diagnose
@@ -193,7 +196,7 @@ def _diagnose(args: argparse.Namespace) -> int:
 
 def _device(args: argparse.Namespace, records: list[Record], options: Any) -> int:
     from .multi import diagnose_device, summary_device
-    from .report import to_json, write_report
+    from .outputs import to_json, write_report
 
     doc = diagnose_device(records, options)
     print(summary_device(doc))
@@ -226,7 +229,10 @@ def _bench(args: argparse.Namespace) -> int:
             + " and diagnosed blind")
     from ..progress import ProgressBar
     from ..sweeps import run_sweep
-    from .bench import bench_items, diagnose_one, format_bench, summarise_bench
+
+    bench = _bench_module()
+    bench_items, diagnose_one = bench.bench_items, bench.diagnose_one
+    format_bench, summarise_bench = bench.format_bench, bench.summarise_bench
 
     items = bench_items(args.n, args.seed, args.steps, args.realism,
                         None if args.records is None else str(args.records),
@@ -246,6 +252,25 @@ def _bench(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
     return 0
+
+
+def _bench_module() -> Any:
+    """The bench generators (``benchmarks/diagnosis``), imported only when the bench runs: they
+    are not part of the product and live beside it in the repository checkout."""
+    import importlib
+
+    try:
+        return importlib.import_module("benchmarks.diagnosis.bench")
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("benchmarks", "benchmarks.diagnosis"):
+            raise
+    root = Path(__file__).resolve().parents[2]
+    if not (root / "benchmarks" / "diagnosis" / "bench.py").is_file():
+        raise DiagnosisInputError(
+            "diagnose-bench needs the repository checkout: its record generators live in "
+            "benchmarks/diagnosis/, not in the installed package")
+    sys.path.insert(0, str(root))
+    return importlib.import_module("benchmarks.diagnosis.bench")
 
 
 def diagnosis_command(args: argparse.Namespace) -> int:

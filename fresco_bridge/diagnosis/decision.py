@@ -22,13 +22,15 @@ from .scored import Scored as _Scored
 from .scored import finite as _finite
 from .scored import gap as _gap
 
-__all__ = ["FLAG_CONFIDENCE_FACTOR", "LOW_CONFIDENCE", "PAIR_MARGIN_PCT", "decide", "pct_text",
-           "systematic_verdict"]
+__all__ = ["FLAG_CONFIDENCE_FACTOR", "HIGH_CONFIDENCE", "LOW_CONFIDENCE", "PAIR_MARGIN_PCT",
+           "confidence_words", "decide", "pct_text", "systematic_verdict"]
 
 FLAG_CONFIDENCE_FACTOR = 0.5
 """The confidence is multiplied by this for each flagged parameter of the winning effect."""
 LOW_CONFIDENCE = 0.5
 """Below this confidence the verdict names the runner-up it could not separate."""
+HIGH_CONFIDENCE = 0.8
+"""From this confidence on the words say "high" (between the two: "moderate")."""
 PAIR_MARGIN_PCT = 5.0
 
 
@@ -180,3 +182,25 @@ def _separation(best: _Scored, runner: _Scored | None, gap: float) -> float:
 
 def pct_text(x: float | None) -> str:
     return "—" if x is None or not math.isfinite(x) else f"{x:.2f} %"
+
+
+def confidence_words(verdict: dict[str, Any]) -> str:
+    """The confidence in words, for a person: its level on the scale (:data:`LOW_CONFIDENCE`,
+    :data:`HIGH_CONFIDENCE`) and, unless high, why — what the record does not separate or
+    measure. Written once into the verdict, so the summary, the report and the demo say the
+    same thing beside the same number."""
+    c = float(verdict["confidence"])
+    level = "high" if c >= HIGH_CONFIDENCE else "moderate" if c >= LOW_CONFIDENCE else "low"
+    effect = verdict["effect"]
+    if effect == "none":
+        return "high" if level == "high" else f"{level}: the withheld gap is close to the floor"
+    if effect in ("unexplained", "baseline_misfit"):
+        return f"{level}: no candidate effect explains the gap"
+    reasons = []
+    if verdict.get("not_separated_from"):
+        reasons.append(f"the record does not separate it from {verdict['not_separated_from']}")
+    elif verdict.get("runner_up") and level != "high":
+        reasons.append(f"the runner-up {verdict['runner_up']} explains much of the gap too")
+    if verdict.get("flags"):
+        reasons.append("the record does not measure " + ", ".join(verdict["flags"]))
+    return level if level == "high" and not reasons else f"{level}: " + "; ".join(reasons)

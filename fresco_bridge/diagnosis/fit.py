@@ -5,30 +5,27 @@ prediction of the first samples needs nothing after them, and the withheld sampl
 the residual. Residuals are the two channels, each normalised by its RMS (force by the measured
 force, displacement by the command), so a 1 % displacement error weighs like a 1 % force error.
 
-The solver is ``lawfit.bounded_least_squares``; the residual, the Jacobian and the uncertainty
-are the diagnosis' own. The Jacobian is a forward difference in which every column that changes
-the law is one member of a population driven in parallel (``drive_many`` of
-``sim_actuator.models.paths``); columns of output effects (friction, viscosity, offsets) reuse
-the base drive. Parameter uncertainty is the Gauss-Newton covariance ``s² (JᵀJ)⁻¹`` inflated by
-(1 + ρ)/(1 − ρ) for the lag-1 autocorrelation ρ of the residual (correlated residuals carry less
-information than their count says).
+The solver, the difference step and the uncertainty are ``lawfit``'s
+(``bounded_least_squares``, ``difference_step``, ``parameter_std``); the residual and the
+Jacobian's batching are the diagnosis' own: every column that changes the law is one member of
+a population driven in parallel (``drive_many`` of ``sim_actuator.models.paths``); columns of
+output effects (friction, viscosity, offsets) reuse the base drive.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from fresco_bridge.lawfit import bounded_least_squares
+from fresco_bridge.lawfit import bounded_least_squares, difference_step, parameter_std
 from sim_actuator.models.paths import drive_many
 
-from .model import DZ_MAX, Context, Param, Spec, _law_vector, finish, law_force, piston_path
+from .model import DZ_MAX, Context, Param, Spec, finish, law_force, law_vector, piston_path
 
-__all__ = ["Fit", "autocorrelation", "fit_spec", "predict"]
+__all__ = ["Fit", "fit_spec", "predict"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -99,9 +96,7 @@ class _Problem:
         jac = np.empty((r0.size, x.size))
         population: list[tuple[int, float, FloatArray]] = []
         for j, p in enumerate(self.free):
-            h = 1e-3 * max(abs(float(x[j])), 1e-2 * (p.hi - p.lo))
-            if x[j] + h > p.hi:
-                h = -h
+            h = difference_step(float(x[j]), p.lo, p.hi)
             xj = x.copy()
             xj[j] += h
             if p.role == "out":
@@ -118,7 +113,7 @@ class _Problem:
             law = 0
             for _j, _h, xj in population:
                 values = self.values(xj)
-                law, vec = _law_vector(self.spec.law_kind, values)
+                law, vec = law_vector(self.spec.law_kind, values)
                 rows.append(vec)
                 gaps.append(values.get("gap", 0.0))
             self.evaluations += len(population)
@@ -126,12 +121,6 @@ class _Problem:
             for (j, h, xj), force in zip(population, forces, strict=True):
                 jac[:, j] = (self.residual_from(xj, force[index]) - r0) / h
         return jac
-
-
-def autocorrelation(r: FloatArray) -> float:
-    r = r - r.mean()
-    denom = float(np.dot(r, r))
-    return float(np.dot(r[1:], r[:-1])) / denom if denom > 0.0 else 0.0
 
 
 def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None, *,
@@ -153,11 +142,8 @@ def fit_spec(spec: Spec, ctx: Context, start: Mapping[str, float] | None = None,
         result = bounded_least_squares(problem.fun, x0, problem.lo, problem.hi, scale="jac",
                                        max_nfev=max_evaluations, jac=problem.jac,
                                        tolerance=tolerance)  # fmt: skip
-    x, r, jac = result.x, result.residual, result.jacobian
-    dof = max(r.size - x.size, 1)
-    rho = min(max(autocorrelation(r), 0.0), 0.99)
-    s2 = float(np.dot(r, r)) / dof * (1.0 + rho) / (1.0 - rho)
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
-    std = {p.name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, p in enumerate(problem.free)}
+    x, r = result.x, result.residual
+    stds = parameter_std(r, result.jacobian)
+    std = {p.name: float(stds[i]) for i, p in enumerate(problem.free)}
     return Fit(spec, problem.values(x), std, float(np.mean(r * r)), problem.evaluations,
                result.success, result.message)

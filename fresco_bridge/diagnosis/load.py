@@ -1,16 +1,14 @@
 """A test record for diagnosis, read from a bridge run directory or a CSV, checked, in mm/kN/s.
 
-The CSV header names the columns: ``time,cmd_disp,meas_force`` are required, ``meas_disp`` is
-optional (without it the interface layer cannot be seen). A record with no command channel —
-``time,meas_disp,meas_force``, or any record read with ``no_command`` (then ``meas_disp``, or
-else the one displacement column, is the measured displacement) — drives the law by the
-measured displacement (``Record.no_command``; what that hides: :mod:`.nocommand`); a
-``cmd_disp`` identical to ``meas_disp`` gets a note (an ideal rig, or a copied channel?).
-The bridge's own export
-(``fresco-bridge runs export``: ``time,step,site,cmd_disp,meas_disp,meas_force,session``) is
-read as is; a site with several actuators uses actuator 1 (``cmd_disp_1``...), a record with
-several integrator sessions its longest. Reading is :mod:`fresco_bridge.element_history`'s (the
-updater commands read the same way); every problem is a :class:`DiagnosisInputError` naming the
+Reading is :mod:`fresco_bridge.element_history`'s, in its one CSV vocabulary (``time``,
+``cmd_disp``, ``meas_disp``, ``meas_force``, or the aliases it documents: ``time,disp,force`` is
+a record of the measured displacement and force): ``time``, ``meas_force`` and a displacement are
+required. A record with no command channel — no ``cmd_disp`` column, or any record read with
+``no_command`` (then ``meas_disp``, or else the one displacement column, is the measured
+displacement) — drives the law by the measured displacement (``Record.no_command``; what that
+hides: :mod:`.nocommand`); a ``cmd_disp`` identical to ``meas_disp`` gets a note (an ideal rig,
+or a copied channel?). A site with several actuators uses actuator 1, a record with several
+integrator sessions its longest. Every problem is a :class:`DiagnosisInputError` naming the
 file, the row or column, and why.
 """
 
@@ -27,6 +25,7 @@ from ..element_history import (
     HistoryInputError,
     check_increasing,
     read_element_history,
+    vocabulary,
 )
 
 __all__ = [
@@ -259,7 +258,9 @@ def _from_history(path: Path, site: str | None, units: dict[str, float],
     cols = history.columns
     cmd, meas = cols.get("cmd_disp"), cols.get("meas_disp")
     if cmd is None and meas is None:
-        _read(path, site, ("time", "cmd_disp", "meas_force"), ("meas_disp",))  # its message
+        raise DiagnosisInputError(
+            f"{history.source}: no displacement column: give {vocabulary(['cmd_disp'])} "
+            f"and/or {vocabulary(['meas_disp'])} (accepted: {vocabulary()})")
     why = ("--no-command" if no_command else "the record has no cmd_disp column"
            if cmd is None else None)
     notes = list(history.notes)

@@ -284,7 +284,7 @@ def make_spec(ctx: Context, baseline: str, effects: Sequence[str],
 
 
 # -- prediction -----------------------------------------------------------------------------------
-def _law_vector(kind: str, values: Mapping[str, float]) -> tuple[int, FloatArray]:
+def law_vector(kind: str, values: Mapping[str, float]) -> tuple[int, FloatArray]:
     if kind == "bilinear":
         return LAW_BILINEAR, np.array([values["k0"], values["fy"], values["alpha"]])
     if kind == "elastic":  # a bilinear with alpha = 1 is k·d exactly, whatever fy
@@ -348,7 +348,7 @@ def reference(cmd: FloatArray, values: Mapping[str, float]) -> FloatArray:
     if u:
         direction = np.zeros_like(cmd)
         direction[1:] = np.diff(cmd)
-        out = cmd - u * _held_sign(direction)
+        out = cmd - u * held_sign(direction)
     a = values.get("amplitude_error", 0.0)
     return out * (1.0 + a) if a else out
 
@@ -379,7 +379,7 @@ def piston_path(ctx: Context, values: Mapping[str, float]) -> tuple[FloatArray, 
 def law_force(spec: Spec, ctx: Context, values: Mapping[str, float]) -> FloatArray:
     """Connection force at the record's samples (the law behind the pin gap, if any)."""
     path, index = piston_path(ctx, values)
-    law, vec = _law_vector(spec.law_kind, values)
+    law, vec = law_vector(spec.law_kind, values)
     force: FloatArray = drive(law, vec, path, values.get("gap", 0.0), DZ_MAX)[index]
     return force
 
@@ -409,7 +409,7 @@ def friction_force(x: FloatArray, v: FloatArray, coulomb: float, slip: float) ->
     if not coulomb:
         return np.zeros_like(x)
     if slip <= 1e-9 * (float(np.max(np.abs(x))) or 1.0):
-        return coulomb * _held_sign(v)
+        return coulomb * held_sign(v)
     out: FloatArray = drive(LAW_BILINEAR, np.array([coulomb / slip, coulomb, 0.0]), x, 0.0,
                             DZ_MAX)
     return out
@@ -426,7 +426,7 @@ def rate_force(v: FloatArray, viscous: float, exponent: float, v_ref: float) -> 
     return out
 
 
-def _held_sign(v: FloatArray) -> FloatArray:
+def held_sign(v: FloatArray) -> FloatArray:
     """sign(v), keeping the last non-zero sign through holds (Coulomb memory of the rig)."""
     s = np.sign(v)
     idx = np.where(s != 0.0, np.arange(s.size), 0)

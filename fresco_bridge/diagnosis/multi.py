@@ -50,10 +50,17 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-from fresco_bridge.lawfit import Solution, bounded_least_squares, multi_start
+from fresco_bridge.lawfit import (
+    Solution,
+    bounded_least_squares,
+    difference_step,
+    multi_start,
+    parameter_std,
+)
+from fresco_bridge.numbers import pct
 
 from .baseline import RESTARTS, SCOUT_EVALUATIONS, fit_baseline, select_family
-from .fit import autocorrelation, predict
+from .fit import predict
 from .load import DiagnosisInputError, Record
 from .model import (
     AUTO,
@@ -67,9 +74,9 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
-from .scored import at_bound
+from .scored import MIN_SHRINK_PCT, PARSIMONY_PCT, at_bound
 from .scored import gap as _gap
-from .verdict import MIN_SHRINK_PCT, PARSIMONY_PCT, Options, diagnose, stop_of
+from .verdict import Options, diagnose, stop_of
 
 __all__ = ["MAGNITUDE_SPREAD", "SCHEMA", "diagnose_device", "fit_joint",
            "fit_joint_candidate", "summary_device"]
@@ -167,9 +174,7 @@ def _jacobian(residual: Callable[..., list[Any]], x: FloatArray,
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     jac = np.zeros((int(offsets[-1]), x.size))
     for j in range(x.size):
-        h = 1e-3 * max(abs(float(x[j])), 1e-2 * float(upper[j] - lower[j]))
-        if x[j] + h > upper[j]:
-            h = -h
+        h = difference_step(float(x[j]), float(lower[j]), float(upper[j]))
         xj = x.copy()
         xj[j] += h
         parts = residual(xj, only=owner[j])
@@ -222,19 +227,14 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
             lambda x: np.concatenate(parts(x)), x0, lower, upper, scale="jac",
             max_nfev=JOINT_CANDIDATE_EVALUATIONS,
             jac=lambda x: _jacobian(parts, x, lower, upper, owner), tolerance=1e-5)
-    r, jac = sol.residual, sol.jacobian
-    rho = min(max(autocorrelation(r), 0.0), 0.99)
-    s2 = float(np.dot(r, r)) / max(r.size - sol.x.size, 1) * (1.0 + rho) / (1.0 - rho)
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    sd = parameter_std(sol.residual, sol.jacobian)
     values, stds, after = [], [], []
     for i in range(n):
         v = values_of(sol.x, i)
         k = len(shared) + i * len(own)
         values.append({p.name: v[p.name] for p in [*shared, *own]})
-        stds.append({p.name: math.sqrt(max(float(cov[k + j, k + j]), 0.0))
-                     for j, p in enumerate(own)}
-                    | {p.name: math.sqrt(max(float(cov[j, j]), 0.0))
-                       for j, p in enumerate(shared)})
+        stds.append({p.name: float(sd[k + j]) for j, p in enumerate(own)}
+                    | {p.name: float(sd[j]) for j, p in enumerate(shared)})
         force, disp = predict(specs[i], fulls[i], v)
         after.append(_total(fulls[i].record, force, disp, withheld[i]))
     effect_shared = [p for p in shared if p.name in {q.name for q in
@@ -417,16 +417,17 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
     names = {c["effect"] for c in consistent}
     per_record = []
     for i, result in enumerate(results):
-        verdict = result["verdict"]["effect"]
+        verdict = result.verdict.effect
         own = set(verdict.split("+")) - NOT_EFFECTS
         if top is not None and not top["consistent"] and sources[i] in top["present_in"]:
             own.add(top["effect"])  # the story's effect, held here, is this test's own
         departures = sorted(own - names) + ([verdict] if verdict in ("baseline_misfit",
                                                                       "unexplained") else [])
         per_record.append({"source": sources[i], "gap_shared_law_pct": before[i],
-                           "verdict": verdict, "confidence": result["verdict"]["confidence"],
-                           "gap_before_pct": result["verdict"]["gap_before_pct"],
-                           "gap_after_pct": result["verdict"]["gap_after_pct"],
+                           "verdict": verdict, "confidence": result.verdict.confidence,
+                           "confidence_words": result.verdict.confidence_words,
+                           "gap_before_pct": result.verdict.gap_before_pct,
+                           "gap_after_pct": result.verdict.gap_after_pct,
                            "departures": departures})
     story: dict[str, Any]
     if all(b < opts.noise_floor_pct for b in before):
@@ -511,10 +512,11 @@ def summary_device(doc: dict[str, Any]) -> str:
                 for v, s in zip(p["values"], p["std"], strict=True)) + f" {p['unit']}")
     lines.append("per record (verdict against the shared law; departures):")
     for p in doc["per_record"]:
-        lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}), gap "
-                     f"{p['gap_before_pct']:.2f} → {p['gap_after_pct']:.2f} %; departures: "
+        lines.append(f"  {p['source']}: {p['verdict']} (confidence {p['confidence']:.2f}, "
+                     f"{p['confidence_words']}), gap "
+                     f"{pct(p['gap_before_pct'])} → {pct(p['gap_after_pct'])}; departures: "
                      + (", ".join(p["departures"]) or "none"))
-    hidden = {line for r in doc["results"] for line in r.get("hidden", [])}
+    hidden = {line for r in doc["results"] for line in r.hidden}
     if hidden:
         lines.append("hidden    no command channel in some records: " + "; ".join(sorted(hidden)))
     lines.append(f"time      {doc['seconds']:.1f} s")

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..report.diagnosis import DIAGNOSIS_PREFIX, headline
 from .load import load_record
-from .report import write_report
+from .outputs import write_report
 from .verdict import Options, diagnose
 
 __all__ = ["diagnose_into_run"]
@@ -25,4 +25,4 @@ def diagnose_into_run(run_dir: Path, site: str,
     ``DiagnosisInputError`` for a record it cannot diagnose (e.g. too short)."""
     result = diagnose(load_record(run_dir, site=site), Options(), progress=progress)
     write_report(result, run_dir / f"{DIAGNOSIS_PREFIX}{site}")
-    return headline(result)
+    return headline(result.to_json())

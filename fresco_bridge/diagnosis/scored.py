@@ -101,7 +101,10 @@ class Scored:
                     out[p.name] = (f"relative std {relative:.3g} above {MAX_RELATIVE_STD:g}")
         return out
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self, systematic: Scored | None = None) -> dict[str, Any]:
+        """The JSON row; ``systematic``: this candidate scored without the white noise
+        (:func:`without_noise`), whose gap, shrink and score the row carries beside the raw
+        ones (a verdict on that basis quotes them)."""
         flags = self.flags
         return {
             "name": self.name,
@@ -115,6 +118,9 @@ class Scored:
                                                                  self.fit.values),
             "gap_before": self.before, "gap_after": self.after,
             "shrink_pct": finite(self.shrink), "score": finite(self.score),
+            "systematic": None if systematic is None else {
+                "gap_after_pct": finite(systematic.after["total_pct"]),
+                "shrink_pct": finite(systematic.shrink), "score": finite(systematic.score)},
             "fit": None if self.fit is None else {
                 "converged": self.fit.ok, "evaluations": self.fit.evaluations,
                 "calibration_cost": self.fit.cost},

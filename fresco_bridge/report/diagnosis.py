@@ -1,7 +1,7 @@
 """The report's diagnosis section: what ``diagnose RUN --site S --report RUN/diagnosis-S`` wrote.
 
 A run directory holds a site's diagnosis in ``diagnosis-<site>/`` (``diagnosis.json`` and the
-plots of ``fresco_bridge.diagnosis.report``), written by ``diagnosis.rundir`` (the demo,
+plots of ``fresco_bridge.diagnosis.outputs``), written by ``diagnosis.rundir`` (the demo,
 ``report --diagnose SITE``) or by a user's ``diagnose --report``. The report reads it rather
 than diagnosing again (a diagnosis costs seconds to minutes), and imports nothing of the
 diagnosis, which draws with this package's figures.
@@ -17,7 +17,8 @@ from typing import Any, Final
 
 from ..numbers import fmt, pct
 
-__all__ = ["DIAGNOSIS_PREFIX", "diagnosis_sections", "headline"]
+__all__ = ["BASIS_WORDS", "DIAGNOSIS_PREFIX", "confidence_text", "diagnosis_sections", "headline",
+           "on_basis"]
 
 DIAGNOSIS_PREFIX: Final = "diagnosis-"
 """``RUN/diagnosis-<site>/``: where a site's diagnosis lives in its run directory."""
@@ -26,6 +27,29 @@ _LAW_SHAPE: Final = frozenset({"k0", "fy", "alpha", "n", "bg_sum", "beta_share",
                                "cR2"})
 """A winner's parameters that shape the law rather than size the effect (its magnitude)."""
 _NOT_AN_EFFECT: Final = frozenset({"none", "unexplained", "baseline_misfit"})
+
+
+BASIS_WORDS: Final = {"raw": "as measured", "systematic": "white noise removed"}
+"""What a verdict's ``gap_basis`` means, in the words every table and figure heads it with."""
+
+
+def on_basis(row: dict[str, Any], basis: str) -> tuple[float | None, float | None,
+                                                       float | None]:
+    """(withheld gap after, shrink %, score) of a candidate row on the verdict's ``gap_basis``:
+    the one place the summary, the report and the figure take a candidate's figures from, so
+    they quote what the verdict quotes (a verdict scored without the white noise shows its
+    candidates without it too)."""
+    sys_row = row.get("systematic") if basis == "systematic" else None
+    if sys_row is not None:
+        return sys_row["gap_after_pct"], sys_row["shrink_pct"], sys_row["score"]
+    return row["gap_after"]["total_pct"], row["shrink_pct"], row["score"]
+
+
+def confidence_text(verdict: dict[str, Any]) -> str:
+    """``0.08 (low: the record does not separate it from friction)``: the number and its words
+    (``verdict.confidence_words``, written by the diagnosis)."""
+    words = verdict.get("confidence_words")
+    return f"{verdict['confidence']:.2f}" + ("" if not words else f" ({words})")
 
 
 def headline(result: dict[str, Any]) -> dict[str, Any]:
@@ -41,6 +65,8 @@ def headline(result: dict[str, Any]) -> dict[str, Any]:
         "baseline": result["baseline"]["kind"],
         "effect": verdict["effect"],
         "confidence": verdict["confidence"],
+        "confidence_text": confidence_text(verdict),
+        "gap_basis": verdict.get("gap_basis", "raw"),
         "gap_before_pct": verdict["gap_before_pct"],
         "gap_after_pct": verdict["gap_after_pct"],
         "shrink_pct": verdict["shrink_pct"],
@@ -81,20 +107,23 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
     rows = [
         ("record", h["record"]),
         ("sim (baseline law, fitted on the calibration part)", h["baseline"]),
-        ("verdict", f"{h['effect']} (confidence {h['confidence']:.2f})"),
+        ("verdict", f"{h['effect']} (confidence {h['confidence_text']})"),
         ("magnitude", magnitude),
-        ("withheld gap without → with it (force and displacement NRMS)", _gap_row(h, floor)),
+        ("withheld gap without → with it (force and displacement NRMS, "
+         f"{BASIS_WORDS.get(h['gap_basis'], h['gap_basis'])})", _gap_row(h, floor)),
         ("shrink", pct(h["shrink_pct"], 1) if h["effect"] not in _NOT_AN_EFFECT
          else f"– ({h['effect']}: no effect added)"),
         ("explanation", h["explanation"]),
     ]
     table = "".join(f'<tr><th>{_e(k)}</th><td data-key="{_e(k.split()[0])}">{_e(v)}</td></tr>'
                     for k, v in rows)
+    rows_on_basis = [(c["name"], *on_basis(c, h["gap_basis"]))
+                     for c in [*result["effects"], *result["pairs"][:3]]]
     candidates = "".join(
-        f'<tr><td>{_e(c["name"])}</td><td class="n">{pct(c["gap_after"]["total_pct"])}</td>'
-        f'<td class="n">{"–" if below_floor else pct(c["shrink_pct"], 1)}</td>'
-        f'<td class="n">{"–" if below_floor else fmt(c["score"], digits=3)}</td></tr>'
-        for c in [*result["effects"], *result["pairs"][:3]])
+        f'<tr><td>{_e(name)}</td><td class="n">{pct(after)}</td>'
+        f'<td class="n">{"–" if below_floor else pct(shrink, 1)}</td>'
+        f'<td class="n">{"–" if below_floor else fmt(score, digits=3)}</td></tr>'
+        for name, after, shrink, score in rows_on_basis)
     parts = [
         f'<section id="diagnosis-{_e(site)}"><h2>Diagnosis: {_e(site)}</h2>',
         "<p>Where the test departs from its simulation: a law fitted on the first part of the "
@@ -111,7 +140,8 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
                          "and predicting the whole record. Bottom: the force residual in time, "
                          "measured − sim, for each model; the shaded part is the withheld one "
                          "the gaps are scored on."))
-    parts.append("<table><tr><th>candidate effect</th><th>withheld gap after</th>"
+    parts.append("<table><tr><th>candidate effect</th><th>withheld gap after "
+                 f"({_e(BASIS_WORDS.get(h['gap_basis'], h['gap_basis']))})</th>"
                  "<th>shrink</th><th>score (shrink − 2 % per parameter)</th></tr>"
                  f"{candidates}</table></section>")
     return "".join(parts)

@@ -40,13 +40,13 @@ PANEL_SIZE = (3.6, 3.2)
 """Inches per panel of a grid of small multiples."""
 
 
-def _png(fig: Figure) -> bytes:
+def png_bytes(fig: Figure) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI)
     return buf.getvalue()
 
 
-def _stride(n: int) -> int:
+def plot_stride(n: int) -> int:
     return max(1, math.ceil(n / MAX_POINTS))
 
 
@@ -69,7 +69,7 @@ def _no_data(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def _min_span(ax: Axes, values: np.ndarray, span: float) -> None:
+def min_span(ax: Axes, values: np.ndarray, span: float) -> None:
     """Keep at least ``span`` visible around the data, so round-off does not fill the axis."""
     finite = values[np.isfinite(values)]
     if finite.size and float(finite.max() - finite.min()) < span:
@@ -123,7 +123,7 @@ def hysteresis(site: str, signals: Sequence[SessionSignals], *, served: bool = F
     ax = fig.add_subplot()
     many = len(signals) > 1
     for sig in signals:
-        k = _stride(sig.step.size)
+        k = plot_stride(sig.step.size)
         for a in range(sig.cmd.shape[1]):
             ax.plot(sig.meas[::k, a], sig.force[::k, a], lw=0.8,
                     label=_label(sig, a, many) or None)
@@ -135,7 +135,7 @@ def hysteresis(site: str, signals: Sequence[SessionSignals], *, served: bool = F
     ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)
 
 
 MARKER_COLORS = {"hold": "tab:red", "limit": "tab:orange", "monitor-warning": "tab:purple"}
@@ -151,7 +151,7 @@ def command_vs_measured(
     ax = fig.add_subplot()
     many = len(signals) > 1
     for sig in signals:
-        k = _stride(sig.step.size)
+        k = plot_stride(sig.step.size)
         for a in range(sig.cmd.shape[1]):
             label = _label(sig, a, many)
             sep = ", " if label else ""
@@ -171,7 +171,7 @@ def command_vs_measured(
     ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def error_monitors(
@@ -190,7 +190,7 @@ def error_monitors(
     many = len(signals) > 1
     times: dict[tuple[int, int], float] = {}
     for sig, ti_s in zip(signals, ti, strict=True):
-        k = _stride(sig.step.size)
+        k = plot_stride(sig.step.size)
         for a in range(sig.cmd.shape[1]):
             err = sig.meas[:, a] - sig.cmd[:, a]
             ax_e.plot(sig.time[::k], err[::k], lw=0.8, label=_label(sig, a, many) or None)
@@ -207,7 +207,7 @@ def error_monitors(
     mons = [m for m in monitors if (m.session, m.step) in times]
     if mons:
         t = np.array([times[(m.session, m.step)] for m in mons])
-        k = _stride(t.size)
+        k = plot_stride(t.size)
         ax_ti.plot(t[::k], np.array([m.ti for m in mons])[::k], lw=0.9, ls="--",
                    label="online monitor (recorded)")
         amp = np.array([math.nan if m.fei_amplitude is None else m.fei_amplitude for m in mons])
@@ -218,8 +218,8 @@ def error_monitors(
         ax_delay.plot(t[::k], 1000.0 * delay[::k], color="tab:orange", lw=0.9,
                       label="FEI delay")
         ax_delay.set_ylabel("FEI delay (ms)", color="tab:orange")
-        _min_span(ax_fei, amp, 0.02)
-        _min_span(ax_delay, 1000.0 * delay, 0.2)  # round-off is not a delay worth a scale
+        min_span(ax_fei, amp, 0.02)
+        min_span(ax_delay, 1000.0 * delay, 0.2)  # round-off is not a delay worth a scale
         if not np.isfinite(amp).any():
             _no_data(ax_fei, "FEI window not yet full (fewer steps than telemetry.monitor_window)")
     else:
@@ -232,7 +232,7 @@ def error_monitors(
     _legend(ax_e)
     _legend(ax_ti)
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
@@ -242,7 +242,7 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     many = len(signals) > 1
     lo, hi = math.inf, -math.inf
     for sig in signals:
-        k = _stride(sig.step.size)
+        k = plot_stride(sig.step.size)
         for a in range(sig.cmd.shape[1]):
             ax.plot(sig.cmd[::k, a], sig.meas[::k, a], lw=0.8, label=_label(sig, a, many) or None)
             both = np.concatenate([sig.cmd[:, a], sig.meas[:, a]])
@@ -260,7 +260,7 @@ def synchronization(site: str, signals: Sequence[SessionSignals]) -> bytes:
     ax.grid(alpha=GRID_ALPHA)
     _legend(ax)
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
@@ -273,23 +273,23 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     update time (in time and as a distribution)."""
     fig = Figure(figsize=(10.0, 10.0))
     axes = fig.subplots(3, 2)
-    k = _stride(twin_d.size)
+    k = plot_stride(twin_d.size)
     ax = axes[0, 0]
     ax.plot(twin_d[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8})
     ax.set_xlabel("twin displacement (mm)")
     ax.set_ylabel("predicted force (kN)")
     ax.set_title("twin hysteresis (predicted)", fontsize=10)
     ax = axes[0, 1]
-    ks = _stride(source_f.size)
+    ks = plot_stride(source_f.size)
     ax.plot(source_time[::ks], source_f[::ks], **{**TRUTH, "lw": 0.8},
-            label=f"source {source} (measured)")
+            label=f"measured at {source}")
     ax.plot(twin_time[::k], twin_f[::k], **{**PREDICTION, "lw": 0.8},
-            label=f"twin {twin} (predicted)")
+            label=f"served by {twin} (predicted)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (kN)")
     ax.set_title("predicted vs source force", fontsize=10)
     _legend(ax)
-    ku = _stride(steps.size)
+    ku = plot_stride(steps.size)
     ax = axes[1, 0]
     if np.isfinite(error).any():
         ax.plot(steps[::ku], error[::ku], lw=0.8, color="C1")
@@ -329,6 +329,6 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
             _no_data(ax, "no committed twin steps")
         elif n >= 2 and not steps.size:
             _no_data(ax, "no update lines (a record before format 5)")
-    fig.suptitle(f"Updatable site {twin}: its twin learned online from {source}", fontsize=11)
+    fig.suptitle(f"Updatable site {twin}: the twin of {source}, learned online", fontsize=11)
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)

@@ -1,13 +1,14 @@
 """``fresco-bridge report RUN_DIR``: one self-contained HTML file per run (PNGs inlined).
 
-Sections (element ids): ``run`` (metadata and notes), ``summary`` (numbers per site, session
-and actuator), ``site-<name>`` (hysteresis, command vs measured, error monitors,
-synchronization subspace; an updatable site, without an actuator, its hysteresis only),
-``updating-<name>`` for an updatable site (its twin hysteresis,
-predicted vs source force, the source's one-step error, learning lag and update time, from
-its update lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
-(``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events`` and ``config`` (the
-snapshot). The same summary numbers are
+Sections (element ids): ``overview`` (what a test engineer reads first: what was tested, the
+headline figures, the diagnosis in words, what to do next; ``report.overview``), ``summary``
+(numbers per site, session and actuator), ``site-<name>`` (hysteresis, command vs measured,
+error monitors, synchronization subspace; an updatable site, without an actuator, its
+hysteresis only), ``updating-<name>`` for an updatable site (its twin hysteresis, predicted vs
+source force, the source's one-step error, learning lag and update time, from its update
+lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
+(``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events``, ``run`` (metadata
+and notes) and ``config`` (the snapshot). The same summary numbers (and the overview's) are
 embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
 pipeline can read them without scraping the tables.
 """
@@ -38,6 +39,7 @@ from ..runs import (
 )
 from . import figures
 from .diagnosis import diagnosis_sections
+from .overview import overview_section
 
 REPORT_FILE = "report.html"
 MAX_EVENT_ROWS = 2000
@@ -51,14 +53,22 @@ th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
 pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:.85em}
 img{max-width:100%;display:block;margin:.5em 0}.note{background:#fff4d6;padding:.5em 1em}
 figure{margin:1em 0}figcaption{color:#555;font-size:.9em}.wide{overflow-x:auto}
+table.overview{font-size:1em;width:100%}table.overview th{width:12em}
+.fig{font-weight:600;font-variant-numeric:tabular-nums}
+caption{text-align:left;font-weight:600;padding:.3em 0}
 """
 
-# (key, header, unit) of the summary table; keys are SessionSummary fields.
+# (key, header, unit) of the summary's two per-session tables (a page wide each); keys are
+# SessionSummary fields.
 _COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("session", "session", ""), ("actuator", "actuator", ""), ("steps", "steps", ""),
     ("time_end", "end time", "s"), ("peak_cmd", "peak |command|", "mm"),
     ("peak_meas", "peak |measured|", "mm"), ("force_min", "min force", "kN"),
-    ("force_max", "max force", "kN"), ("max_tracking_error", "max |error|", "mm"),
+    ("force_max", "max force", "kN"),
+)
+_TRACKING_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("session", "session", ""), ("actuator", "actuator", ""),
+    ("max_tracking_error", "max |error|", "mm"),
     ("peak_amplitude_error", "peak amplitude error", "mm"), ("nrms", "NRMS", ""),
     ("ti_final", "final TI", "mm²"), ("fei_amplitude", "FEI amplitude", ""),
     ("fei_delay", "FEI delay", "s"), ("xcorr_delay", "xcorr delay", "s"),
@@ -118,20 +128,11 @@ def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = froze
     )
     parts.append("<table><tr><th>site</th><th>committed steps</th><th>sessions</th>"
                  f"<th>holds</th><th>limit events</th><th>events</th></tr>{site_rows}</table>")
-    head = "".join(f"<th>{_e(h)}{f' ({_e(u)})' if u else ''}</th>" for _, h, u in _COLUMNS)
-    rows = []
-    for s in summaries:
-        for d in s.sessions_detail:
-            na = s.site in twins
-            cells = "".join(
-                f'<td class="n" data-key="{k}">'
-                f'{"–" if na and k in _TRACKING_KEYS else _e(fmt(getattr(d, k), digits=6))}</td>'
-                for k, _, _ in _COLUMNS
-            )
-            rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
-    if rows:
-        parts.append(f'<div class="wide"><table><tr><th>site</th>{head}</tr>{"".join(rows)}'
-                     "</table></div>")
+    tables = [_session_table(summaries, twins, columns, caption)
+              for columns, caption in ((_COLUMNS, "Each session"),
+                                       (_TRACKING_COLUMNS, "Tracking of each session"))]
+    if any(s.sessions_detail for s in summaries):
+        parts.extend(tables)
         parts.append("<p>Errors are measured − command of each actuator; NRMS, TI, FEI and the "
                      "cross-correlation delay follow <code>fresco_bridge/indicators.py</code> "
                      "(positive delay: the measurement lags). TI decreasing means lag "
@@ -141,6 +142,22 @@ def _summary_section(summaries: list[SiteSummary], twins: frozenset[str] = froze
         parts.append('<p class="note">No committed steps in this run.</p>')
     parts.append("</section>")
     return "".join(parts)
+
+
+def _session_table(summaries: list[SiteSummary], twins: frozenset[str],
+                   columns: tuple[tuple[str, str, str], ...], caption: str) -> str:
+    head = "".join(f"<th>{_e(h)}{f' ({_e(u)})' if u else ''}</th>" for _, h, u in columns)
+    rows = []
+    for s in summaries:
+        na = s.site in twins
+        for d in s.sessions_detail:
+            cells = "".join(
+                f'<td class="n" data-key="{k}">'
+                f'{"–" if na and k in _TRACKING_KEYS else _e(fmt(getattr(d, k), digits=6))}</td>'
+                for k, _, _ in columns)
+            rows.append(f'<tr data-site="{_e(s.site)}"><td>{_e(s.site)}</td>{cells}</tr>')
+    return (f"<table><caption>{_e(caption)}</caption><tr><th>site</th>{head}</tr>"
+            f"{''.join(rows)}</table>")
 
 
 def _twin_site_section(run: Run, site: str, source: str) -> str:
@@ -301,6 +318,7 @@ def render_report(run: Run) -> str:
                                       for d in s.sessions_detail]}
                   for s in summaries},
     }
+    overview, data["overview"] = overview_section(run, summaries)
     generated = datetime.now(UTC).isoformat(timespec="seconds")
     started = run.meta.get("started_utc", "?")
     return "".join([
@@ -310,13 +328,14 @@ def render_report(run: Run) -> str:
         f"<p>Started {_e(started)} (UTC); sites: {_e(', '.join(run.sites) or 'none')}. "
         f"Report generated {_e(generated)} by fresco-bridge {_e(__version__)}. "
         "Units: mm, kN, s.</p>",
-        _meta_section(run),
+        overview,
         _summary_section(summaries, frozenset(run.sources())),
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
         *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
         *diagnosis_sections(run.directory, _img),
         _events_section(run),
+        _meta_section(run),
         _config_section(run),
         '<script type="application/json" id="summary-data">',
         json.dumps(data).replace("</", "<\\/"),

@@ -1,4 +1,5 @@
-"""``[[sites.limits]]``: one table per control point, validated (defaults: no limits at all)."""
+"""``[[sites.limits]]``: one table per control point, validated (defaults: no limits at all);
+``[sites.correction]``: the outer-loop displacement correction (off when absent)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from ..config_model import StrictConfig
+from .correction import CorrectionSettings
 from .limits import INF, ControlPointLimits
 
 
@@ -66,3 +68,74 @@ class ControlPointLimitsConfig(StrictConfig):
             step_time=self.step_time, policy=self.policy, max_substeps=self.max_substeps,
             force_min=v(self.force_min, -INF), force_max=v(self.force_max, INF),
         )
+
+
+class CorrectionConfig(StrictConfig):
+    """``[sites.correction]``: the outer-loop displacement correction (``safety/correction.py``).
+    Off when the table is absent. Units mm."""
+
+    tolerance: float | list[float]
+    """|target − measured| (mm) within which a control point counts as there: one value for
+    every corrected control point, or one per control point."""
+    max_correction: float | list[float]
+    """The farthest a corrected command may be from the target (mm), one value or one per
+    control point; a correction beyond it is never sent (→ ``policy``)."""
+    max_iterations: int = Field(default=5, ge=1, le=100)
+    """Corrected commands per step at most; still outside the tolerance after them → ``policy``."""
+    gain: float = Field(default=1.0, gt=0, le=1.0)
+    """Next command = last command + gain·(target − measured), in (0, 1]: 1 removes a linear
+    error (compliance, undershoot) in one iteration; above 1 a correction overshoots, and an
+    inelastic specimen keeps the excursion in its history (BENCHMARKS.md)."""
+    policy: Literal["hold", "accept-with-event"] = "hold"
+    """Not converged or beyond ``max_correction``: ``hold`` → HOLD; ``accept-with-event`` →
+    the integrator gets the force at the last position reached, and an event is recorded."""
+    measured: Literal["daq", "external"] = "daq"
+    """Which displacement is compared with the target: the controller's daq displacement, or
+    the external channel its ``[sites.controller]`` table names (docs/configuration.md)."""
+    actuators: list[int] | None = None
+    """The corrected control points (1-based, after the setup); default: every one."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CorrectionConfig:
+        for key in ("tolerance", "max_correction"):
+            value = getattr(self, key)
+            values = value if isinstance(value, list) else [value]
+            if not values:
+                raise ValueError(f"{key}: an empty list (give one value, or one per control "
+                                 "point)")
+            strict = key == "tolerance"
+            for i, v in enumerate(values, 1):
+                if (strict and not v > 0) or (not strict and not v >= 0):
+                    which = f" of control point {i}" if isinstance(value, list) else ""
+                    raise ValueError(f"{key}{which}: {v!r} mm must be "
+                                     f"{'> 0' if strict else '>= 0'}")
+        points = self.actuators
+        if points is not None and (not points or len(set(points)) != len(points)
+                                   or min(points) < 1):
+            raise ValueError(f"actuators {points}: distinct control points, 1-based, at "
+                             "least one")
+        return self
+
+    def to_settings(self, n_actuators: int) -> CorrectionSettings:
+        """The pure settings for a site of ``n_actuators`` control points (``ValueError``
+        naming the key that does not fit that count)."""
+        def per_point(key: str) -> list[float]:
+            value = getattr(self, key)
+            if not isinstance(value, list):
+                return [float(value)] * n_actuators
+            if len(value) != n_actuators:
+                raise ValueError(f"correction.{key}: {len(value)} value(s) for "
+                                 f"{n_actuators} control point(s)")
+            return [float(v) for v in value]
+
+        tolerance, most = per_point("tolerance"), per_point("max_correction")
+        if self.actuators is not None:
+            beyond = [a for a in self.actuators if a > n_actuators]
+            if beyond:
+                raise ValueError(f"correction.actuators {beyond}: the setup has "
+                                 f"{n_actuators} control point(s)")
+            for i in range(n_actuators):
+                if i + 1 not in self.actuators:
+                    tolerance[i] = INF  # not corrected: its command stays the target
+        return CorrectionSettings(tuple(tolerance), tuple(most), self.max_iterations,
+                                  self.gain, self.policy)

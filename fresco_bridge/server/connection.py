@@ -63,6 +63,8 @@ class SiteListener:
     """The listener's log lines about peers (errors, resets): one per cause per interval."""
     tls_handshakes: int = 0
     """TLS handshakes in flight (bounded by ``tls.MAX_HANDSHAKES``)."""
+    told_to_stop: int = 0
+    """Refused clients being answered with NaN now (bounded by ``refusal.MAX_REFUSALS``)."""
 
     def __post_init__(self) -> None:
         self.site.rejections = self.rejections
@@ -116,6 +118,9 @@ class SessionPump:
         self._write_blocked = False  # reading paused: the client does not read its replies
         self._timing: tuple[object, float] | None = None  # (event, start) of a pending request
         self.closed = False
+        self.on_refused: Callable[[ElementServerSession], None] | None = None
+        """Given, a client whose size ID the site cannot serve is handed to it with its
+        session (answered with NaN: ``refusal.py``) instead of being closed."""
         self._idle_timeout = idle_timeout = listener.idle_timeout
         self._loop = asyncio.get_running_loop()
         self._activity = self._loop.time()
@@ -304,6 +309,11 @@ class SessionPump:
             # and reported within the rate limit, so hostile churn grows neither log nor record
             self.listener.refuse("handshake", self.peer, f"ended before a valid size ID: "
                                  f"{reason}")
+            element = self._element
+            if (error and element is not None and element.size_id is not None
+                    and self.on_refused is not None):  # its requests follow: told to stop
+                self.on_refused(element)
+                return
         self._close()
 
     @property

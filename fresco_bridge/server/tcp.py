@@ -25,8 +25,11 @@ import socket
 import ssl
 from typing import Any, cast
 
+from protocol import ElementServerSession
+
 from ..sites import SiteError
 from .connection import HELD_BYTES_CAP, WRITE_HIGH_WATER, WRITE_LOW_WATER, SessionPump, SiteListener
+from .refusal import MAX_REFUSALS, Refusal
 from .tls import HANDSHAKE_TIMEOUT, MAX_HANDSHAKES, check_issued_directly, describe_failure
 
 log = logging.getLogger("fresco_bridge.server")
@@ -70,7 +73,7 @@ class TcpConnection(asyncio.Protocol):
         self.listener = listener
         self.site = listener.site
         self.tls = tls
-        self.pump: SessionPump | None = None
+        self.pump: SessionPump | Refusal | None = None
         self.transport: asyncio.Transport | None = None
         self._quickack: Any = None
         self._ack_sock: socket.socket | None = None
@@ -90,7 +93,10 @@ class TcpConnection(asyncio.Protocol):
         if not self.listener.allowlist.admits(host):
             self.listener.refuse("address", peer, "address not in allowed_clients "
                                  f"({self.listener.allowlist})")
-            transport.abort()
+            if self.tls is None:  # a plain client: told to stop (TLS bytes: cannot be)
+                self._tell_to_stop(transport)
+            else:
+                transport.abort()
             return
         sock = transport.get_extra_info("socket")
         if sock is not None:
@@ -172,9 +178,31 @@ class TcpConnection(asyncio.Protocol):
                                     self._pause, transport="tcp")
         except SiteError as exc:
             self.listener.refuse("busy" if self.site.busy else "state", peer, str(exc))
+            self._tell_to_stop(transport)
+            return
+        self.pump.on_refused = lambda session: self._tell_to_stop(transport, session)
+        transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
+        early, self._early = self._early, []
+        for data in early:
+            self.pump.feed(data)
+
+    def _tell_to_stop(self, transport: asyncio.Transport,
+                      session: ElementServerSession | None = None) -> None:
+        """A refused client: an element-protocol one is answered with NaN until it leaves
+        (``refusal.py``: OpenSees then stops instead of spinning); others, and those past
+        ``MAX_REFUSALS`` at once, are closed."""
+        listener = self.listener
+        if self.site.cfg.protocol != "element" or listener.told_to_stop >= MAX_REFUSALS:
             transport.abort()
             return
         transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
+        listener.told_to_stop += 1
+
+        def ended() -> None:
+            listener.told_to_stop -= 1
+
+        self.pump = Refusal(self._reply, transport.close, max_data_size=listener.max_data_size,
+                            session=session, ended=ended)
         early, self._early = self._early, []
         for data in early:
             self.pump.feed(data)

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 from protocol import Signals, SignalSizes
 
 from ..controls.base import Controller, Daq, InlineController
+from ..logs import cause_of
 from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
@@ -41,8 +42,9 @@ from ..safety import (
     all_finite,
     next_state,
 )
-from ..setups import LinearSetup, make_setup
+from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
+from ..tangent import TangentEstimate, TangentMethod
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
@@ -85,8 +87,11 @@ class ExperimentalSite:
                                                   "reset_on_new_session", False))
         """``[sites.controller] reset_on_new_session``: a new session starts a fresh specimen
         (not the session that continues a resumed run)."""
-        self.setup: LinearSetup = make_setup(cfg.setup, cfg.dofs)
-        self._plain = self.setup.kind == "NoTransformation"
+        self._tangent_method: TangentMethod = getattr(cfg, "tangent", "controller")
+        """``[[sites]] tangent`` of an experimental site (``tangent.py``); a kind without the
+        key (a twin) answers its controller's tangent."""
+        self.setup: Setup = make_setup(cfg.setup, cfg.dofs)
+        self._plain = self.setup.identity
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
         setup's calls."""
         if self.setup.n_actuators != controller.n_actuators:
@@ -131,7 +136,7 @@ class ExperimentalSite:
     # -- sessions ------------------------------------------------------------------------------
     def _reset_signals(self) -> None:
         n, na = self.cfg.dofs, self.setup.n_actuators
-        self.step = 0
+        self.step = self._session_first_step = 0
         self.time = 0.0
         self.commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
@@ -146,6 +151,7 @@ class ExperimentalSite:
         asks (the site's own force request, or a trial listener reading the published
         trial's measurement)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
+        self._estimate = TangentEstimate(self._tangent_method, na)  # per session
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
 
@@ -201,6 +207,7 @@ class ExperimentalSite:
             self.step, self.time = self._resume_at  # numbering; the specimen is not reset)
             self.commit_time = self.time
             self._resume_at = None
+        self._session_first_step = self.step  # the close line counts the session's own steps
         reset = getattr(self.controller, "reset", None)
         if reset is not None and self._reset_on_new_session and not resumed:
             reset()
@@ -216,8 +223,9 @@ class ExperimentalSite:
             self.peer, self._end_session = "", None
             return False
         (log.warning if error else log.info)(
-            "site %s: session %d closed after %d step(s): %s", self.name, self.session,
-            self.step, reason,
+            "site %s: session %d closed after %d step(s)%s: %s", self.name, self.session,
+            self.step - self._session_first_step, f" (steps {self._session_first_step + 1}-"
+            f"{self.step} of the resumed run)" if self._session_first_step else "", reason,
         )
         if self._uncommitted and self.state in (RUNNING, PAUSED):
             self._enter(Trigger.INTEGRATOR_LOST,
@@ -292,7 +300,8 @@ class ExperimentalSite:
             log.error("site %s: %s (%s)", self.name, exc, reason)
             return
         if new is HOLD:
-            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason)
+            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason,
+                      extra=cause_of(reason))  # one line per (site, cause) per interval
             self.guard.hold()
         else:
             log.warning("site %s: %s at step %d: %s (stays %s)", self.name, trigger, self.step,
@@ -459,6 +468,8 @@ class ExperimentalSite:
                                 f"non-finite ctrl {list(target)}; not forwarded")
             return None
         self.target = target
+        if (stalled := self._estimate.trial(target)) is not None:
+            self.event("tangent-fallback", stalled)
         if self.state is HOLD:
             return None
         self._daq_valid = False
@@ -617,6 +628,8 @@ class ExperimentalSite:
         self.step += 1
         self._uncommitted = False
         commit_time, self.commit_time = self.commit_time, self.time
+        if (refused := self._estimate.committed(self.ctrl, self.daq.force)) is not None:
+            self.event("tangent-fallback", refused)
         outlets = self.listeners
         lean = outlets.step_values
         try:
@@ -666,7 +679,8 @@ class ExperimentalSite:
             if sizes.disp else (),
             trial.vel if sizes.vel else (),
             trial.accel if sizes.accel else (),
-            (daq.force if plain else setup.basic_force(daq.force)) if sizes.force else (),
+            (daq.force if plain else setup.basic_force(daq.force, daq.disp))
+            if sizes.force else (),
             (self.time,) if sizes.time else (),
         )
 
@@ -697,7 +711,7 @@ class ExperimentalSite:
 
     def _tangent_from(self, k: tuple[float, ...] | None) -> tuple[float, ...]:
         if k is not None:
-            self._k_tangent = self.setup.basic_matrix(k)
+            self._k_tangent = self.setup.basic_matrix(self._estimate.answer(k))
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:

@@ -23,6 +23,7 @@ from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controll
 from ..controls.sim import SimControllerConfig
 from ..record import RecordError
 from ..record.export import read_record
+from ..tangent import TangentMethod
 from .base import Site
 from .experimental import ExperimentalSite
 from .kind import SiteConfigBase, SiteContext, SiteKind
@@ -57,14 +58,16 @@ class ExperimentalSiteConfig(SiteConfigBase):
     controller: ControllerConfig = Field(default_factory=SimControllerConfig)
     """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
     ``modbus``, ``mts``."""
+    tangent: TangentMethod = "controller"
+    """The tangent answered to action 13: the controller's (``controller``), its first answer
+    kept (``initial``), or estimated from the committed steps (``broyden``, ``bfgs``,
+    ``transpose``; docs/openfresco-setups.md)."""
 
     def actuators_fit(self, n_actuators: int) -> None:
-        most = controller_kind(self.controller.kind).max_actuators
-        if most is not None and n_actuators > most:
-            raise ValueError(
-                f"controller {self.controller.kind} drives {most} actuator(s); this site needs "
-                f"{n_actuators} (use setup OneActuator or dofs = 1)"
-            )
+        problem = controller_kind(self.controller.kind).actuators_problem(self.controller,
+                                                                         n_actuators)
+        if problem is not None:
+            raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
 
 
 def site_controller(cfg: ExperimentalSiteConfig) -> Controller:

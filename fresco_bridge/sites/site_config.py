@@ -9,7 +9,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..config_model import ClientAddress, ConfigPath, Name, StrictConfig
 from ..safety import ControlPointLimitsConfig
-from ..setups import SetupError, make_setup
+from ..setups import SetupError, SetupSpec, make_setup
 
 __all__ = ["SiteConfigBase"]
 
@@ -26,7 +26,9 @@ class SiteConfigBase(StrictConfig):
     """``element``: OpenSees genericClient / OpenFresco EE* clients; ``site``: ShadowExpSite."""
     dofs: int = Field(default=1, ge=1, le=64)
     """Number of basic DOFs of the element served (the -dof entries of genericClient)."""
-    setup: Literal["NoTransformation", "OneActuator"] = "NoTransformation"
+    setup: SetupSpec = "NoTransformation"
+    """A name (``NoTransformation``, ``OneActuator``) or a ``[sites.setup]`` table: OpenFresco's
+    setup as ``kind`` with its parameters (docs/openfresco-setups.md)."""
     damping: list[list[float]] | None = None
     """n×n damping matrix in basic DOFs, row by row (answers action 14); default zero."""
     mass: list[list[float]] | None = None

@@ -31,6 +31,7 @@ from typing import Any, cast
 import aiomqtt
 
 from fresco_bridge.backoff import Backoff
+from fresco_bridge.jsonline import RequestJsonError, decode
 from fresco_bridge.telemetry.base import (
     COMMANDS,
     CommandHandler,
@@ -63,7 +64,7 @@ __all__ = [  # the shared types are re-exported: importers of this module keep w
 ]
 
 log = logging.getLogger("fresco_bridge.telemetry")
-_paho_log = logging.getLogger("fresco_bridge.telemetry.paho")  # per-packet chatter at DEBUG
+_paho_log = logging.getLogger("paho.fresco_bridge")  # a library's: WARNING up, one line (logs.py)
 
 MAX_COMMAND_BYTES = 1024
 MIN_TOKEN_LENGTH = 16
@@ -562,11 +563,9 @@ class MqttTelemetry:
         if len(payload) > MAX_COMMAND_BYTES:
             return f"payload of {len(payload)} bytes exceeds {MAX_COMMAND_BYTES}"
         try:
-            body = json.loads(bytes(payload).decode("utf-8"))
-        except UnicodeDecodeError as exc:
-            return f"malformed payload ({len(payload)} bytes): not UTF-8 at byte {exc.start}"
-        except json.JSONDecodeError as exc:
-            return f"malformed payload ({len(payload)} bytes): not JSON ({exc.msg} at {exc.pos})"
+            body = decode(bytes(payload))
+        except RequestJsonError as exc:
+            return f"malformed payload ({len(payload)} bytes): {exc}"
         if not isinstance(body, dict):
             return f"payload is a JSON {type(body).__name__}, expected an object"
         unknown = sorted(set(body) - {"command", "token", "id"})

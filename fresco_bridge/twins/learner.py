@@ -32,8 +32,10 @@ from collections.abc import Callable
 from multiprocessing.process import BaseProcess
 from typing import Any
 
+from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
+from ..worker_output import OUTPUT, quiet_tracker, relay_output
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
 log = logging.getLogger("fresco_bridge.twins")
@@ -172,11 +174,12 @@ class Learner:
     async def _spawn(self) -> None:
         assert self._loop is not None
         ctx = multiprocessing.get_context("spawn")
+        quiet_tracker()  # its report of a killed bridge's semaphores (worker_output)
         inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         start = None if self._snapshot is None else self._snapshot[2]
         proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox, start),
-                           name=f"fresco-learner-{self.source}", daemon=True)
+                           name=f"{WORKER_PROCESS_PREFIX}learner-{self.source}", daemon=True)
         self._generation += 1
         self._ready = self._loop.create_future()
         self._backlog.clear()
@@ -227,6 +230,9 @@ class Learner:
         if generation != self._generation:
             return
         kind = reply[0]
+        if kind == OUTPUT:  # a line the worker logged or printed
+            relay_output(self.source, self.pid, reply)
+            return
         if kind == "ready":
             if self._ready is not None and not self._ready.done():
                 self._ready.set_result(None)

@@ -32,6 +32,7 @@ from typing import Any
 
 from ..updating.base import Updater, UpdaterError, UpdaterInputError
 from ..updating.registry import make_updater
+from ..worker_output import forward_output
 
 log = logging.getLogger("fresco_bridge.twins")
 
@@ -180,6 +181,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
     answer batches of messages in order until ``None`` (or until the bridge process is gone).
     It runs at a lower priority and with one BLAS thread, so training takes the CPU the
     bridge's step loop leaves."""
+    forward_output(outbox.put)  # its warnings and stderr: lines of the bridge's log
     _end_with_the_bridge()
     with contextlib.suppress(OSError):
         os.nice(NICE)

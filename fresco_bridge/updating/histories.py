@@ -90,19 +90,14 @@ def read_history(path: Path, *, need_force: bool = True, site: str | None = None
     """
     if path.is_dir():
         units = Units()
-    force_col = ("force",)
+    force_col = ("meas_force",)  # ``force`` in a time,disp,force CSV (element_history.ALIASES)
     try:
         history = read_element_history(
-            path, ("time", "disp", *(force_col if need_force else ())),
-            () if need_force else force_col, site=site, session=session, actuator=actuator,
-            aliases=_EXPORT_NAMES)
+            path, ("time", "meas_disp", *(force_col if need_force else ())),
+            () if need_force else force_col, site=site, session=session, actuator=actuator)
     except HistoryInputError as exc:
         raise HistoryError(str(exc)) from None
     cols = history.columns
-    force = cols.get("force")
-    return History(cols["disp"] * units.to_mm, None if force is None else force * units.to_kn,
-                   history.source, history.notes)
-
-
-_EXPORT_NAMES = {"disp": "meas_disp", "force": "meas_force"}
-"""Where an export (and a run directory) keeps what a ``time,disp,force`` CSV calls disp, force."""
+    force = cols.get("meas_force")
+    return History(cols["meas_disp"] * units.to_mm,
+                   None if force is None else force * units.to_kn, history.source, history.notes)

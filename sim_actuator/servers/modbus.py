@@ -21,6 +21,9 @@ addr   name         type     acc  meaning
 18-19  TARGET       float32  ro   target of the current or last accepted move, mm
 20-21  SIM_TIME     float32  ro   simulated time, s
 22     MAP_VERSION  uint16   ro   1
+23     CHANNELS     uint16   ro   channels served
+24-25  EXT_DISP     float32  ro   external displacement at the end of the last move: the
+                                  specimen's, behind frame compliance and pin play, mm
 ====== ============ ======== ==== ===========================================================
 
 Every write of 1 to EXECUTE is a trigger (no 0 -> 1 edge needed; the register reads back what
@@ -28,6 +31,10 @@ was written, so FC06 echoes stay valid). A write that covers COMMAND..EXECUTE in
 FC23 request is atomic: the new command and ramp time are used. Re-executing the running
 move's own target and ramp time is a harmless no-op; re-executing after DONE runs a move of
 zero length. When CONTROL and EXECUTE are in one write, CONTROL acts first.
+
+Several channels (``sim-actuator serve --channels N``): channel c's block is the same table at
+``c * 32 + addr`` (``CHANNEL_STRIDE``), each driving its own rig; register 23 (CHANNELS, ro) of
+every block reads N (1 for one channel), so STATE .. EXT_DISP is one contiguous read.
 
 Exception codes: 01 coil/discrete-input functions; 02 unmapped address or write to a read-only
 register (from pymodbus); 03 EXECUTE or CONTROL value not allowed, command not finite, ramp time
@@ -54,6 +61,7 @@ from sim_actuator.servers.controller import (
     RigController,
 )
 from sim_actuator.wire.modbus_map import (  # the one register map, shared with the bridge
+    CHANNEL_STRIDE,
     CONTROL_HOLD,
     CONTROL_RESET,
     MAP_VERSION,
@@ -79,28 +87,35 @@ _BIT_FUNCTIONS = frozenset((1, 2, 5, 15))
 
 
 class ModbusRigServer:
-    """A pymodbus TCP server whose register map drives a :class:`RigController`."""
+    """A pymodbus TCP server whose register map drives one :class:`RigController` per
+    channel (a register block each)."""
 
-    def __init__(self, controller: RigController, *, host: str = "127.0.0.1",
-                 port: int = 502) -> None:
-        self.controller = controller
+    def __init__(self, controller: RigController | list[RigController], *,
+                 host: str = "127.0.0.1", port: int = 502) -> None:
+        self.controllers = controller if isinstance(controller, list) else [controller]
+        if not self.controllers:
+            raise ValueError("a Modbus rig server needs at least one channel")
+        self.controller = self.controllers[0]
         self.host = host
         self.port = port
         self._server: ModbusTcpServer | None = None
 
     def _device(self) -> SimDevice:
-        rig = self.controller.rig
-        holding = [
-            SimData(Reg.COMMAND, count=1, values=encode_float32(rig.command),
-                    datatype=DataType.REGISTERS),
-            SimData(Reg.RAMP_TIME, count=1, values=encode_float32(rig.default_ramp_time),
-                    datatype=DataType.REGISTERS),
-            SimData(Reg.EXECUTE, count=2, values=0, datatype=DataType.REGISTERS),
-        ]
-        read_only = SimData(Reg.STATE, count=Reg.MAP_VERSION - Reg.STATE + 1, values=0,
-                            datatype=DataType.REGISTERS, readonly=True)
+        blocks: list[SimData] = []
+        for channel, controller in enumerate(self.controllers):
+            base, rig = channel * CHANNEL_STRIDE, controller.rig
+            blocks += [
+                SimData(base + Reg.COMMAND, count=1, values=encode_float32(rig.command),
+                        datatype=DataType.REGISTERS),
+                SimData(base + Reg.RAMP_TIME, count=1,
+                        values=encode_float32(rig.default_ramp_time),
+                        datatype=DataType.REGISTERS),
+                SimData(base + Reg.EXECUTE, count=2, values=0, datatype=DataType.REGISTERS),
+                SimData(base + Reg.STATE, count=Reg.EXT_DISP + 2 - Reg.STATE, values=0,
+                        datatype=DataType.REGISTERS, readonly=True),
+            ]
         # id 0: answer whatever unit id a master uses, as Modbus TCP servers usually do
-        return SimDevice(id=0, simdata=[*holding, read_only], action=self._action)
+        return SimDevice(id=0, simdata=blocks, action=self._action)
 
     async def start(self) -> tuple[str, int]:
         """Listen; return the bound (host, port) (port 0 picks a free one)."""
@@ -147,20 +162,25 @@ class ModbusRigServer:
 
     def _on_write(self, start: int, address: int, registers: list[int],
                   values: list[int]) -> ExcCodes | None:
+        channel, base = address // CHANNEL_STRIDE, address // CHANNEL_STRIDE * CHANNEL_STRIDE
+        if channel >= len(self.controllers) or \
+                (address + len(values) - 1) // CHANNEL_STRIDE != channel:
+            return ExcCodes.ILLEGAL_ADDRESS  # one write, one channel
+        controller = self.controllers[channel]
         view = list(registers)
         view[address - start : address - start + len(values)] = values
-        touched = range(address, address + len(values))
+        touched = range(address - base, address - base + len(values))
 
         def word(addr: int) -> int:
-            return view[addr - start]
+            return view[base + addr - start]
 
         if Reg.CONTROL in touched:
             control = word(Reg.CONTROL)
             if control & ~(CONTROL_RESET | CONTROL_HOLD):
                 return ExcCodes.ILLEGAL_VALUE
             if control & CONTROL_RESET:
-                self.controller.reset()
-            self.controller.set_interlock(bool(control & CONTROL_HOLD))
+                controller.reset()
+            controller.set_interlock(bool(control & CONTROL_HOLD))
         if Reg.EXECUTE in touched:
             execute = word(Reg.EXECUTE)
             if execute not in (0, 1):
@@ -168,12 +188,13 @@ class ModbusRigServer:
             if execute == 1:
                 target = decode_float32([word(Reg.COMMAND), word(Reg.COMMAND + 1)])
                 ramp = decode_float32([word(Reg.RAMP_TIME), word(Reg.RAMP_TIME + 1)])
-                return self._execute(target, ramp)
+                return self._execute(controller, target, ramp)
         return None
 
-    def _execute(self, target: float, ramp_time: float) -> ExcCodes | None:
+    def _execute(self, controller: RigController, target: float,
+                 ramp_time: float) -> ExcCodes | None:
         try:
-            self.controller.execute(target, ramp_time)
+            controller.execute(target, ramp_time)
         except (CommandRejected, LimitExceeded) as exc:
             _log.info("execute refused: %s", exc)
             return ExcCodes.ILLEGAL_VALUE
@@ -189,18 +210,22 @@ class ModbusRigServer:
         return None
 
     def _refresh(self, start: int, registers: list[int]) -> None:
-        """Copy the controller's state into the read-only block before a request is served."""
-        c = self.controller
+        """Copy every channel's state into its read-only block before a request is served."""
+        n = len(self.controllers)
+        for channel, c in enumerate(self.controllers):
+            base = channel * CHANNEL_STRIDE - start
 
-        def put(addr: int, words: list[int]) -> None:
-            registers[addr - start : addr - start + len(words)] = words
+            def put(addr: int, words: list[int], base: int = base) -> None:
+                registers[base + addr : base + addr + len(words)] = words
 
-        put(Reg.STATE, [int(c.state)])
-        put(Reg.FAULT_CODE, [int(c.fault)])
-        put(Reg.MEAS_DISP, encode_float32(c.measurement.displacement))
-        put(Reg.MEAS_FORCE, encode_float32(c.measurement.force))
-        put(Reg.HEARTBEAT, [c.heartbeat & 0xFFFF])
-        put(Reg.SEQUENCE, [c.sequence & 0xFFFF])
-        put(Reg.TARGET, encode_float32(c.target))
-        put(Reg.SIM_TIME, encode_float32(c.rig.time))
-        put(Reg.MAP_VERSION, [MAP_VERSION])
+            put(Reg.STATE, [int(c.state)])
+            put(Reg.FAULT_CODE, [int(c.fault)])
+            put(Reg.MEAS_DISP, encode_float32(c.measurement.displacement))
+            put(Reg.MEAS_FORCE, encode_float32(c.measurement.force))
+            put(Reg.HEARTBEAT, [c.heartbeat & 0xFFFF])
+            put(Reg.SEQUENCE, [c.sequence & 0xFFFF])
+            put(Reg.TARGET, encode_float32(c.target))
+            put(Reg.SIM_TIME, encode_float32(c.rig.time))
+            put(Reg.MAP_VERSION, [MAP_VERSION])
+            put(Reg.EXT_DISP, encode_float32(c.measurement.specimen_displacement))
+            put(Reg.CHANNELS, [n])

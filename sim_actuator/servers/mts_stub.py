@@ -9,6 +9,11 @@ It mirrors the calls OpenFresco's ``ECMtsCsi`` makes on an MTS CSI controller (s
   separated by spaces; verbs are case-insensitive. One request line gets exactly one reply line.
 * Replies: ``OK`` followed by ``key=value`` pairs, or ``ERR <CODE> <message>``.
 * Floats in replies use Python's shortest round-trip repr, so they parse back exactly.
+* Several channels (``sim-actuator serve --protocol mts --channels N``): one ramp drives every
+  channel, as CSI's ``runRamp`` with a command vector: ``COMMAND`` and ``RUN`` take N
+  displacements, every reading is a comma-separated list in channel order, and ``STATUS``
+  reports the most severe channel state (with ``states=`` per channel). A ramp starts only when
+  every channel accepts its target (nothing moves otherwise).
 """
 
 from __future__ import annotations
@@ -19,8 +24,16 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from sim_actuator.rig import Measurement, MoveOutcome
-from sim_actuator.servers.controller import ControllerError, RigController
+from sim_actuator.rig import Measurement, MoveOutcome, RigError, RigFault
+from sim_actuator.servers.controller import (
+    ControllerBusy,
+    ControllerError,
+    ControllerFaulted,
+    ControllerInterlocked,
+    ControllerState,
+    LimitExceeded,
+    RigController,
+)
 from sim_actuator.wire.mts_lines import MAX_LINE, PROTOCOL, PROTOCOL_VERSION, err, ok, split_request
 
 __all__ = ["PROTOCOL_VERSION", "MtsStubServer", "ProtocolError"]
@@ -43,7 +56,7 @@ class _Session:
 
     test_id: int = 0
     ramp_time: float | None = None
-    command: float | None = None
+    command: tuple[float, ...] | None = None
     peer: str = "?"
 
 
@@ -71,17 +84,34 @@ def _timeout(token: str) -> float:
     return value
 
 
-def _feedback(move_id: int, m: Measurement) -> str:
-    return ok(ramp=move_id, time=m.time, displacement=m.displacement, force=m.force,
-              command=m.command)
+def _values(values: list[float]) -> float | str:
+    """One float as itself, several as a comma-separated list of shortest reprs."""
+    return values[0] if len(values) == 1 else ",".join(repr(v) for v in values)
+
+
+def _feedback(move_id: int, ms: list[Measurement]) -> str:
+    return ok(ramp=move_id, time=ms[0].time, displacement=_values([m.displacement for m in ms]),
+              force=_values([m.force for m in ms]), command=_values([m.command for m in ms]),
+              specimen=_values([m.specimen_displacement for m in ms]))
+
+
+_SEVERITY = (ControllerState.MOVING, ControllerState.FAULT, ControllerState.INTERLOCK,
+             ControllerState.IDLE, ControllerState.DONE)
+"""The state STATUS reports for several channels: the first of these any channel is in."""
 
 
 class MtsStubServer:
     """asyncio TCP server speaking the stub protocol; one client may own the test at a time."""
 
-    def __init__(self, controller: RigController, *, host: str = "127.0.0.1", port: int = 0,
-                 max_line: int = MAX_LINE) -> None:
-        self.controller = controller
+    def __init__(self, controller: RigController | list[RigController], *,
+                 host: str = "127.0.0.1", port: int = 0, max_line: int = MAX_LINE) -> None:
+        self.controllers = controller if isinstance(controller, list) else [controller]
+        if not self.controllers:
+            raise ValueError("an MTS stub server needs at least one channel")
+        self.controller = self.controllers[0]
+        n = len(self.controllers)
+        self._ramp_ids: tuple[int, ...] = (0,) * n
+        """Each channel's move id of the last ramp (equal unless a channel refused midway)."""
         self.host = host
         self.port = port
         self.max_line = max_line
@@ -97,11 +127,11 @@ class MtsStubServer:
             "OPEN": (0, 0, False, self._open),
             "CLOSE": (0, 0, False, self._close),
             "SET_RAMP_TIME": (1, 1, True, self._set_ramp_time),
-            "COMMAND": (1, 1, True, self._command),
+            "COMMAND": (n, n, True, self._command),
             "EXECUTE": (0, 0, True, self._execute),
             "WAIT": (2, 2, True, self._wait),
             "ACQUIRE": (0, 1, False, self._acquire),
-            "RUN": (2, 2, True, self._run),
+            "RUN": (n + 1, n + 1, True, self._run),
             "RESET": (0, 0, True, self._reset),
             "INTERLOCK": (1, 1, True, self._interlock),
         }
@@ -205,18 +235,30 @@ class MtsStubServer:
     def _info(self, session: _Session) -> str:
         rig = self.controller.rig
         return (
-            f"OK protocol={PROTOCOL} version={PROTOCOL_VERSION} dofs=1 "
+            f"OK protocol={PROTOCOL} version={PROTOCOL_VERSION} dofs={len(self.controllers)} "
             "channels=displacement,force,command,time units=mm,kN,mm,s "
             f"stroke={rig.actuator.stroke!r} force_capacity={rig.actuator.force_capacity!r} "
             f"max_ramp_time={rig.max_ramp_time!r} default_ramp_time={rig.default_ramp_time!r}"
         )
 
+    def _state(self) -> ControllerState:
+        """The most severe state of the channels (the one channel's state, for one)."""
+        states = [x.state for x in self.controllers]
+        return next(s for s in _SEVERITY if s in states)
+
     def _status(self, session: _Session) -> str:
-        c = self.controller
+        c, cs = self.controller, self.controllers
+        states = [x.state for x in cs]
+        state = self._state()
+        fault = next((x.fault for x in cs if x.fault.name != "NONE"), c.fault)
+        several = "" if len(cs) == 1 else (
+            f" states={','.join(s.name for s in states)} "
+            f"sequences={','.join(str(x.sequence) for x in cs)}")
         return (
-            f"OK state={c.state.name} fault={c.fault.name} ramp={c.move_id} "
+            f"OK state={state.name} fault={fault.name} ramp={c.move_id} "
             f"sequence={c.sequence} heartbeat={c.heartbeat} time={c.rig.time!r} "
-            f"interlock={int(c.interlock)} open={int(self._owner is not None)}"
+            f"interlock={int(any(x.interlock for x in cs))} "
+            f"open={int(self._owner is not None)}{several}"
         )
 
     def _open(self, session: _Session) -> str:
@@ -244,9 +286,9 @@ class MtsStubServer:
         session.ramp_time = value
         return f"OK ramp_time={value!r}"
 
-    def _command(self, session: _Session, token: str) -> str:
-        session.command = _number(token, "command displacement")
-        return f"OK command={session.command!r}"
+    def _command(self, session: _Session, *tokens: str) -> str:
+        session.command = tuple(_number(t, "command displacement") for t in tokens)
+        return ok(command=_values(list(session.command)))
 
     def _execute(self, session: _Session) -> str:
         return f"OK ramp={self._start_ramp(session)}"
@@ -257,7 +299,33 @@ class MtsStubServer:
         ramp = session.ramp_time
         if ramp is None:
             ramp = self.controller.rig.default_ramp_time
-        return self.controller.execute(session.command, ramp)
+        if len(self.controllers) == 1:
+            self._ramp_ids = (self.controller.execute(session.command[0], ramp),)
+            return self._ramp_ids[0]
+        for channel, (c, target) in enumerate(zip(self.controllers, session.command,
+                                                  strict=True), 1):
+            self._accepts(channel, c, target, ramp)  # every channel first: all or nothing
+        self._ramp_ids = tuple(c.execute(t, ramp) for c, t in zip(self.controllers,
+                                                                  session.command, strict=True))
+        return self._ramp_ids[0]
+
+    @staticmethod
+    def _accepts(channel: int, c: RigController, target: float, ramp: float) -> None:
+        """Refuse (as ``execute`` would) a target channel ``channel`` cannot start now."""
+        if c.state is ControllerState.MOVING and (target, ramp) != (c.target, c.ramp_time):
+            raise ControllerBusy(f"channel {channel}: move {c.move_id} is still running")
+        if c.interlock:
+            raise ControllerInterlocked(f"channel {channel}: the program interlock is engaged")
+        if c.state is ControllerState.MOVING:
+            return
+        try:
+            c.rig.validate(target, ramp)
+        except RigFault as exc:
+            if c.fault.name != "NONE" and "latched" in str(exc):
+                raise ControllerFaulted(f"channel {channel}: {exc}") from None
+            raise LimitExceeded(f"channel {channel}: {exc}") from None
+        except RigError as exc:
+            raise ProtocolError("BAD_VALUE", f"channel {channel}: {exc}") from None
 
     async def _wait(self, session: _Session, ramp_token: str, timeout_token: str) -> str:
         return await self._wait_for(_integer(ramp_token, "ramp id"), _timeout(timeout_token))
@@ -268,32 +336,46 @@ class MtsStubServer:
             raise ProtocolError(
                 "UNKNOWN_RAMP", f"ramp {move_id} is not the last ramp ({c.move_id})"
             )
-        if not await c.wait(timeout):
-            raise ProtocolError("TIMEOUT", f"ramp {move_id} still running after {timeout:g} s")
-        if c.outcome is MoveOutcome.TRIPPED:
-            raise ProtocolError("FAULT", f"ramp {move_id} tripped: {c.fault.name}")
-        if c.outcome is MoveOutcome.ABORTED:
-            raise ProtocolError("INTERLOCK", f"ramp {move_id} stopped by the interlock")
+        for channel, x in enumerate(self.controllers, 1):
+            which = "" if len(self.controllers) == 1 else f" (channel {channel})"
+            if not await x.wait(timeout):
+                raise ProtocolError("TIMEOUT", f"ramp {move_id} still running after "
+                                    f"{timeout:g} s{which}")
+            if x.outcome is MoveOutcome.TRIPPED:
+                raise ProtocolError("FAULT", f"ramp {move_id} tripped{which}: {x.fault.name}")
+            if x.outcome is MoveOutcome.ABORTED:
+                raise ProtocolError("INTERLOCK", f"ramp {move_id} stopped by the "
+                                    f"interlock{which}")
         return f"OK ramp={move_id} state={c.state.name}"
 
-    def _acquire(self, session: _Session, ramp_token: str = "-1") -> str:
-        move_id, measurement = self.controller.feedback(_integer(ramp_token, "ramp id"))
-        return _feedback(move_id, measurement)
+    def _readings(self, move_id: int) -> tuple[int, list[Measurement]]:
+        """Every channel's feedback of ramp ``move_id`` (-1: fresh readings now)."""
+        first, _ = self.controller.feedback(move_id)  # raises for an unknown ramp
+        if move_id == -1:
+            return first, [c.feedback(-1)[1] for c in self.controllers]
+        ids = self._ramp_ids if move_id == self._ramp_ids[0] else (move_id,) * len(
+            self.controllers)
+        return move_id, [c.feedback(i)[1] for c, i in zip(self.controllers, ids, strict=True)]
 
-    async def _run(self, session: _Session, disp_token: str, timeout_token: str) -> str:
-        timeout = _timeout(timeout_token)
-        self._command(session, disp_token)
+    def _acquire(self, session: _Session, ramp_token: str = "-1") -> str:
+        return _feedback(*self._readings(_integer(ramp_token, "ramp id")))
+
+    async def _run(self, session: _Session, *tokens: str) -> str:
+        timeout = _timeout(tokens[-1])
+        self._command(session, *tokens[:-1])
         move_id = self._start_ramp(session)
         await self._wait_for(move_id, timeout)
-        return _feedback(*self.controller.feedback(move_id))
+        return _feedback(*self._readings(move_id))
 
     def _reset(self, session: _Session) -> str:
-        self.controller.reset()
-        return f"OK state={self.controller.state.name}"
+        for c in self.controllers:
+            c.reset()
+        return f"OK state={self._state().name}"
 
     def _interlock(self, session: _Session, token: str) -> str:
         flag = token.upper()
         if flag not in ("ON", "OFF"):
             raise ProtocolError("SYNTAX", f"INTERLOCK takes ON or OFF, got {token!r}")
-        self.controller.set_interlock(flag == "ON")
-        return f"OK state={self.controller.state.name}"
+        for c in self.controllers:  # every channel
+            c.set_interlock(flag == "ON")
+        return f"OK state={self._state().name}"

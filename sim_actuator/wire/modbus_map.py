@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from .states import fault_name, state_name
 
 __all__ = [
+    "CHANNEL_STRIDE",
     "CONTROL_HOLD",
     "CONTROL_RESET",
     "EXCEPTION_MEANINGS",
@@ -49,6 +50,16 @@ class Reg:
     TARGET = 18
     SIM_TIME = 20
     MAP_VERSION = 22
+    CHANNELS = 23
+    """Channels served (1 for one channel; an older one-channel server left it unmapped)."""
+    EXT_DISP = 24
+    """External displacement, float32 mm: the simulated rig's specimen displacement behind
+    frame compliance, pin play and servo undershoot (a transducer on the specimen)."""
+
+
+CHANNEL_STRIDE = 32
+"""Channel c's block is the table above at addresses ``c * CHANNEL_STRIDE + Reg.*``: channel 0
+is the one-actuator map itself."""
 
 
 EXCEPTION_MEANINGS: dict[int, str] = {

@@ -37,7 +37,7 @@ def test_a_tiny_bench_runs_on_a_local_cluster(tmp_path: Path,
 def test_an_independent_bench_runs_on_a_local_cluster(tmp_path: Path) -> None:
     from distributed import LocalCluster
 
-    from fresco_bridge.diagnosis.independent import case_label
+    from benchmarks.diagnosis.independent import case_label
 
     out = tmp_path / "bench.json"
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import command_history
 from fresco_bridge.cli import main
-from fresco_bridge.diagnosis.synth import command_history
 from fresco_bridge.integrator.link import GenericClientLink
 from tests.support.bridge import RunningBridge
 

@@ -8,6 +8,7 @@ Each scenario builds the model either with ``genericClient`` elements pointed at
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 from typing import Any
@@ -111,7 +112,49 @@ def frame2(p: dict[str, Any]) -> dict[str, Any]:
     return {"runs": runs}
 
 
+def column3(p: dict[str, Any]) -> dict[str, Any]:
+    """The top of a 2-D column (u, v, theta) as one genericClient element with three basic DOFs
+    (three actuators behind the bridge), shaken horizontally and vertically with a growing
+    amplitude and rocked by a moment; stops at the first step OpenSees cannot converge (a
+    holding site answers NaN)."""
+    ops.wipe()
+    ops.model("basic", "-ndm", 2, "-ndf", 3)
+    ops.node(1, 0.0, 0.0)
+    ops.mass(1, *p["masses"])
+    ops.element("genericClient", 1, "-node", 1, "-dof", 1, 2, 3, *_gc_args(p["port"], p))
+    dt, n = p["dt"], p["nsteps"]
+    for direction, (amp, freq, growth) in enumerate(p["excitation"], 1):
+        values = [amp * (1 + growth * i * dt) * math.sin(6.283185307 * freq * i * dt)
+                  for i in range(n + 1)]
+        ops.timeSeries("Path", direction, "-dt", dt, "-values", *values)
+        if direction < 3:
+            ops.pattern("UniformExcitation", direction, direction, "-accel", direction)
+        else:
+            ops.pattern("Plain", direction, direction)
+            ops.load(1, 0.0, 0.0, 1.0)
+    ops.system("FullGeneral")
+    ops.numberer("Plain")
+    ops.constraints("Plain")
+    ops.test("NormDispIncr", 1e-10, 10)
+    ops.algorithm("Linear")
+    ops.integrator("Newmark", 0.5, 0.25)
+    ops.analysis("Transient")
+    u: list[list[float]] = []
+    failed_at = None
+    for i in range(n):
+        if ops.analyze(1, dt) != 0:
+            failed_at = i + 1
+            break
+        disp = ops.nodeDisp(1)
+        if any(d != d for d in disp):  # NaN forces give NaN displacements: the bridge holds
+            failed_at = i + 1
+            break
+        u.append(disp)
+    ops.wipe()
+    return {"u": u, "failed_at": failed_at}
+
+
 if __name__ == "__main__":
     scenario, params = sys.argv[1], json.loads(sys.argv[2])
-    result = {"static_1dof": static_1dof, "frame2": frame2}[scenario](params)
+    result = {"static_1dof": static_1dof, "frame2": frame2, "column3": column3}[scenario](params)
     print("RESULT " + json.dumps(result), flush=True)

@@ -3,7 +3,9 @@ its (real, in-process) controller: the safety and peer-loss tests' common ground
 
 from __future__ import annotations
 
+import math
 import socket
+import struct
 import textwrap
 import time
 from collections.abc import Callable
@@ -14,6 +16,7 @@ from fresco_bridge.controls.base import InlineController
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.sites import SiteState
+from protocol import SizeID
 
 K = 10.0  # kN/mm, elastic specimen: force = K * ctrl
 
@@ -82,9 +85,27 @@ def good_session(port: int, steps: int = 3) -> None:
 
 
 def refused(port: int) -> bool:
-    """The bridge closes a new connection at once (it never reads a request from it)."""
+    """The bridge will not serve a new 1-DOF genericClient connection: it tells it to stop."""
     with socket.create_connection(("127.0.0.1", port), timeout=5.0) as s:
-        try:
-            return s.recv(1) == b""
-        except ConnectionResetError:
-            return True
+        return told_to_stop(s)
+
+
+def told_to_stop(s: socket.socket) -> bool:
+    """``s``, a connection the bridge refused, is told to stop the way OpenSees understands
+    (``server/refusal.py``): after a 1-DOF size ID and a trial, its force request is answered
+    with NaN only, and its DIE ends the connection. False if a number came back (served)."""
+    vector = struct.Struct("<5d")
+    s.sendall(SizeID.for_generic_client(1, 1).encode() + vector.pack(3.0, 0.01, 0, 0, 1.0)
+              + vector.pack(10.0, 0, 0, 0, 0))
+    reply = b""
+    while len(reply) < vector.size:
+        chunk = s.recv(vector.size - len(reply))
+        assert chunk, "the refused connection was closed before its request was answered"
+        reply += chunk
+    if not all(math.isnan(v) for v in vector.unpack(reply)):
+        return False
+    s.sendall(vector.pack(99.0, 0, 0, 0, 0))
+    try:
+        return s.recv(1) == b""
+    except ConnectionResetError:
+        return True

@@ -25,6 +25,7 @@ from fresco_bridge.config import (
     load_config,
     parse_config,
 )
+from fresco_bridge.controls.generic_tcp import GenericTcpControllerConfig
 from fresco_bridge.controls.modbus import ModbusControllerConfig
 from fresco_bridge.controls.mts import MtsControllerConfig
 from fresco_bridge.controls.rig import RigControllerConfig
@@ -65,6 +66,7 @@ TABLES: list[tuple[type[BaseModel], str, str]] = [
     (ModbusControllerConfig, "[sites.controller]", 'kind = "modbus"\n'),
     (MtsControllerConfig, "[sites.controller]", 'kind = "mts"\n'),
     (RigControllerConfig, "[sites.controller]", 'kind = "rig"\npreset = "ideal"\n'),
+    (GenericTcpControllerConfig, "[sites.controller]", 'kind = "generic-tcp"\n'),
 ]
 CASES = [(model, header, base, name, t) for model, header, base in TABLES
          for name, t in _numeric_fields(model)]

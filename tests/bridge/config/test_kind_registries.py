@@ -29,8 +29,9 @@ def test_the_configuration_table_is_the_registries() -> None:
 def test_an_unknown_kind_names_every_registered_kind() -> None:
     with pytest.raises(ConfigError) as err:
         parse_config(SITE + '[sites.controller]\nkind = "rg"\n')
-    assert "unknown controller kind 'rg'; expected sim, rig, modbus or mts" in str(err.value)
-    with pytest.raises(ValueError, match="expected sim, rig, modbus or mts"):
+    assert "unknown controller kind 'rg'; expected sim, rig, modbus, mts or generic-tcp" in str(
+        err.value)
+    with pytest.raises(ValueError, match="expected sim, rig, modbus, mts or generic-tcp"):
         controller_kind("servo")
 
 
@@ -44,11 +45,17 @@ def test_a_typo_inside_a_kinds_table_is_reported_under_its_own_key(kind: str) ->
 
 def test_the_actuator_count_comes_from_the_setup() -> None:
     two_dofs = SITE + "dofs = 2\n"
-    with pytest.raises(ConfigError, match=r"controller modbus drives 1 actuator.*needs 2"):
-        parse_config(two_dofs + '[sites.controller]\nkind = "modbus"\n')
+    with pytest.raises(ConfigError, match=r"controller rig has 1 \[\[sites.controller.channels"
+                                          r"\]\] table\(s\); this site needs one per actuator: "
+                                          r"2 \(setup NoTransformation with 2 DOF\(s\)\)"):
+        parse_config(two_dofs + '[sites.controller]\nkind = "rig"\n'
+                     '[[sites.controller.channels]]\npreset = "ideal-elastic"\n')
     one_actuator = parse_config(two_dofs + 'setup = "OneActuator"\n[sites.controller]\n'
                                 'kind = "modbus"\n').sites[0]
     assert make_controller(one_actuator).n_actuators == 1
+    for kind in ("modbus", "mts", "generic-tcp"):  # a channel per actuator
+        site = parse_config(two_dofs + f'[sites.controller]\nkind = "{kind}"\n').sites[0]
+        assert make_controller(site).n_actuators == 2
     sim = parse_config(two_dofs + '[sites.controller]\nmodel = "elastic"\n'
                        'params = { k = 2.0 }\n').sites[0]
     assert make_controller(sim).n_actuators == 2  # one specimen model per actuator

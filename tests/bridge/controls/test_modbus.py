@@ -283,3 +283,72 @@ def test_a_move_still_running_after_move_timeout_is_an_error_and_not_resent() ->
             assert s.controller.move_id == 1 and s.controller.sequence == 1
 
     run(scenario)
+
+
+# -- several channels: a register block per actuator ------------------------------------------
+
+
+@contextlib.asynccontextmanager
+async def serving_channels(names: list[str], n_site: int, *, time_scale: float = 0.0,
+                           ) -> AsyncIterator[tuple[list[RigController], ModbusController]]:
+    from sim_actuator.config import channel_config
+
+    rigs = [RigController(build_rig(channel_config(preset(name), c)), time_scale=time_scale)
+            for c, name in enumerate(names)]
+    server = ModbusRigServer(rigs, host="127.0.0.1", port=0)
+    _, port = await server.start()
+    for rig in rigs:
+        rig.start_heartbeat(50.0)
+    ctl = ModbusController(ModbusControllerConfig(
+        kind="modbus", port=port, ramp_time=0.05, reconnect_min=0.01, reconnect_max=0.05,
+        request_timeout=0.5), n_site)
+    try:
+        yield rigs, ctl
+    finally:
+        await ctl.close()
+        await server.stop()
+        for rig in rigs:
+            await rig.close()
+
+
+def test_three_channels_each_its_own_rig_to_float32() -> None:
+    from sim_actuator.config import channel_config
+
+    names = ["ideal-bilinear", "servo-hydraulic", "lab-realistic"]
+    references = [build_rig(channel_config(preset(n), c)) for c, n in enumerate(names)]
+
+    async def scenario() -> None:
+        async with serving_channels(names, 3, time_scale=0.5) as (rigs, ctl):
+            for i, targets in enumerate([(0.4, -0.2, 1.0), (1.5, 0.3, -0.5), (0.0, 0.0, 2.0)], 1):
+                await ctl.set_ctrl(targets)
+                daq = await ctl.get_daq()
+                expected = [r.execute(f32(t), f32(0.05)) for r, t in zip(references, targets,
+                                                                         strict=True)]
+                assert daq.disp == tuple(f32(m.displacement) for m in expected)
+                assert daq.force == tuple(f32(m.force) for m in expected)
+                assert [r.sequence for r in rigs] == [i, i, i]
+            assert await ctl.tangent_stiffness() == (68.0, 0, 0, 0, 68.0, 0, 0, 0, 68.0)
+            await ctl.hold()  # HOLD holds every actuator
+            assert all(r.interlock for r in rigs)
+            await ctl.set_ctrl((0.1, 0.1, 0.1))  # the bridge's own interlocks are released
+            assert not any(r.interlock for r in rigs) and [r.target for r in rigs] == \
+                [f32(0.1)] * 3
+            rigs[1].set_interlock(True)  # an operator's interlock on one channel: no move at all
+            with pytest.raises(ControllerError, match=r"channel 2: cannot move .* not by this"):
+                await ctl.set_ctrl((0.2, 0.2, 0.2))
+            assert [r.target for r in rigs] == [f32(0.1)] * 3
+
+    run(scenario)
+
+
+def test_a_server_with_fewer_channels_than_the_site_is_refused_before_any_move() -> None:
+    async def scenario() -> None:
+        async with serving_channels(["ideal-elastic"] * 2, 3) as (rigs, ctl):
+            with pytest.raises(ControllerError, match=r"serves 2 channel.*drives 3 actuators"):
+                await ctl.set_ctrl((1.0, 1.0, 1.0))
+            assert [r.sequence for r in rigs] == [0, 0]
+        async with serving_channels(["ideal-elastic"], 2) as (rigs, ctl):
+            with pytest.raises(ControllerError, match=r"serves 1 channel.*drives 2 actuators"):
+                await ctl.connect()
+
+    run(scenario)

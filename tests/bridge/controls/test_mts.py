@@ -250,3 +250,58 @@ def test_config_is_strict() -> None:
         MtsControllerConfig.model_validate({"kind": "mts", "wait": 1.0})
     with pytest.raises(ValueError, match="wait_timeout"):
         MtsControllerConfig.model_validate({"kind": "mts", "wait_timeout": 0.0})
+
+
+def test_three_channels_one_ramp_each_its_own_rig() -> None:
+    from sim_actuator.config import channel_config
+
+    names = ["ideal-bilinear", "servo-hydraulic", "ideal-elastic"]
+    references = [build_rig(channel_config(preset(n), c)) for c, n in enumerate(names)]
+
+    async def scenario() -> None:
+        rigs = [RigController(build_rig(channel_config(preset(n), c)), time_scale=0.2)
+                for c, n in enumerate(names)]
+        server = MtsStubServer(rigs, host="127.0.0.1", port=0)
+        _, port = await server.start()
+        for rig in rigs:
+            rig.start_heartbeat(50.0)
+        ctl = MtsController(MtsControllerConfig(kind="mts", port=port, ramp_time=0.05,
+                                                request_timeout=0.5), 3)
+        try:
+            for targets in [(0.4, -0.2, 1.0), (1.5, 0.3, -0.5)]:
+                await ctl.set_ctrl(targets)
+                daq = await ctl.get_daq()
+                expected = [r.execute(t, 0.05) for r, t in zip(references, targets, strict=True)]
+                assert daq.disp == tuple(m.displacement for m in expected)
+                assert daq.force == tuple(m.force for m in expected)
+            await ctl.hold()  # HOLD holds every actuator
+            assert all(r.interlock for r in rigs)
+            await ctl.set_ctrl((0.1, 0.1, 0.1))  # releases the interlock it engaged
+            assert [r.target for r in rigs] == [0.1] * 3
+            # a target one channel refuses (beyond its stroke): no channel moves
+            with pytest.raises(ControllerError, match=r"channel 2.*beyond the actuator stroke"):
+                await ctl.set_ctrl((0.2, 500.0, 0.2))
+            assert [r.target for r in rigs] == [0.1] * 3 and [r.sequence for r in rigs] == [3] * 3
+        finally:
+            await ctl.close()
+            await server.stop()
+            for rig in rigs:
+                await rig.close()
+
+    run(scenario)
+
+
+def test_a_server_with_other_channels_than_the_site_is_refused() -> None:
+    async def scenario() -> None:
+        rigs = [RigController(build_rig(preset("ideal-elastic"))) for _ in range(2)]
+        server = MtsStubServer(rigs, host="127.0.0.1", port=0)
+        _, port = await server.start()
+        ctl = MtsController(MtsControllerConfig(kind="mts", port=port, heartbeat_timeout=None), 3)
+        try:
+            with pytest.raises(ControllerError, match="has 2 dofs, expected 3"):
+                await ctl.connect()
+        finally:
+            await ctl.close()
+            await server.stop()
+
+    run(scenario)

@@ -82,3 +82,74 @@ def test_bad_rig_choices_are_config_errors(controller: str, fragment: str) -> No
         except ConfigError as exc:
             assert fragment in str(exc), str(exc)
             raise
+
+
+# -- several actuators loading one platform (a three-actuator column) -------------------------
+
+COLUMN_PLATFORM = """
+[sites.controller.platform]
+geometry = [[1.0, 0.0, 0.0], [0.0, 1.0, -400.0], [0.0, 1.0, 600.0]]
+specimen = [{ kind = "elastic", params = { k = 10.0 } },
+            { kind = "elastic", params = { k = 200.0 } },
+            { kind = "elastic", params = { k = 5.0e6 } }]
+"""
+
+
+def _column_toml(preset_name: str) -> str:
+    return f"""
+[[sites]]
+name = "col"
+port = 0
+dofs = 3
+setup = "NoTransformation"
+[sites.controller]
+kind = "rig"
+preset = "{preset_name}"
+ramp_time = {RAMP}
+{COLUMN_PLATFORM}"""
+
+
+def _k_actuators() -> list[list[float]]:
+    import numpy as np
+
+    t_inv = np.linalg.inv(np.array([[1.0, 0, 0], [0, 1.0, -400.0], [0, 1.0, 600.0]]))
+    k: list[list[float]] = (t_inv.T @ np.diag([10.0, 200.0, 5.0e6]) @ t_inv).tolist()
+    return k
+
+
+def test_three_actuators_loading_one_platform_feel_each_other(tmp_path: Path) -> None:
+    k = _k_actuators()
+    with RunningBridge(_column_toml("ideal-elastic"), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
+        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2), (-0.3, 0.2, 0.1)], 1):
+            link.set_trial(x, time=0.01 * i)
+            forces = link.force()
+            link.commit()
+            expected = [sum(k[r][c] * x[c] for c in range(3)) for r in range(3)]
+            assert forces == pytest.approx(expected, rel=1e-12, abs=1e-9)
+            if i == 1:  # actuator 2 alone moved; actuator 3 holds the platform's rotation
+                assert abs(forces[2]) > 1.0
+
+
+def test_servo_lag_on_every_actuator_keeps_the_platform_in_equilibrium(tmp_path: Path) -> None:
+    k = _k_actuators()
+    with RunningBridge(_column_toml("servo-hydraulic"), tmp_path) as b, \
+            GenericClientLink("127.0.0.1", b.ports["col"], 3, data_size=16) as link:
+        site = b.bridge.sites["col"]
+        for i, x in enumerate([(0.0, 1.0, 0.0), (0.5, 1.0, 1.2), (-0.3, 0.2, 0.1)], 1):
+            link.set_trial(x, time=0.01 * i)
+            forces = link.force()
+            link.commit()
+            measured = b.call(lambda: site.daq.disp)
+            assert any(abs(m - c) > 1e-6 for m, c in zip(measured, x, strict=True))  # the lag
+            expected = [sum(k[r][c] * measured[c] for c in range(3)) for r in range(3)]
+            assert forces == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+def test_a_platform_that_does_not_fit_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match=r"platform has 3 actuators; this site drives 2"):
+        parse_config(_column_toml("ideal-elastic").replace("dofs = 3", "dofs = 2"))
+    with pytest.raises(ConfigError, match=r"lab-realistic\) has load-path effects"):
+        parse_config(_column_toml("lab-realistic"))
+    with pytest.raises(ConfigError, match="singular"):
+        parse_config(_column_toml("ideal-elastic").replace("-400.0", "600.0"))

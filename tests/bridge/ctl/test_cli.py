@@ -143,3 +143,37 @@ def test_ctl_against_a_running_fresco_bridge_serve(tmp_path: Path) -> None:
     # the socket is gone with the bridge: ctl says so and exits 2
     r = Ctl(runs)("status")
     assert r.returncode == 2 and "no control socket" in r.stderr
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (("--timeout", "-1"), "--timeout -1: must be a finite number of seconds above 0"),
+    (("--timeout", "nan"), "--timeout nan: must be a finite number"),
+    (("--timeout", "inf"), "--timeout inf: must be a finite number"),
+    (("--timeout", "0"), "--timeout 0: must be a finite number"),
+    (("--timeout", "1e400"), "--timeout 1e400: must be a finite number"),
+    (("--timeout", "soon"), "--timeout soon: not a number of seconds"),
+    (("--socket", "/etc/passwd"), "--socket /etc/passwd: is a regular file, not a socket"),
+    (("--socket", "/"), "--socket /: is a directory, not a socket"),
+    (("--socket", "/nonexistent/c.sock"), "--socket /nonexistent/c.sock: No such file"),
+    (("--run-dir", "/etc/passwd"), "--run-dir /etc/passwd: is not a directory"),
+    (("--site", "a\x1b[2J"), "--site a\\x1b[2J: not a site name"),
+    (("--site", ""), "--site : not a site name"),
+    (("reboot",), "ctl reboot: not an action; expected one of status, pause, resume, abort"),
+])
+def test_each_bad_argument_is_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...],
+                                                  says: str) -> None:
+    """A live socket is there (``--socket`` names it unless the argument under test does), so
+    the argument, not a missing bridge, is what is refused."""
+    import socket
+
+    live = tmp_path / "c.sock"
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as server:
+        server.bind(str(live))
+        server.listen()
+        where = () if "--socket" in args or "--run-dir" in args else ("--socket", str(live))
+        action = () if args[0] == "reboot" else ("status",)
+        r = subprocess.run([FRESCO_BRIDGE, "ctl", *action, *where, *args],
+                           capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert r.stdout == ""
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith(f"error: {says}"), r.stderr

@@ -4,6 +4,7 @@ mode 0600, stale and live sockets, and the short-path fallback for long run dire
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import stat
@@ -94,6 +95,29 @@ def test_requests_and_bad_requests_on_one_connection(bridge: BridgeThread,
     assert bridge.call(lambda: str(bridge.bridge.sites["a"].state)) == "IDLE"
 
 
+def test_deep_nesting_huge_numbers_and_bad_bytes_get_one_line_answers(
+        bridge: BridgeThread, short_dir: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """4,000 ``[`` under the size cap raised RecursionError out of the client's task (a
+    traceback, no reply): now every such line is answered, and the connection serves on."""
+    answers = _lines(
+        short_dir / "c.sock",
+        b"[" * 4000 + b"\n",
+        b'{"command": ' + b"[" * 17 + b"\n",
+        b"9" * 4090 + b"\n",
+        b'{"command": "status", "id": 1e999999}\n',
+        b"\xff\xfe\n",
+        b'{"command": "status", "id": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[["}\n',
+    )
+    assert [a["ok"] for a in answers] == [False, False, False, True, False, True]
+    assert answers[0]["error"] == ("request is not a JSON line: nested deeper than 16 levels at "
+                                   "character 16")
+    assert "nested deeper" in answers[1]["error"] and "JSON object" in answers[2]["error"]
+    assert answers[3]["id"] == math.inf  # a huge number is a number (inf), not an error
+    assert "not UTF-8 at byte 0" in answers[4]["error"]
+    assert "Traceback" not in caplog.text and "RecursionError" not in caplog.text
+    assert all("\n" not in r.getMessage() for r in caplog.records)
+
+
 def test_socket_is_private_to_the_bridge_user(bridge: BridgeThread, short_dir: Path) -> None:
     mode = stat.S_IMODE(os.stat(short_dir / "c.sock").st_mode)
     assert mode == 0o600
@@ -174,3 +198,10 @@ def test_the_shared_temp_fallback_directory_must_be_private(tmp_path: Path) -> N
         ctl._check_private(d)
     d.chmod(0o700)
     ctl._check_private(d)
+
+
+def test_ctl_prints_what_the_sites_quote_without_acting_on_the_terminal() -> None:
+    answer = {"ok": False, "results": [{"site": "a", "ok": False,
+                                        "message": "refused\x1b[2J\nfake: ok"}], "sites": []}
+    assert ctl.format_answer(answer) == "a: REFUSED: refused\\x1b[2J\\nfake: ok"
+    assert ctl.format_answer({"error": "no site 'x\u202e'"}) == "error: no site 'x\\u202e'"

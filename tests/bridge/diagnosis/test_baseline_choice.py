@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.bench import bench_items, generate
+from benchmarks.diagnosis.realism import realistic_record
+from benchmarks.diagnosis.synth import command_history, synthetic_record
 from fresco_bridge.diagnosis.baseline import choose_baseline
-from fresco_bridge.diagnosis.bench import bench_items, generate
 from fresco_bridge.diagnosis.fit import fit_spec
 from fresco_bridge.diagnosis.load import record_from_arrays
 from fresco_bridge.diagnosis.model import Context, make_spec
 from fresco_bridge.diagnosis.names import AUTO_FAMILIES
-from fresco_bridge.diagnosis.realism import realistic_record
-from fresco_bridge.diagnosis.synth import command_history, synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from sim_actuator.models import make_model
 
@@ -44,12 +44,12 @@ def test_a_steel_specimen_without_effect_is_none_under_auto_and_a_misfit_under_b
 ) -> None:
     record = realistic_record("none", MENEGOTTO_PINTO_SEED, steps=STEPS).record
     options = Options(pairs=False, effects=("backlash", "friction", "sensor_bias"))
-    auto = diagnose(record, options)
+    auto = diagnose(record, options).to_json()
     assert auto["baseline"]["kind"] == "menegotto-pinto"
     assert auto["baseline"]["requested"] == "auto"
     assert auto["verdict"]["effect"] == "none", auto["verdict"]["explanation"]
     forced = diagnose(record, Options(baseline="bouc-wen", pairs=False,
-                                      effects=("backlash", "friction", "sensor_bias")))
+                                      effects=("backlash", "friction", "sensor_bias"))).to_json()
     assert forced["baseline"]["selection"] is None
     assert forced["verdict"]["effect"] == "baseline_misfit", forced["verdict"]["explanation"]
     assert forced["noise_floor"]["systematic_calibration_gap_pct"] > 1.0
@@ -86,8 +86,9 @@ def test_pinching_with_a_slow_build_up_has_its_rate_identified() -> None:
 def test_a_long_record_fits_its_candidates_in_two_stages_and_still_names_the_effect() -> None:
     """``max_fit_samples`` below the calibration part: the staged fits of long records."""
     synthetic = synthetic_record("backlash", 20261124 + 2, steps=1200)
-    result = diagnose(synthetic.record, Options(max_fit_samples=500, pairs=False,
-                                                effects=("backlash", "friction", "pinching")))
+    options = Options(max_fit_samples=500, pairs=False,
+                      effects=("backlash", "friction", "pinching"))
+    result = diagnose(synthetic.record, options).to_json()
     assert result["verdict"]["effect"] == "backlash", result["verdict"]["explanation"]
     gap = next(e for e in result["effects"] if e["name"] == "backlash")["params"]["gap"]
     assert gap["value"] == pytest.approx(synthetic.truth["gap"], rel=0.2)

@@ -11,10 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fresco_bridge.diagnosis.bench import MAGNITUDE_OF, effect_magnitude
+from benchmarks.diagnosis.bench import MAGNITUDE_OF, effect_magnitude
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import REVERSAL_SHARE, record_from_arrays, turning_points
 from fresco_bridge.diagnosis.model import EFFECT_NAMES
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 STEPS = 1200
@@ -28,7 +28,7 @@ SEED = 20261124
 def test_each_effect_is_named_and_measured(effect: str) -> None:
     synthetic = synthetic_record(effect, SEED + [*EFFECT_NAMES, "none"].index(effect),
                                  steps=STEPS_FOR.get(effect, STEPS))
-    result = diagnose(synthetic.record)
+    result = diagnose(synthetic.record).to_json()
     verdict = result["verdict"]
     assert verdict["effect"] == effect, verdict["explanation"]
     if effect == "none":
@@ -47,14 +47,14 @@ def test_the_withheld_part_is_never_seen_by_a_fit() -> None:
     synthetic = synthetic_record("friction", SEED + 99, steps=600)
     record = synthetic.record
     options = Options(effects=("friction", "sensor_noise"), pairs=False)
-    honest = diagnose(record, options)
+    honest = diagnose(record, options).to_json()
     stop = honest["record"]["withheld"]["samples"][0]
     garbage = np.random.default_rng(0).standard_normal(record.size - stop) * 1e3
     tampered = replace(record, force=np.concatenate([record.force[:stop],
                                                       record.force[stop:] + garbage]),
                        meas_disp=np.concatenate([record.meas_disp[:stop],  # type: ignore[index]
                                                  -record.cmd[stop:]]))
-    other = diagnose(tampered, options)
+    other = diagnose(tampered, options).to_json()
     # every fitted number is identical: the fits never read a withheld sample
     assert other["baseline"]["params"] == honest["baseline"]["params"]
     tampered_by_name = {e["name"]: e for e in other["effects"]}  # listed by withheld score
@@ -72,7 +72,7 @@ def test_two_effects_at_once_are_tried_as_a_pair() -> None:
     biased = synthetic.record
     bias = 0.05 * float(np.max(np.abs(biased.force)))
     record = replace(biased, force=biased.force + bias)
-    result = diagnose(record)
+    result = diagnose(record).to_json()
     assert result["pairs"], "the best single leaves a gap: pairs must be tried"
     assert result["verdict"]["effect"] == "friction+sensor_bias"  # alphabetical, not by rank
 

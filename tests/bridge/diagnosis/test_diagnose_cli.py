@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.cli import main
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.record.rundir import META_FILE, RECORD_FILE
 
 
@@ -91,7 +91,7 @@ def _bad(tmp_path: Path, case: str) -> list[str]:
 
 
 @pytest.mark.parametrize(("case", "fragment"), [
-    ("missing columns", "missing column(s) meas_force"),
+    ("missing columns", "missing column(s) meas_force (or force)"),
     ("nan row", "a.csv:59: column meas_force is 'nan'"),
     ("time goes back", "time is not strictly increasing at line 122 (1.19 then 1.0)"),
     ("too short", "too short to split: 40 sample(s)"),

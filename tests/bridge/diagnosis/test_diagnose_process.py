@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fresco_bridge.diagnosis.synth import synthetic_record
+from benchmarks.diagnosis.synth import synthetic_record
 
 SCRIPT = Path(sys.executable).parent / "fresco-bridge"
 DEADLINE = 120.0

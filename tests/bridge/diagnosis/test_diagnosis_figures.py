@@ -4,23 +4,24 @@ withheld part marked (issue 27, "Pictures"). Drawn from a real diagnosis of a ba
 
 from __future__ import annotations
 
-import copy
+from dataclasses import replace
 from typing import Any
 
 import pytest
 from matplotlib.colors import to_rgba
 from matplotlib.lines import Line2D
 
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.figures import overlay_figure
-from fresco_bridge.diagnosis.synth import synthetic_record
+from fresco_bridge.diagnosis.result import Diagnosis
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 
 @pytest.fixture(scope="module")
-def result() -> dict[str, Any]:
+def result() -> Diagnosis:
     record = synthetic_record("backlash", 2, steps=600).record
     out = diagnose(record, Options(effects=("backlash", "friction"), pairs=False))
-    assert out["verdict"]["effect"] == "backlash"
+    assert out.verdict.effect == "backlash"
     return out
 
 
@@ -28,13 +29,13 @@ def _data_lines(ax: Any) -> list[Line2D]:
     return [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
 
 
-def test_each_model_has_its_panel_over_the_measurement(result: dict[str, Any]) -> None:
+def test_each_model_has_its_panel_over_the_measurement(result: Diagnosis) -> None:
     fig = overlay_figure(result)
     base, effect, _residual = fig.axes
     assert base.get_shared_x_axes().joined(base, effect)
     assert base.get_shared_y_axes().joined(base, effect)
     colours = []
-    kind = result["baseline"]["kind"]
+    kind = result.baseline["kind"]
     for ax, model_label in ((base, f"sim ({kind} baseline)"), (effect, "sim + backlash")):
         measured, model = _data_lines(ax)
         assert (measured.get_label(), model.get_label()) == ("measured", model_label)
@@ -46,20 +47,20 @@ def test_each_model_has_its_panel_over_the_measurement(result: dict[str, Any]) -
     assert colours[0] != colours[1]  # baseline and baseline + effect never share a colour
 
 
-def test_the_residual_panel_marks_the_withheld_part(result: dict[str, Any]) -> None:
+def test_the_residual_panel_marks_the_withheld_part(result: Diagnosis) -> None:
     fig = overlay_figure(result)
     residual = fig.axes[2]
     lines = _data_lines(residual)
     assert [str(ln.get_label()).split(" (gap")[0] for ln in lines] == [
         "measured − sim", "measured − (sim + backlash)"]
     (span,) = residual.patches
-    t = result["_series"]["time"]
-    assert span.get_x() == pytest.approx(float(t[result["_series"]["stop"]]))  # type: ignore[attr-defined]
+    assert result.series is not None
+    t = result.series.time
+    assert span.get_x() == pytest.approx(float(t[result.series.stop]))  # type: ignore[attr-defined]
 
 
-def test_a_verdict_without_an_effect_says_so_in_its_panel(result: dict[str, Any]) -> None:
-    none = copy.copy(result)
-    none["verdict"] = {**result["verdict"], "effect": "none"}
+def test_a_verdict_without_an_effect_says_so_in_its_panel(result: Diagnosis) -> None:
+    none = replace(result, verdict=replace(result.verdict, effect="none"))
     fig = overlay_figure(none)
     effect = fig.axes[1]
     assert [ln.get_label() for ln in _data_lines(effect)] == ["measured"]

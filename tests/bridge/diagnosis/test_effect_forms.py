@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from fresco_bridge.diagnosis.independent import independent_record
+from benchmarks.diagnosis.independent import independent_record
+from benchmarks.diagnosis.synth import command_history
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
-from fresco_bridge.diagnosis.model import _law_vector
-from fresco_bridge.diagnosis.synth import command_history
+from fresco_bridge.diagnosis.model import law_vector
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from sim_actuator.models.paths import drive
 
@@ -22,7 +22,7 @@ EFFECTS = ("friction", "rate_dependence", "sensor_bias", "sensor_noise")
 
 
 def _record(extra: np.ndarray | None, cmd: np.ndarray, dt: float, seed: int) -> Record:
-    force = drive(*_law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
+    force = drive(*law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
     if extra is not None:
         force = force + extra
     rng = np.random.default_rng(seed + 1)
@@ -50,7 +50,8 @@ def test_power_law_viscosity_is_rate_dependence_with_its_exponent() -> None:
     v = np.diff(cmd, prepend=cmd[0]) / dt
     v_rms = float(np.sqrt(np.mean(np.diff(cmd) ** 2))) / dt
     viscous = at_rms * np.sign(v) * np.abs(v / v_rms) ** exponent
-    result = diagnose(_record(viscous, cmd, dt, 31), Options(effects=EFFECTS, pairs=False))
+    options = Options(effects=EFFECTS, pairs=False)
+    result = diagnose(_record(viscous, cmd, dt, 31), options).to_json()
     assert result["verdict"]["effect"] == "rate_dependence", result["verdict"]["explanation"]
     params = _winner(result)["params"]
     assert isinstance(params, dict)
@@ -63,9 +64,10 @@ def test_friction_behind_a_spring_is_friction_with_its_slip() -> None:
     friction, the force and the slip recovered, the rate law not preferred."""
     dt, coulomb, spring = 0.01, 1.2, 40.0
     cmd = _command(32)
-    jenkins = drive(*_law_vector("bilinear", {"k0": spring, "fy": coulomb, "alpha": 0.0}),
+    jenkins = drive(*law_vector("bilinear", {"k0": spring, "fy": coulomb, "alpha": 0.0}),
                     cmd, 0.0, 0.2)
-    result = diagnose(_record(jenkins, cmd, dt, 32), Options(effects=EFFECTS, pairs=False))
+    options = Options(effects=EFFECTS, pairs=False)
+    result = diagnose(_record(jenkins, cmd, dt, 32), options).to_json()
     assert result["verdict"]["effect"] == "friction", result["verdict"]["explanation"]
     params = _winner(result)["params"]
     assert isinstance(params, dict)
@@ -78,7 +80,7 @@ def test_a_small_offset_absorbing_a_law_misfit_is_not_named() -> None:
     "offset" (0.4 % of fy) took up a fifth of the small systematic gap the law leaves. It moves
     the prediction by less than the floor, so it is not named (nor is a pinching that leaves
     more than the baseline's own gap)."""
-    result = diagnose(independent_record("none", 10600328).record)
+    result = diagnose(independent_record("none", 10600328).record).to_json()
     assert result["verdict"]["effect"] in ("none", "sensor_noise", "baseline_misfit"), \
         result["verdict"]["explanation"]
     bias = next(e for e in result["effects"] if e["name"] == "sensor_bias")

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import command_history
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
-from fresco_bridge.diagnosis.model import Context, _law_vector, law_parameters
+from fresco_bridge.diagnosis.model import Context, law_parameters, law_vector
 from fresco_bridge.diagnosis.names import AUTO_FAMILIES, BASELINES
-from fresco_bridge.diagnosis.synth import command_history
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 from sim_actuator.models import MODEL_KINDS
 from sim_actuator.models.paths import drive
@@ -34,7 +34,7 @@ FAMILIES = {
 def _record(kind: str, law: dict[str, float], seed: int = 5) -> Record:
     rng = np.random.default_rng(seed)
     cmd = command_history(rng, 1500, 0.01, 5.0 * law.get("fy", 20.0) / law.get("k0", 10.0))
-    force = drive(*_law_vector(kind, law), cmd, 0.0, 0.2)
+    force = drive(*law_vector(kind, law), cmd, 0.0, 0.2)
     force = force + rng.normal(0.0, 0.005 * float(np.max(np.abs(force))), force.size)
     time = np.arange(cmd.size, dtype=np.float64) * 0.01
     return record_from_arrays(time, cmd, force, source=kind)
@@ -44,7 +44,7 @@ def _record(kind: str, law: dict[str, float], seed: int = 5) -> Record:
 def test_each_family_is_recovered_from_its_own_record(kind: str) -> None:
     law = FAMILIES[kind]
     result = diagnose(_record(kind, law), Options(pairs=False,
-                                                  effects=("backlash", "friction")))
+                                                  effects=("backlash", "friction"))).to_json()
     assert result["baseline"]["kind"] == kind, result["baseline"]["selection"]["reason"]
     fitted = result["baseline"]["params"]
     for name, truth in law.items():
@@ -63,7 +63,7 @@ def test_every_registry_kind_and_every_auto_family_is_a_baseline() -> None:
 
 def test_an_elastic_spring_under_the_elastic_baseline() -> None:
     result = diagnose(_record("elastic", {"k": 4.0}), Options(
-        baseline="elastic", pairs=False, effects=("friction",)))
+        baseline="elastic", pairs=False, effects=("friction",))).to_json()
     assert result["baseline"]["params"]["k"] == pytest.approx(4.0, rel=1e-3)
     gap = result["baseline"]["gap_withheld"]["total_pct"]
     assert gap == pytest.approx(result["noise_floor"]["noise_only_gap_pct"], rel=0.1)

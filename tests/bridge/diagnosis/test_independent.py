@@ -17,10 +17,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fresco_bridge import indicators as ind
-from fresco_bridge.cli import main
-from fresco_bridge.diagnosis.bench import bench_items, credit, summarise_bench
-from fresco_bridge.diagnosis.independent import (
+from benchmarks.diagnosis.bench import bench_items, credit, summarise_bench
+from benchmarks.diagnosis.independent import (
     CYCLE,
     EFFECTS,
     PAIR,
@@ -28,12 +26,14 @@ from fresco_bridge.diagnosis.independent import (
     case_label,
     independent_record,
 )
-from fresco_bridge.diagnosis.independent_laws import (
+from benchmarks.diagnosis.independent_laws import (
     BoucWenBaberNoori,
     GiuffreMenegottoPinto,
     IsotropicBilinear,
     SpecimenLaw,
 )
+from fresco_bridge import indicators as ind
+from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.names import EFFECT_NAMES
 
 STEPS = 600

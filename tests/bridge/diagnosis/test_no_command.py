@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.load import load_record, record_from_arrays
 from fresco_bridge.diagnosis.nocommand import NOT_IDENTIFIABLE
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose
 
 
@@ -57,7 +57,7 @@ def test_an_interface_effect_is_never_guessed_without_a_command() -> None:
     assert rec.meas_disp is not None
     blind = record_from_arrays(rec.time, rec.meas_disp, rec.force, source="delay, no command",
                                no_command=True)
-    result = diagnose(blind, Options(pairs=False))
+    result = diagnose(blind, Options(pairs=False)).to_json()
     assert result["verdict"]["effect"] not in NOT_IDENTIFIABLE
     assert result["verdict"]["effect"] == "none", result["verdict"]["explanation"]
     assert "actuator_delay" in result["not_identifiable"]

@@ -17,9 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fresco_bridge import indicators as ind
-from fresco_bridge.cli import main
-from fresco_bridge.diagnosis.bench import (
+from benchmarks.diagnosis.bench import (
     MAGNITUDE_OF,
     bench_items,
     credit,
@@ -28,8 +26,10 @@ from fresco_bridge.diagnosis.bench import (
     generate,
     summarise_bench,
 )
-from fresco_bridge.diagnosis.realism import realistic_record
-from fresco_bridge.diagnosis.synth import SyntheticRecord
+from benchmarks.diagnosis.realism import realistic_record
+from benchmarks.diagnosis.synth import SyntheticRecord
+from fresco_bridge import indicators as ind
+from fresco_bridge.cli import main
 
 STEPS = 300
 

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import command_history
 from fresco_bridge.cli import main
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
-from fresco_bridge.diagnosis.model import _law_vector
+from fresco_bridge.diagnosis.model import law_vector
 from fresco_bridge.diagnosis.multi import diagnose_device
-from fresco_bridge.diagnosis.synth import command_history
 from fresco_bridge.diagnosis.verdict import Options
 from sim_actuator.models.paths import drive
 
@@ -27,7 +27,7 @@ def _record(seed: int, coulomb: float, steps: int = 900) -> Record:
     the piston velocity, 0.3 % load-cell noise."""
     rng = np.random.default_rng(seed)
     cmd = command_history(rng, steps, 0.01, float(rng.uniform(3.0, 6.0)) * 2.0)
-    force = drive(*_law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
+    force = drive(*law_vector("bouc-wen", SPECIMEN), cmd, 0.0, 0.2)
     v = np.diff(cmd, prepend=cmd[0])
     force = force + coulomb * np.sign(v) + rng.normal(0.0, 0.003 * 20.0, cmd.size)
     time = np.arange(cmd.size, dtype=np.float64) * 0.01
@@ -49,7 +49,7 @@ def test_the_same_effect_in_three_records_is_reported_as_consistent() -> None:
     # with the story held (the shared law, each test's friction) nothing departs
     assert [p["verdict"] for p in doc["per_record"]] == ["none"] * 3
     assert all(p["departures"] == [] for p in doc["per_record"])
-    assert all(r["baseline"]["fitted"] is False for r in doc["results"])
+    assert all(r.baseline["fitted"] is False for r in doc["results"])
 
 
 def test_one_record_that_departs_is_named(tmp_path: Path,
@@ -98,7 +98,7 @@ def test_a_family_change_is_not_the_device_story() -> None:
     for seed in (41, 42, 43):
         rng = np.random.default_rng(seed)
         cmd = command_history(rng, 900, 0.01, float(rng.uniform(3.0, 6.0)) * 2.0)
-        force = drive(*_law_vector("menegotto-pinto", mp), cmd, 0.0, 0.2)
+        force = drive(*law_vector("menegotto-pinto", mp), cmd, 0.0, 0.2)
         force = force + rng.normal(0.0, 0.003 * 20.0, cmd.size)
         time = np.arange(cmd.size, dtype=np.float64) * 0.01
         records.append(record_from_arrays(time, cmd, force, cmd.copy(), source=f"mp {seed}"))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from fresco_bridge.diagnosis.synth import synthetic_record
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import Options, diagnose, stop_of
 
 SEED = 20261127
@@ -18,10 +18,10 @@ def test_thinned_fits_keep_the_verdict_and_the_magnitude(effect: str, param: str
     synthetic = synthetic_record(effect, SEED, steps=2400)
     record = synthetic.record
     effects = ("friction", "backlash", "pinching", "sensor_bias", "sensor_noise")
-    whole = diagnose(record, Options(effects=effects, pairs=False))
+    whole = diagnose(record, Options(effects=effects, pairs=False)).to_json()
     budget = 500
     assert stop_of(record, Options()) > budget  # the thinned, staged path is really taken
-    thin = diagnose(record, Options(effects=effects, pairs=False, max_fit_samples=budget))
+    thin = diagnose(record, Options(effects=effects, pairs=False, max_fit_samples=budget)).to_json()
     assert any("fits used" in note for note in thin["record"]["notes"])
     assert thin["verdict"]["effect"] == whole["verdict"]["effect"] == effect
     got = [next(e for e in r["effects"] if e["name"] == effect)["params"][param]["value"]

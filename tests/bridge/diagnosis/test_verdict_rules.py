@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.diagnosis.synth import command_history, rig_record, run_rig, synthetic_record
+from fresco_bridge.diagnosis.decision import FLAG_CONFIDENCE_FACTOR
 from fresco_bridge.diagnosis.model import reference
-from fresco_bridge.diagnosis.report import summary
-from fresco_bridge.diagnosis.synth import command_history, rig_record, run_rig, synthetic_record
-from fresco_bridge.diagnosis.verdict import FLAG_CONFIDENCE_FACTOR, Options, diagnose, stop_of
+from fresco_bridge.diagnosis.outputs import summary
+from fresco_bridge.diagnosis.verdict import Options, diagnose, stop_of
 
 DT = 0.01
 SPECIMEN = {"k0": 10.0, "fy": 25.0, "alpha": 0.05, "n": 2.0, "beta": 0.6, "gamma": 0.4}
@@ -41,7 +42,7 @@ def test_the_undershoot_candidate_has_the_rigs_form_exactly() -> None:
 
 def test_undershoot_is_named_and_sized_on_a_synthetic_record() -> None:
     synthetic = synthetic_record("actuator_undershoot", 20261127, steps=1200)
-    result = diagnose(synthetic.record)
+    result = diagnose(synthetic.record).to_json()
     assert result["verdict"]["effect"] == "actuator_undershoot", result["verdict"]
     found = next(e for e in result["effects"] if e["name"] == "actuator_undershoot")
     assert found["params"]["undershoot"]["value"] == pytest.approx(
@@ -55,7 +56,8 @@ def test_a_family_change_is_a_baseline_misfit_naming_the_family_not_an_effect() 
                            {"stroke": 200.0, "force_capacity": 1e6}, {},
                            {"lvdt": {"noise_std": 0.002}, "load_cell": {"noise_std": 0.06}},
                            {}, cmd, DT)
-    result = diagnose(synthetic.record, Options(baseline="bilinear"))
+    diagnosis = diagnose(synthetic.record, Options(baseline="bilinear"))
+    result = diagnosis.to_json()
     verdict = result["verdict"]
     assert verdict["effect"] == "baseline_misfit", verdict
     assert verdict["better_family"] == "menegotto-pinto", verdict
@@ -64,15 +66,16 @@ def test_a_family_change_is_a_baseline_misfit_naming_the_family_not_an_effect() 
     pinching = next(e for e in result["effects"] if e["name"] == "pinching")
     assert pinching["compared_with"] == "bouc-wen baseline"
     assert not {"n", "bg_sum", "beta_share"} & set(pinching["params"])
-    assert "try --baseline menegotto-pinto" in summary(result)
+    assert "try --baseline menegotto-pinto" in summary(diagnosis)
 
 
 def test_a_parameter_at_its_bound_is_flagged_and_lowers_the_confidence() -> None:
     cmd = command_history(np.random.default_rng(5), 900, DT, 8.0)
     record = _rig({"amplitude": 1.8}, cmd)  # 80 % gain error: beyond the candidate's 50 %
     # a systematic rival: the white noise is no rival of an effect (it is removed from the gap)
-    result = diagnose(record, Options(effects=("actuator_amplitude", "actuator_delay",
-                                               "sensor_noise"), pairs=False))
+    diagnosis = diagnose(record, Options(effects=("actuator_amplitude", "actuator_delay",
+                                                  "sensor_noise"), pairs=False))
+    result = diagnosis.to_json()
     verdict = result["verdict"]
     assert verdict["effect"] == "actuator_amplitude", verdict
     assert "upper bound" in verdict["flags"]["amplitude_error"]
@@ -80,7 +83,7 @@ def test_a_parameter_at_its_bound_is_flagged_and_lowers_the_confidence() -> None
     assert "upper bound" in amplitude["params"]["amplitude_error"]["flag"]
     assert verdict["confidence"] <= FLAG_CONFIDENCE_FACTOR
     assert verdict["not_separated_from"] == verdict["runner_up"] == "actuator_delay"
-    text = summary(result)
+    text = summary(diagnosis)
     assert "UNSURE: at its upper bound" in text and "not separated from actuator_delay" in text
 
 
@@ -98,12 +101,14 @@ def test_a_quiet_tail_neither_fills_the_withheld_part_nor_inflates_the_gap() -> 
     assert rms(record.force[old_stop:]) < 0.15 * rms(record.force)  # the tail is quiet
     stop = stop_of(record, Options())
     assert stop < 1200  # the withheld part starts in the loud part, with its share of signal
-    result = diagnose(record)
+    diagnosis = diagnose(record)
+    result = diagnosis.to_json()
     assert result["record"]["withheld"]["samples"] == [stop, n]
     gap = result["baseline"]["gap_withheld"]["total_pct"]
     assert gap < 1.5 * result["noise_floor"]["noise_only_gap_pct"], gap
     assert result["verdict"]["effect"] == "none", result["verdict"]
     # what the tail would have made of the same residual: over its own RMS force, the noise
     # alone reads as a gap several times the floor
-    residual = (record.force - result["_series"]["sim"])[old_stop:]
+    assert diagnosis.series is not None
+    residual = (record.force - diagnosis.series.sim)[old_stop:]
     assert 100.0 * rms(residual) / rms(record.force[old_stop:]) > 2.0

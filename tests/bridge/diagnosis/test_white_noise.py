@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
-from fresco_bridge.diagnosis.bench import SYSTEMATIC
+from benchmarks.diagnosis.bench import SYSTEMATIC
+from benchmarks.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.load import Record, record_from_arrays
 from fresco_bridge.diagnosis.scored import systematic_floor
-from fresco_bridge.diagnosis.synth import synthetic_record
 from fresco_bridge.diagnosis.verdict import diagnose
 
 
@@ -30,7 +30,7 @@ def _noisy(record: Record, force_share: float, seed: int) -> Record:
 
 def test_friction_under_loud_white_noise_is_friction_not_noise() -> None:
     synthetic = synthetic_record("friction", 20261128, steps=1500)
-    result = diagnose(_noisy(synthetic.record, 0.018, 1))
+    result = diagnose(_noisy(synthetic.record, 0.018, 1)).to_json()
     assert result["verdict"]["effect"] == "friction", result["verdict"]
     assert result["verdict"]["gap_basis"] == "systematic"
     floor = result["noise_floor"]
@@ -39,7 +39,7 @@ def test_friction_under_loud_white_noise_is_friction_not_noise() -> None:
 
 def test_white_noise_alone_is_noise_never_a_systematic_effect() -> None:
     synthetic = synthetic_record("none", 20261129, steps=1500)
-    result = diagnose(_noisy(synthetic.record, 0.03, 2))
+    result = diagnose(_noisy(synthetic.record, 0.03, 2)).to_json()
     assert result["verdict"]["effect"] == "sensor_noise", result["verdict"]
     assert not set(result["verdict"]["effect"].split("+")) & SYSTEMATIC
 
@@ -55,10 +55,10 @@ def test_coloured_noise_is_claimed_by_sensor_noise() -> None:
     the white estimate sees under half of it and no effect explains the rest. The loop's state
     explains almost none of the calibration residual, so ``sensor_noise`` claims it all, and
     its std comes out near the truth (the white part alone: 0.96 of 2.2 kN)."""
-    from fresco_bridge.diagnosis.independent import independent_record
+    from benchmarks.diagnosis.independent import independent_record
 
     generated = independent_record("sensor_noise", 10700358)
-    result = diagnose(generated.record)
+    result = diagnose(generated.record).to_json()
     assert result["verdict"]["effect"] == "sensor_noise", result["verdict"]["explanation"]
     floor = result["noise_floor"]
     assert floor["claimed_force_noise_std"] > 2.0 * floor["force_noise_std"]

@@ -68,7 +68,8 @@ def test_the_report_shows_tracking_error_the_served_twin_and_the_diagnosis(
         demo: tuple[Path, dict[str, Any], str]) -> None:
     run_dir, summary, _ = demo
     rep = parse(run_dir / "report.html")
-    assert rep.sections[:5] == ["run", "summary", "site-damper", "site-twin", "updating-twin"]
+    assert rep.sections[:5] == ["overview", "summary", "site-damper", "site-twin",
+                                "updating-twin"]
     assert "diagnosis-damper" in rep.sections
     (detail,) = rep.summary["sites"]["damper"]["detail"]
     assert detail["max_tracking_error"] > 0.01 and detail["nrms"] > 1e-4  # not flat zeros
@@ -88,6 +89,38 @@ def test_the_report_shows_tracking_error_the_served_twin_and_the_diagnosis(
     assert diagnosis["shrink_pct"] > 20.0 and diagnosis["magnitude"]
     assert cells["shrink"] == pct(diagnosis["shrink_pct"], 1)
     assert next(iter(diagnosis["magnitude"])) in cells["magnitude"]
+
+
+def test_the_report_opens_with_a_summary_whose_figures_are_the_runs_own(
+        demo: tuple[Path, dict[str, Any], str]) -> None:
+    """The first section a test engineer reads: each headline figure equals the run's JSON
+    (summary.json, diagnosis-damper/diagnosis.json), shown rounded beside its exact value."""
+    run_dir, summary, _ = demo
+    rep = parse(run_dir / "report.html")
+    assert rep.sections[0] == "overview"
+    figures = {key: (float(value), text) for key, (value, text) in rep.figures.items()}
+    diagnosis = json.loads((run_dir / "diagnosis-damper" / "diagnosis.json").read_text())
+    verdict = diagnosis["verdict"]
+    twin = summary["twin"]
+    expected = {
+        "tracking.damper.max_tracking_error_mm": summary["max_tracking_error_mm"],
+        "tracking.damper.nrms": summary["tracking_nrms"],
+        "holds.damper": summary["holds"],
+        "holds.twin": 0,
+        "twin.updated.rmseth_kN": twin["updated"]["rmseth_kN"],
+        "twin.calibrated_bilinear.rmseth_kN": twin["calibrated_bilinear"]["rmseth_kN"],
+        "twin.rmseth_reduction_pct": twin["rmseth_reduction_pct"],
+        "diagnosis.damper.confidence": verdict["confidence"],
+        "diagnosis.damper.gap_before_pct": verdict["gap_before_pct"],
+        "diagnosis.damper.gap_after_pct": verdict["gap_after_pct"],
+    }
+    assert {k: v for k, (v, _) in figures.items()} == expected
+    assert figures["twin.rmseth_reduction_pct"][1] == pct(twin["rmseth_reduction_pct"], 0)
+    assert figures["diagnosis.damper.confidence"][1] == f"{verdict['confidence']:.2f}"
+    text = "".join(rep.text)
+    assert verdict["effect"] in text and "What to do next" in text
+    assert rep.summary["overview"]["twin"]["rmseth_reduction_pct"] == twin["rmseth_reduction_pct"]
+    assert rep.summary["overview"]["diagnosis"]["damper"]["effect"] == verdict["effect"]
 
 
 def test_report_renders_the_diagnosis_again_and_can_compute_it(

@@ -124,12 +124,13 @@ def step_until_nan(link: GenericClientLink, start: int, limit: int = 100_000) ->
 
 
 def refused_now(port: int) -> bool:
-    """A new client is refused at once (the connection is closed before any reply)."""
+    """A new client is refused at once: told to stop (its first request answered with NaN,
+    ``server/refusal.py``) or closed before any reply."""
     link = GenericClientLink("127.0.0.1", port, 1, data_size=1, timeout=5.0)
     try:
         link.connect()
         link.set_trial((0.0,), time=0.0)
-        link.force()
+        return math.isnan(link.force()[0])
     except (LinkError, ConnectionError):
         return True
     finally:

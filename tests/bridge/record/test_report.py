@@ -41,6 +41,8 @@ class _Report(HTMLParser):
         self._key: str | None = None
         self._json: bool = False
         self.summary: dict[str, Any] = {}
+        self.figures: dict[str, tuple[str, str]] = {}  # overview: key -> (exact value, text)
+        self._fig: tuple[str, str] | None = None
 
     def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
         a = dict(attrs)
@@ -56,11 +58,16 @@ class _Report(HTMLParser):
                 self.events.append(str(a["data-event"]))
         elif tag == "td" and a.get("data-key"):
             self._key = str(a["data-key"])
+        elif tag == "span" and a.get("data-key"):
+            self._fig = (str(a["data-key"]), str(a.get("data-value", "")))
         elif tag == "script" and a.get("id") == "summary-data":
             self._json = True
 
     def handle_data(self, data: str) -> None:
         self.text.append(data)
+        if self._fig is not None:
+            self.figures[self._fig[0]] = (self._fig[1], data)
+            self._fig = None
         if self._key is not None:
             self.cells.append((self._site, self._key, data))
             self._key = None
@@ -85,7 +92,7 @@ def test_report_of_a_real_run_has_every_section_and_the_record_numbers(recorded:
                                                                           tmp_path: Path) -> None:
     out = write_report(recorded, tmp_path / "r.html")
     rep = parse(out)
-    assert rep.sections == ["run", "summary", "site-spring", "events", "config"]
+    assert rep.sections == ["overview", "summary", "site-spring", "events", "run", "config"]
     assert [alt for alt, _ in rep.images] == [
         "spring hysteresis", "spring command vs measured", "spring error monitors",
         "spring synchronization subspace"]
@@ -213,7 +220,8 @@ params = { k = 4.0 }
     # two integrator sessions on the same site, then one on the other
     run_dir = record_sessions(tmp_path, toml, [("spring", 40), ("spring", 25), ("story2", 30)])
     rep = parse(write_report(run_dir))
-    assert rep.sections == ["run", "summary", "site-spring", "site-story2", "events", "config"]
+    assert rep.sections == ["overview", "summary", "site-spring", "site-story2", "events", "run",
+                            "config"]
     assert len(rep.images) == 8
     spring, story2 = rep.summary["sites"]["spring"], rep.summary["sites"]["story2"]
     assert (spring["steps"], spring["sessions"]) == (65, 2)

@@ -10,6 +10,7 @@ import h5py  # type: ignore[import-untyped]
 import numpy as np
 import pytest
 
+from fresco_bridge import __version__
 from fresco_bridge.cli import main as cli_main
 from fresco_bridge.record import export_csv
 from fresco_bridge.record.export import committed_steps
@@ -92,7 +93,12 @@ def test_show_prints_metadata_and_the_site_summary(runs_root: Path,
     name = _run(runs_root, "first").name
     assert cli_main(["runs", "show", "--runs", str(runs_root), name[:-3]]) == 0  # a prefix
     out = capsys.readouterr().out
-    assert f"run        {runs_root / name}" in out
+    head = [line.split(maxsplit=1) for line in out.split("\n\n")[0].splitlines()]
+    assert head[0] == ["run", str(runs_root / name)]
+    # the metadata's values start in one column, whatever the longest key
+    starts = {len(line) - len(line.split(maxsplit=1)[1])
+              for line in out.split("\n\n")[0].splitlines()}
+    assert len(starts) == 1 and ["fresco_bridge", __version__] in head
     assert "site spring: 120 committed step(s), 1 session(s), 1 hold(s), 0 limit event(s)" in out
     assert "session 1 actuator 1: 120 steps" in out and "NRMS" in out and "FEI delay" in out
 
@@ -148,6 +154,15 @@ def test_resolve_run_names_and_errors(runs_root: Path) -> None:
         resolve_run(first.name[:4], runs_root)
     with pytest.raises(RunDirError, match="no such run"):
         resolve_run("zzz", runs_root)
+
+
+def test_an_ambiguous_prefix_says_how_many_runs_it_does_not_list(tmp_path: Path) -> None:
+    names = [f"2026120{i}T100000-demo" for i in range(1, 10)]
+    for name in names:
+        (tmp_path / name).mkdir()
+    with pytest.raises(RunDirError) as err:
+        resolve_run("2026", tmp_path)
+    assert f"matches 9 runs under {tmp_path}: {', '.join(names[:5])} and 4 more" in str(err.value)
 
 
 def test_default_outputs_are_named_where_they_were_written(

@@ -17,7 +17,7 @@ from fresco_bridge.record.export import committed_steps
 from fresco_bridge.sites import SiteState
 from protocol import Action, SizeID
 from tests.support.bridge import RunningBridge
-from tests.support.spied_bridge import wait_for
+from tests.support.spied_bridge import told_to_stop, wait_for
 
 CONFIG = """
 [bridge]
@@ -108,15 +108,40 @@ def _after_bad_client(bridge, caplog, fragment: str) -> None:  # type: ignore[no
         ([1, 1, 1, 0, 1, 0, 0, 0, 1, 0, -5], "entry 10"),
         ([1, 1, 1, 0, 1, 0, 0, 0, -1, 0, 256], "entry 8"),
         ([1, 1, 1, 0, 1, 0, 0, 0, 1, 0, 5000], "cap 1000"),
-        ([2, 2, 2, 0, 1, 0, 0, 0, 2, 0, 256], "do not fit site spring"),
-        ([1, 1, 1, 2, 1, 0, 0, 0, 1, 0, 256], "force control"),
     ],
-    ids=["negative-datasize", "negative-size", "above-cap", "wrong-dofs", "force-ctrl"],
+    ids=["negative-datasize", "negative-size", "above-cap"],
 )
-def test_malformed_or_unfitting_size_id(bridge, caplog, ints: list[int], fragment: str) -> None:  # type: ignore[no-untyped-def]
+def test_malformed_size_id(bridge, caplog, ints: list[int], fragment: str) -> None:  # type: ignore[no-untyped-def]
     caplog.set_level(logging.INFO, logger="fresco_bridge")
     s = _raw(bridge.ports["spring"])
     s.sendall(struct.pack("<11i", *ints))
+    assert _closed_by_bridge(s)
+    s.close()
+    _after_bad_client(bridge, caplog, fragment)
+
+
+@pytest.mark.parametrize(
+    ("ints", "fragment"),
+    [
+        ([2, 2, 2, 0, 1, 0, 0, 0, 2, 0, 256], "do not fit site spring"),
+        ([1, 1, 1, 2, 1, 0, 0, 0, 1, 0, 256], "force control"),
+    ],
+    ids=["wrong-dofs", "force-ctrl"],
+)
+def test_unfitting_size_id_is_told_to_stop(bridge, caplog, ints: list[int], fragment: str) -> None:  # type: ignore[no-untyped-def]
+    """A valid size ID the site cannot serve: refused, and its requests answered with NaN
+    until DIE (an OpenSees client then stops; a closed socket made it spin)."""
+    caplog.set_level(logging.INFO, logger="fresco_bridge")
+    s = _raw(bridge.ports["spring"])
+    s.sendall(struct.pack("<11i", *ints))
+    s.sendall(_vector(3.0, 0.01, size=256) + _vector(10.0, size=256))  # trial, then force
+    reply = b""
+    while len(reply) < 8 * 256:
+        chunk = s.recv(8 * 256 - len(reply))
+        assert chunk, "closed instead of answered"
+        reply += chunk
+    assert all(math.isnan(v) for v in struct.unpack("<256d", reply))
+    s.sendall(_vector(99.0, size=256))
     assert _closed_by_bridge(s)
     s.close()
     _after_bad_client(bridge, caplog, fragment)
@@ -182,7 +207,7 @@ def test_non_finite_trial_holds_and_is_never_forwarded(bridge, caplog, bad: floa
 def test_client_from_disallowed_address(bridge, caplog) -> None:  # type: ignore[no-untyped-def]
     caplog.set_level(logging.INFO, logger="fresco_bridge")
     s = _raw(bridge.ports["guarded"], source="127.0.0.1")
-    assert _closed_by_bridge(s)
+    assert told_to_stop(s)
     s.close()
     assert any("not in allowed_clients" in r.getMessage() for r in caplog.records)
     ok = _raw(bridge.ports["guarded"], source="127.0.0.2")  # the allowed address is served
@@ -198,7 +223,7 @@ def test_second_concurrent_client_is_refused(bridge, caplog) -> None:  # type: i
     with GenericClientLink("127.0.0.1", bridge.ports["spring"], 1, data_size=1) as first:
         wait_for(lambda: bridge.call(lambda: bridge.bridge.sites["spring"].busy), "the session")
         intruder = _raw(bridge.ports["spring"])
-        assert _closed_by_bridge(intruder)
+        assert told_to_stop(intruder)
         intruder.close()
         first.set_trial((0.02,), time=1.0)
         assert first.force()[0] == pytest.approx(2.0)
@@ -221,7 +246,7 @@ def test_other_sites_are_served_while_a_bad_client_is_still_connected(bridge, ca
     try:
         _good_session(bridge.ports["other"], 50.0, steps=20)  # while `stuck` is open
         intruder = _raw(bridge.ports["spring"])  # its own site stays one-client-at-a-time
-        assert _closed_by_bridge(intruder)
+        assert told_to_stop(intruder)
         intruder.close()
     finally:
         stuck.close()

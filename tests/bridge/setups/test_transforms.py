@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import pytest
 
-from fresco_bridge.controls.sim import _diagonal
+from fresco_bridge.controls.base import diagonal
 from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.setups import LinearSetup, make_setup
@@ -64,7 +64,7 @@ def test_a_general_transform_equals_the_explicit_sum() -> None:
 
 
 def test_the_sim_controller_diagonal_is_column_major() -> None:
-    assert _diagonal((1.0, 2.0, 3.0)) == (1.0, 0, 0, 0, 2.0, 0, 0, 0, 3.0)
+    assert diagonal((1.0, 2.0, 3.0)) == (1.0, 0, 0, 0, 2.0, 0, 0, 0, 3.0)
 
 
 def test_a_64_dof_element_is_served_end_to_end(

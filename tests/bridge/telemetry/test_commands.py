@@ -164,12 +164,12 @@ def test_a_command_flood_is_logged_at_a_bounded_rate(caplog: pytest.LogCaptureFi
 def test_a_payload_the_checks_did_not_foresee_is_counted_not_raised(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     """An exception out of the checks would end the MQTT session (telemetry, remote abort)."""
-    def deep(_: str) -> object:
-        raise RecursionError("maximum recursion depth exceeded")
+    def unforeseen(*_: object, **__: object) -> object:
+        raise RuntimeError("a check's own bug")
 
-    monkeypatch.setattr(json, "loads", deep)
+    monkeypatch.setattr("fresco_bridge.telemetry.mqtt.decode", unforeseen)
     tel = commanded([])
     with caplog.at_level(logging.WARNING, logger="fresco_bridge.telemetry"):
         tel.handle_command_message("lab/fresco/s1/cmd", payload(command="pause", token=TOKEN))
     assert tel.stats.commands_rejected == 1
-    assert "unreadable payload (RecursionError)" in caplog.text
+    assert "unreadable payload (RuntimeError)" in caplog.text

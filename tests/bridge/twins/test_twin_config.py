@@ -53,7 +53,8 @@ def error_of(tmp_path: Path, text: str) -> str:
 ])
 def test_bad_updatable_site(tmp_path: Path, text: str, key: str, reason: str) -> None:
     message = error_of(tmp_path, text)
-    line = next((ln for ln in message.splitlines() if ln.strip().startswith(f"{key}:")), None)
+    line = next((ln for ln in message.splitlines()  # after "line N, site NAME: " when known
+                 if ln.strip().startswith(f"{key}:") or f": {key}:" in ln), None)
     assert line is not None and reason in line, message
 
 

@@ -167,7 +167,7 @@ def test_replay_units_round_trip(files: dict[str, Path], tmp_path: Path) -> None
 @pytest.mark.parametrize(
     ("content", "message"),
     [
-        ("time,disp\n0,1\n", r"src\.csv:1: missing column\(s\) force \(or meas_force\)"),
+        ("time,disp\n0,1\n", r"src\.csv:1: missing column\(s\) meas_force \(or force\)"),
         ("time,disp,force\n0,1,2\n0.01,2,nan\n",
          r"src\.csv:3: column force is 'nan', not a finite number"),
         ("time,disp,force\n0,1,2\n0.02,2,3\n0.01,3,4\n",

@@ -101,3 +101,16 @@ def test_presets_are_listed(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert "ideal-bilinear:" in out
     assert "lab-realistic:" in out
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--protocol", "generic-tcp", "--channels", "0"], "--channels must be >= 1"),
+    (["--protocol", "modbus", "--transport", "udp"], "options of --protocol generic-tcp"),
+    (["--protocol", "generic-tcp", "--tls-cert", "a.crt"], "go together"),
+    (["--protocol", "generic-tcp", "--transport", "udp", "--tls-cert", "a", "--tls-key", "b",
+      "--tls-client-ca", "c"], "cannot load the TLS files"),
+])
+def test_generic_tcp_options_are_checked_before_serving(
+        args: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["serve", *args, "--preset", "ideal-elastic"]) == 2
+    assert message in capsys.readouterr().err

@@ -192,7 +192,8 @@ def test_bad_requests_get_exception_codes_and_the_server_keeps_working() -> None
     async def scenario() -> None:
         async with serving(preset("ideal-bilinear")) as (_, client, _port):
             assert exception_code(await client.read_holding_registers(6, count=1)) == 2
-            assert exception_code(await client.read_input_registers(20, count=4)) == 2
+            ext = await client.read_input_registers(Reg.EXT_DISP, count=4)  # 26 is unmapped
+            assert exception_code(ext) == 2
             assert exception_code(await client.read_holding_registers(500, count=1)) == 2
             assert exception_code(await client.write_register(Reg.STATE, 1)) == 2  # read-only
             assert exception_code(await client.write_registers(4, [0, 0, 0])) == 2  # 4..6
@@ -272,5 +273,37 @@ def test_mbpoll_drives_a_move_and_reads_the_measurement() -> None:
             rc, out = await _mbpoll(*common, "-r", "6", "-t", "3", "127.0.0.1")
             assert rc != 0
             assert "Illegal data address" in out
+
+    run(scenario)
+
+
+def test_several_channels_a_register_block_each() -> None:
+    from sim_actuator.wire.modbus_map import CHANNEL_STRIDE
+
+    async def scenario() -> None:
+        rigs = [RigController(build_rig(preset("ideal-elastic"))) for _ in range(3)]
+        server = ModbusRigServer(rigs, host="127.0.0.1", port=0)
+        host, port = await server.start()
+        client = AsyncModbusTcpClient(host, port=port, timeout=3, retries=0)
+        assert await client.connect()
+        try:
+            base = 2 * CHANNEL_STRIDE  # channel 3 moves alone
+            r = await client.write_registers(
+                base + Reg.COMMAND, [*encode_float32(0.5), *encode_float32(0.0), 1], device_id=1)
+            assert not r.isError(), r
+            assert [c.target for c in rigs] == [0.0, 0.0, 0.5]
+            r = await client.read_holding_registers(base + Reg.STATE,
+                                                    count=Reg.CHANNELS - Reg.STATE + 1,
+                                                    device_id=1)
+            w = r.registers
+            assert decode_float32(w[Reg.MEAS_FORCE - Reg.STATE:][:2]) == f32(34.0)
+            assert w[Reg.CHANNELS - Reg.STATE] == 3 and w[Reg.SEQUENCE - Reg.STATE] == 1
+            # one write, one channel: a write spanning two blocks is refused, nothing moves
+            r = await client.write_registers(CHANNEL_STRIDE - 1, [0] * 8, device_id=1)
+            assert exception_code(r) == 2
+            assert [c.sequence for c in rigs] == [0, 0, 1]
+        finally:
+            client.close()
+            await server.stop()
 
     run(scenario)

@@ -18,9 +18,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.diagnosis.load import Record, record_from_arrays
 from sim_actuator.config import build_rig, parse_rig_config
-
-from .load import Record, record_from_arrays
 
 __all__ = [
     "MAGNITUDES",
@@ -29,7 +28,9 @@ __all__ = [
     "rig_record",
     "run_rig",
     "sensor_effect",
+    "signed",
     "synthetic_record",
+    "uniform",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -89,27 +90,29 @@ def command_history(rng: np.random.Generator, steps: int, dt: float, peak: float
     return np.asarray(signal / np.max(np.abs(signal)) * peak, dtype=np.float64)
 
 
-def _uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
+def uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
+    """A draw from [lo, hi)."""
     return float(rng.uniform(lo, hi))
 
 
-def _signed(rng: np.random.Generator, lo: float, hi: float) -> float:
-    return float(rng.choice((-1.0, 1.0))) * _uniform(rng, lo, hi)
+def signed(rng: np.random.Generator, lo: float, hi: float) -> float:
+    """A draw from [lo, hi) with a random sign."""
+    return float(rng.choice((-1.0, 1.0))) * uniform(rng, lo, hi)
 
 
 def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
                      dt: float = 0.01) -> SyntheticRecord:
     """Generate one record with ``effect`` (or ``none``) from ``seed``, through the rig."""
     rng = np.random.default_rng(seed)
-    k0 = _uniform(rng, 5.0, 50.0)
-    fy = _uniform(rng, 10.0, 100.0)
-    beta = _uniform(rng, 0.3, 0.8)
+    k0 = uniform(rng, 5.0, 50.0)
+    fy = uniform(rng, 10.0, 100.0)
+    beta = uniform(rng, 0.3, 0.8)
     specimen: dict[str, float] = {
-        "k0": k0, "fy": fy, "alpha": _uniform(rng, 0.02, 0.15), "n": _uniform(rng, 1.0, 3.0),
+        "k0": k0, "fy": fy, "alpha": uniform(rng, 0.02, 0.15), "n": uniform(rng, 1.0, 3.0),
         "beta": beta, "gamma": 1.0 - beta,
     }
     dy = fy / k0
-    peak = _uniform(rng, 3.0, 8.0) * dy
+    peak = uniform(rng, 3.0, 8.0) * dy
     cmd = command_history(rng, steps, dt, peak)
     path_u = float(np.sum(np.abs(np.diff(cmd)))) / dy
     v_rms = float(np.sqrt(np.mean((np.diff(cmd) / dt) ** 2)))
@@ -120,31 +123,31 @@ def synthetic_record(effect: str, seed: int, *, steps: int = 3000,
     load_cell: dict[str, Any] = {"noise_std": NOMINAL_LOAD_CELL_NOISE * fy}
     truth: dict[str, float] = {}
     if effect == "actuator_delay":
-        truth["tau"] = _uniform(rng, 0.005, 0.040)
+        truth["tau"] = uniform(rng, 0.005, 0.040)
         actuator["delay"] = truth["tau"]
     elif effect == "actuator_amplitude":
-        truth["amplitude_error"] = _signed(rng, 0.03, 0.10)
+        truth["amplitude_error"] = signed(rng, 0.03, 0.10)
         actuator["amplitude"] = 1.0 + truth["amplitude_error"]
     elif effect == "actuator_undershoot":
-        truth["undershoot"] = _uniform(rng, 0.01, 0.04) * peak
+        truth["undershoot"] = uniform(rng, 0.01, 0.04) * peak
         actuator["undershoot"] = truth["undershoot"]
     elif effect == "backlash":
-        truth["gap"] = _uniform(rng, 0.02, 0.08) * peak
+        truth["gap"] = uniform(rng, 0.02, 0.08) * peak
         effects["backlash"] = {"gap": truth["gap"]}
     elif effect == "friction":
-        truth["coulomb"] = _uniform(rng, 0.03, 0.10) * fy
+        truth["coulomb"] = uniform(rng, 0.03, 0.10) * fy
         effects["friction"] = {"coulomb": truth["coulomb"]}
     elif effect == "rate_dependence":
-        truth["viscous"] = _uniform(rng, 0.03, 0.10) * fy / v_rms
+        truth["viscous"] = uniform(rng, 0.03, 0.10) * fy / v_rms
         effects["friction"] = {"viscous": truth["viscous"]}
     elif effect == "pinching":
         kind = "bwbn"
-        truth.update(zeta_s=_uniform(rng, 0.3, 0.8), psi0=_uniform(rng, 0.1, 0.3),
-                     q=_uniform(rng, 0.0, 0.2))
+        truth.update(zeta_s=uniform(rng, 0.3, 0.8), psi0=uniform(rng, 0.1, 0.3),
+                     q=uniform(rng, 0.0, 0.2))
         specimen.update(truth, **PLAIN_PINCHING)
     elif effect == "degradation":
         kind = "bwbn"
-        delta = _uniform(rng, 0.2, 0.6) / path_u
+        delta = uniform(rng, 0.2, 0.6) / path_u
         truth.update(delta_nu=delta, delta_eta=delta)
         specimen.update(truth, p=0.0, q=0.0, psi0=1.0, delta_psi=0.0, lam=1.0)
     elif effect in ("sensor_bias", "sensor_noise"):
@@ -159,12 +162,12 @@ def sensor_effect(effect: str, rng: np.random.Generator, fy: float, peak: float,
                   lvdt: dict[str, Any], load_cell: dict[str, Any]) -> dict[str, float]:
     """Put ``sensor_bias`` or ``sensor_noise`` on the two channels; its truth."""
     if effect == "sensor_bias":
-        truth = {"force_bias": _signed(rng, 0.02, 0.08) * fy,
-                 "disp_bias": _signed(rng, 0.01, 0.04) * peak}
+        truth = {"force_bias": signed(rng, 0.02, 0.08) * fy,
+                 "disp_bias": signed(rng, 0.01, 0.04) * peak}
         lvdt["bias"], load_cell["bias"] = truth["disp_bias"], truth["force_bias"]
     else:
-        truth = {"force_noise_std": _uniform(rng, 0.015, 0.05) * fy,
-                 "disp_noise_std": _uniform(rng, 0.005, 0.02) * peak}
+        truth = {"force_noise_std": uniform(rng, 0.015, 0.05) * fy,
+                 "disp_noise_std": uniform(rng, 0.005, 0.02) * peak}
         lvdt["noise_std"] = truth["disp_noise_std"]
         load_cell["noise_std"] = truth["force_noise_std"]
     return truth

@@ -1,10 +1,7 @@
-"""Setups: the kinematic map between an element's basic DOFs and the actuators.
-
-OpenFresco's experimental setups transform *trial* signals (basic DOFs of the element) into
-*ctrl* signals (actuator commands) and *daq* signals back into *out* signals. Both setups we
-ship are linear, ``ctrl = T · trial``: ``NoTransformation`` (T = I) and ``OneActuator`` (one
-actuator along the element: stroke = u_j − u_i for a two-node element, forces equal and
-opposite). Forces go back as ``q = Tᵀ · f`` and stiffness as ``K = Tᵀ · k · T``.
+"""The linear setups ``ctrl = T · trial``: ``NoTransformation`` (T = I) and ``OneActuator``
+(one actuator along basic DOF ``dir``, or along a two-node element: stroke = u_j − u_i,
+forces equal and opposite). Forces go back as ``q = Tᵀ · f`` and stiffness as
+``K = Tᵀ · k · T``; velocities and accelerations transform as displacements.
 """
 
 from __future__ import annotations
@@ -15,11 +12,9 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from .base import SetupError
+
 SetupKind = Literal["NoTransformation", "OneActuator"]
-
-
-class SetupError(ValueError):
-    """The setup cannot serve an element of this size."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,7 +45,28 @@ class LinearSetup:
             return trial_disp
         return tuple(sum(c * u for c, u in zip(row, trial_disp, strict=True)) for row in self.t)
 
-    def basic_force(self, daq_force: tuple[float, ...]) -> tuple[float, ...]:
+    def ctrl_vel(self, trial_disp: tuple[float, ...],
+                 trial_vel: tuple[float, ...]) -> tuple[float, ...]:
+        return self.ctrl_disp(trial_vel)
+
+    def ctrl_accel(self, trial_disp: tuple[float, ...], trial_vel: tuple[float, ...],
+                   trial_accel: tuple[float, ...]) -> tuple[float, ...]:
+        return self.ctrl_disp(trial_accel)
+
+    def out_vel(self, daq_vel: tuple[float, ...]) -> tuple[float, ...]:
+        return self._pseudo_inverse(daq_vel)
+
+    def out_accel(self, daq_accel: tuple[float, ...]) -> tuple[float, ...]:
+        return self._pseudo_inverse(daq_accel)
+
+    def _pseudo_inverse(self, daq: tuple[float, ...]) -> tuple[float, ...]:
+        if self.identity:
+            return daq
+        out: list[float] = (np.linalg.pinv(self._t) @ np.asarray(daq, float)).tolist()
+        return tuple(out)
+
+    def basic_force(self, daq_force: tuple[float, ...],
+                    daq_disp: tuple[float, ...] | None = None) -> tuple[float, ...]:
         if self.identity:
             return daq_force
         t = self.t
@@ -81,20 +97,27 @@ class LinearSetup:
         return tuple(out)
 
 
-def make_setup(kind: SetupKind, n_basic: int) -> LinearSetup:
-    """Build the setup for an element with ``n_basic`` basic DOFs."""
+def make_linear(kind: SetupKind, n_basic: int, direction: int | None = None) -> LinearSetup:
+    """Build the setup for an element with ``n_basic`` basic DOFs (``direction``: OneActuator
+    along that basic DOF, 1-based, as OpenFresco's ``$dir``)."""
     if n_basic < 1:
         raise SetupError(f"{kind}: the element must have at least one basic DOF, got {n_basic}")
     if kind == "NoTransformation":
         eye = tuple(tuple(1.0 if i == j else 0.0 for j in range(n_basic)) for i in range(n_basic))
         return LinearSetup(kind, n_basic, n_basic, eye)
     if kind == "OneActuator":
+        if direction is not None:
+            if not 1 <= direction <= n_basic:
+                raise SetupError(f"OneActuator: dir = {direction} is not a basic DOF of the "
+                                 f"element (1 to {n_basic})")
+            return LinearSetup(kind, n_basic, 1, (tuple(
+                1.0 if i == direction - 1 else 0.0 for i in range(n_basic)),))
         if n_basic == 1:
             return LinearSetup(kind, 1, 1, ((1.0,),))
         if n_basic == 2:
             return LinearSetup(kind, 2, 1, ((-1.0, 1.0),))
         raise SetupError(
             f"OneActuator drives a grounded 1-DOF element or a two-node element with one DOF "
-            f"per node (-dof 1 -dof 1); this element has {n_basic} basic DOFs"
+            f"per node (-dof 1 -dof 1), or give dir; this element has {n_basic} basic DOFs"
         )
     raise SetupError(f"unknown setup {kind!r}; expected NoTransformation or OneActuator")

@@ -33,16 +33,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.diagnosis.load import Record, record_from_arrays
+
 from .independent_laws import (
     BoucWenBaberNoori,
     GiuffreMenegottoPinto,
     IsotropicBilinear,
     SpecimenLaw,
 )
-from .load import Record, record_from_arrays
 
 __all__ = ["CYCLE", "EFFECTS", "INDEPENDENT", "PAIR", "IndependentRecord", "case_label",
-           "ground_motion_command", "independent_record"]
+           "coloured_noise", "contact_force", "draw_specimen", "drive_with_gap",
+           "ground_motion_command", "independent_record", "jenkins", "servo_path", "signed",
+           "specimen_law", "uniform"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -110,12 +113,12 @@ def case_label(seed: int, index: int) -> str:
     return "+".join(sorted((EFFECTS[int(a)], EFFECTS[int(b)])))
 
 
-def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
+def uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(rng.uniform(lo, hi))
 
 
-def _pm(rng: np.random.Generator, lo: float, hi: float) -> float:
-    return (1.0 if rng.uniform() < 0.5 else -1.0) * _u(rng, lo, hi)
+def signed(rng: np.random.Generator, lo: float, hi: float) -> float:
+    return (1.0 if rng.uniform() < 0.5 else -1.0) * uniform(rng, lo, hi)
 
 
 def ground_motion_command(rng: np.random.Generator, steps: int, dt: float,
@@ -127,16 +130,16 @@ def ground_motion_command(rng: np.random.Generator, steps: int, dt: float,
     t = np.arange(steps) * dt
     n_fft = 1 << math.ceil(math.log2(2 * steps))
     w = 2.0 * math.pi * np.fft.rfftfreq(n_fft, dt)
-    wg, zg = 2.0 * math.pi * _u(rng, 1.5, 5.0), _u(rng, 0.3, 0.7)
+    wg, zg = 2.0 * math.pi * uniform(rng, 1.5, 5.0), uniform(rng, 0.3, 0.7)
     kanai_tajimi = (wg**2 + 2j * zg * wg * w) / (wg**2 - w**2 + 2j * zg * wg * w)
     noise = np.fft.rfft(rng.standard_normal(steps), n_fft)
     ground = np.fft.irfft(noise * kanai_tajimi, n_fft)[:steps]
-    t1, t2 = _u(rng, 0.05, 0.15) * duration, _u(rng, 0.4, 0.7) * duration
-    tail = _u(rng, 0.1, 0.4)
+    t1, t2 = uniform(rng, 0.05, 0.15) * duration, uniform(rng, 0.4, 0.7) * duration
+    tail = uniform(rng, 0.1, 0.4)
     decay = -math.log(tail) / (duration - t2)
     envelope = np.where(t < t1, (t / t1) ** 2,
                         np.where(t < t2, 1.0, np.exp(-decay * (t - t2))))
-    wn, zn = 2.0 * math.pi / _u(rng, 0.3, 1.5), _u(rng, 0.02, 0.05)
+    wn, zn = 2.0 * math.pi / uniform(rng, 0.3, 1.5), uniform(rng, 0.02, 0.05)
     wd = wn * math.sqrt(1.0 - zn * zn)
     impulse = np.exp(-zn * wn * t) * np.sin(wd * t) / wd  # u'' + 2 z w u' + w^2 u = -a_g
     response = -np.fft.irfft(np.fft.rfft(ground * envelope, n_fft)
@@ -144,20 +147,20 @@ def ground_motion_command(rng: np.random.Generator, steps: int, dt: float,
     return np.asarray(response / np.max(np.abs(response)) * peak, dtype=np.float64)
 
 
-def _specimen(rng: np.random.Generator, bwbn: bool) -> tuple[str, dict[str, float]]:
+def draw_specimen(rng: np.random.Generator, bwbn: bool) -> tuple[str, dict[str, float]]:
     """Every family's parameters are drawn in one fixed order, whichever is used: a record
     with an effect and one without, from the same seed, share the specimen (and the command
     and base noise: independent streams) unless the effect needs BWBN."""
-    k0, fy = _u(rng, 5.0, 50.0), _u(rng, 10.0, 100.0)
+    k0, fy = uniform(rng, 5.0, 50.0), uniform(rng, 10.0, 100.0)
     uy = fy / k0
     family = ("menegotto-pinto", "bilinear-isotropic", "bouc-wen")[int(rng.integers(3))]
-    r0 = _u(rng, 10.0, 25.0)
-    steel = {"k0": k0, "fy": fy, "b": _u(rng, 0.005, 0.05), "R0": r0,
-             "a1": _u(rng, 0.85, 0.95) * r0, "a2": _u(rng, 0.05, 0.3)}
-    isotropic = {"k0": k0, "fy": fy, "q_inf": _u(rng, 0.2, 0.6) * fy,
-                 "kappa_s": _u(rng, 3.0, 15.0) * uy, "h_kin": _u(rng, 0.002, 0.02) * k0}
-    total, share = _u(rng, 0.7, 1.4), _u(rng, 0.2, 0.8)
-    bouc_wen = {"k0": k0, "fy": fy, "alpha": _u(rng, 0.02, 0.15), "n": _u(rng, 1.0, 3.0),
+    r0 = uniform(rng, 10.0, 25.0)
+    steel = {"k0": k0, "fy": fy, "b": uniform(rng, 0.005, 0.05), "R0": r0,
+             "a1": uniform(rng, 0.85, 0.95) * r0, "a2": uniform(rng, 0.05, 0.3)}
+    isotropic = {"k0": k0, "fy": fy, "q_inf": uniform(rng, 0.2, 0.6) * fy,
+                 "kappa_s": uniform(rng, 3.0, 15.0) * uy, "h_kin": uniform(rng, 0.002, 0.02) * k0}
+    total, share = uniform(rng, 0.7, 1.4), uniform(rng, 0.2, 0.8)
+    bouc_wen = {"k0": k0, "fy": fy, "alpha": uniform(rng, 0.02, 0.15), "n": uniform(rng, 1.0, 3.0),
                 "beta": share * total, "gamma": (1.0 - share) * total}
     if bwbn:
         return "bwbn", bouc_wen
@@ -165,7 +168,7 @@ def _specimen(rng: np.random.Generator, bwbn: bool) -> tuple[str, dict[str, floa
                     "bouc-wen": bouc_wen}[family]
 
 
-def _law(family: str, p: dict[str, float]) -> SpecimenLaw:
+def specimen_law(family: str, p: dict[str, float]) -> SpecimenLaw:
     if family == "menegotto-pinto":
         return GiuffreMenegottoPinto(p["k0"], p["fy"], p["b"], p["R0"], p["a1"], p["a2"])
     if family == "bilinear-isotropic":
@@ -177,7 +180,7 @@ def _law(family: str, p: dict[str, float]) -> SpecimenLaw:
         p=p.get("p", 1.0), lam=p.get("lam", 0.5), d_psi=p.get("delta_psi", 0.0))
 
 
-def _servo(target: FloatArray, dt: float, delay: float, lag: float) -> FloatArray:
+def servo_path(target: FloatArray, dt: float, delay: float, lag: float) -> FloatArray:
     """The piston on a fine grid (:data:`SUBSTEPS` per sample): the reference ramps linearly
     between samples, arrives ``delay`` late (transport delay) and passes a first-order lag
     ``lag`` (y' = (r - y)/lag), integrated exactly for a piecewise-linear input."""
@@ -201,7 +204,7 @@ def _servo(target: FloatArray, dt: float, delay: float, lag: float) -> FloatArra
     return np.asarray(y, dtype=np.float64)
 
 
-def _contact(r: float, gap: float, k_c: float, width: float) -> float:
+def contact_force(r: float, gap: float, k_c: float, width: float) -> float:
     """Pin force for a relative displacement ``r`` (piston minus specimen): none within the
     clearance ``gap`` each side; beyond it a penalty contact whose stiffness grows linearly
     from 0 to ``k_c`` over ``width`` (the pin bedding in), then stays: force and stiffness
@@ -213,7 +216,7 @@ def _contact(r: float, gap: float, k_c: float, width: float) -> float:
     return f if r > 0.0 else -f
 
 
-def _drive_with_gap(law: SpecimenLaw, x: FloatArray, gap: float, k_c: float, width: float,
+def drive_with_gap(law: SpecimenLaw, x: FloatArray, gap: float, k_c: float, width: float,
                     fy: float, uy: float) -> FloatArray:
     """Connection force when the piston ``x`` drives the specimen through a pin gap: at each
     sample, the specimen displacement u where the pin force equals the specimen's resistance
@@ -224,10 +227,10 @@ def _drive_with_gap(law: SpecimenLaw, x: FloatArray, gap: float, k_c: float, wid
     tol = 1e-9 * fy
     for i, xi in enumerate(map(float, x)):
         def residual(v: float, xi: float = xi) -> float:
-            return _contact(xi - v, gap, k_c, width) - law.trial(v)
+            return contact_force(xi - v, gap, k_c, width) - law.trial(v)
         a, fa = u, residual(u)
         if abs(fa) <= tol:
-            out[i], u = _contact(xi - a, gap, k_c, width), a
+            out[i], u = contact_force(xi - a, gap, k_c, width), a
             law.commit()
             continue
         step = max(abs(xi - u), 1e-6 * uy) * (1.0 if fa > 0.0 else -1.0)
@@ -255,11 +258,11 @@ def _drive_with_gap(law: SpecimenLaw, x: FloatArray, gap: float, k_c: float, wid
                 side = 1
         law.commit()  # the last trial was at c: the solution
         u = c
-        out[i] = _contact(xi - c, gap, k_c, width)
+        out[i] = contact_force(xi - c, gap, k_c, width)
     return out
 
 
-def _jenkins(x: FloatArray, coulomb: float, k_s: float) -> FloatArray:
+def jenkins(x: FloatArray, coulomb: float, k_s: float) -> FloatArray:
     """Coulomb friction behind a spring: F = k_s (x - y), the slider y moving only when
     |F| would exceed the Coulomb force (Jenkins element; Iwan 1966)."""
     out = np.empty(x.size)
@@ -273,7 +276,7 @@ def _jenkins(x: FloatArray, coulomb: float, k_s: float) -> FloatArray:
     return out
 
 
-def _coloured(rng: np.random.Generator, n: int, std: float, corner: float,
+def coloured_noise(rng: np.random.Generator, n: int, std: float, corner: float,
               dt: float) -> FloatArray:
     """Stationary first-order low-pass (AR(1)) noise of standard deviation ``std``."""
     phi = math.exp(-2.0 * math.pi * corner * dt)
@@ -303,66 +306,66 @@ def independent_record(label: str, seed: int, *, steps: int | None = None) -> In
     rng = np.random.default_rng([seed, 0])  # the test: length, specimen, command
     draw = np.random.default_rng([seed, 1])  # the effects' magnitudes and forms
     noise = np.random.default_rng([seed, 2])  # the base noise
-    drawn_steps, dt = int(rng.integers(1500, 6001)), _u(rng, 0.01, 0.02)
+    drawn_steps, dt = int(rng.integers(1500, 6001)), uniform(rng, 0.01, 0.02)
     n = steps or drawn_steps
-    law_name, specimen = _specimen(rng, bool(effects & {"pinching", "degradation"}))
+    law_name, specimen = draw_specimen(rng, bool(effects & {"pinching", "degradation"}))
     k0, fy = specimen["k0"], specimen["fy"]
     uy = fy / k0
-    peak = _u(rng, 3.0, 8.0) * uy
+    peak = uniform(rng, 3.0, 8.0) * uy
     cmd = ground_motion_command(rng, n, dt, peak)
     truth: dict[str, float] = {}
     forms: dict[str, float] = {}
 
     target = cmd.copy()
     if UNDERSHOOT in effects:  # ErrorSimUndershoot: short of each target against the motion
-        forms["undershoot"] = truth["undershoot"] = _u(draw, 0.01, 0.04) * peak
+        forms["undershoot"] = truth["undershoot"] = uniform(draw, 0.01, 0.04) * peak
         direction = np.sign(np.diff(cmd, prepend=cmd[0]))
         idx = np.where(direction != 0.0, np.arange(n), 0)
         np.maximum.accumulate(idx, out=idx)
         target = cmd - truth["undershoot"] * direction[idx]
     if "actuator_amplitude" in effects:
-        truth["amplitude_error"] = _pm(draw, 0.03, 0.10)
+        truth["amplitude_error"] = signed(draw, 0.03, 0.10)
         target = target * (1.0 + truth["amplitude_error"])
     delay = lag = 0.0
     if "actuator_delay" in effects:
-        delay, lag = _u(draw, 0.0, 0.015), _u(draw, 0.005, 0.030)
+        delay, lag = uniform(draw, 0.0, 0.015), uniform(draw, 0.005, 0.030)
         truth["tau"] = delay + lag
         forms.update(transport_delay=delay, lag=lag)
-    fine = _servo(target, dt, delay, lag)
+    fine = servo_path(target, dt, delay, lag)
     x = fine[::SUBSTEPS]
     v = np.zeros(n)
     v[1:] = (fine[SUBSTEPS::SUBSTEPS] - fine[SUBSTEPS - 1::SUBSTEPS]) / (dt / SUBSTEPS)
 
     if "pinching" in effects:
-        pinch = {"zeta_s": _u(draw, 0.3, 0.8), "psi0": _u(draw, 0.1, 0.3),
-                 "q": _u(draw, 0.0, 0.2)}
+        pinch = {"zeta_s": uniform(draw, 0.3, 0.8), "psi0": uniform(draw, 0.1, 0.3),
+                 "q": uniform(draw, 0.0, 0.2)}
         truth.update(pinch)
-        specimen.update(pinch, p=_u(draw, 0.3, 3.0), lam=_u(draw, 0.2, 0.9),
-                        delta_psi=_u(draw, 0.0, 0.02))
+        specimen.update(pinch, p=uniform(draw, 0.3, 3.0), lam=uniform(draw, 0.2, 0.9),
+                        delta_psi=uniform(draw, 0.0, 0.02))
     if "degradation" in effects:
         path_u = float(np.sum(np.abs(np.diff(x)))) / uy
-        mean = _u(draw, 0.2, 0.6) / path_u
-        ratio = math.exp(_u(draw, -math.log(3.0), math.log(3.0)))
+        mean = uniform(draw, 0.2, 0.6) / path_u
+        ratio = math.exp(uniform(draw, -math.log(3.0), math.log(3.0)))
         nu = 2.0 * mean * ratio / (1.0 + ratio)
         truth.update(delta_nu=nu, delta_eta=2.0 * mean - nu)
         specimen.update(delta_nu=nu, delta_eta=2.0 * mean - nu,
-                        delta_a=_u(draw, 0.0, 0.5) * mean)
-    law = _law(law_name, specimen)
+                        delta_a=uniform(draw, 0.0, 0.5) * mean)
+    law = specimen_law(law_name, specimen)
     if "backlash" in effects:
-        gap = truth["gap"] = _u(draw, 0.02, 0.08) * peak
-        k_c, width = _u(draw, 10.0, 50.0) * k0, _u(draw, 0.05, 0.2) * gap
+        gap = truth["gap"] = uniform(draw, 0.02, 0.08) * peak
+        k_c, width = uniform(draw, 10.0, 50.0) * k0, uniform(draw, 0.05, 0.2) * gap
         forms.update(gap=gap, contact_stiffness=k_c, contact_width=width)
-        force = _drive_with_gap(law, x, gap, k_c, width, fy, uy)
+        force = drive_with_gap(law, x, gap, k_c, width, fy, uy)
     else:
         force = np.array([law.step(float(xi)) for xi in x])
     if "friction" in effects:
-        truth["coulomb"] = _u(draw, 0.03, 0.10) * fy
-        forms.update(coulomb=truth["coulomb"], spring=_u(draw, 0.5, 5.0) * k0)
-        force = force + _jenkins(x, truth["coulomb"], forms["spring"])
+        truth["coulomb"] = uniform(draw, 0.03, 0.10) * fy
+        forms.update(coulomb=truth["coulomb"], spring=uniform(draw, 0.5, 5.0) * k0)
+        force = force + jenkins(x, truth["coulomb"], forms["spring"])
     if "rate_dependence" in effects:
         v_rms = float(np.sqrt(np.mean(v * v)))
-        exponent, at_rms = _u(draw, 0.2, 1.0), _u(draw, 0.03, 0.10) * fy
-        hump, v_hump = _u(draw, 0.2, 0.6) * at_rms, _u(draw, 0.05, 0.3) * v_rms
+        exponent, at_rms = uniform(draw, 0.2, 1.0), uniform(draw, 0.03, 0.10) * fy
+        hump, v_hump = uniform(draw, 0.2, 0.6) * at_rms, uniform(draw, 0.05, 0.3) * v_rms
         ratio_v = v / v_hump
         viscous = (at_rms * np.sign(v) * np.abs(v / v_rms) ** exponent
                    + hump * ratio_v * np.exp(0.5 * (1.0 - ratio_v**2)))
@@ -371,20 +374,20 @@ def independent_record(label: str, seed: int, *, steps: int | None = None) -> In
         forms.update(exponent=exponent, force_at_rms=at_rms, hump=hump, hump_velocity=v_hump)
 
     t = np.arange(n, dtype=np.float64) * dt
-    disp_level, force_level = _u(noise, 0.002, 0.02), _u(noise, 0.002, 0.02)
+    disp_level, force_level = uniform(noise, 0.002, 0.02), uniform(noise, 0.002, 0.02)
     meas_disp = x + noise.standard_normal(n) * disp_level * float(np.max(np.abs(x)))
     meas_force = force + noise.standard_normal(n) * force_level * float(np.max(np.abs(force)))
     if "sensor_noise" in effects:
-        corner = _u(draw, 2.0, 10.0)
-        truth.update(force_noise_std=_u(draw, 0.015, 0.05) * fy,
-                     disp_noise_std=_u(draw, 0.005, 0.02) * peak)
+        corner = uniform(draw, 2.0, 10.0)
+        truth.update(force_noise_std=uniform(draw, 0.015, 0.05) * fy,
+                     disp_noise_std=uniform(draw, 0.005, 0.02) * peak)
         forms["noise_corner_hz"] = corner
-        meas_force = meas_force + _coloured(draw, n, truth["force_noise_std"], corner, dt)
-        meas_disp = meas_disp + _coloured(draw, n, truth["disp_noise_std"], corner, dt)
+        meas_force = meas_force + coloured_noise(draw, n, truth["force_noise_std"], corner, dt)
+        meas_disp = meas_disp + coloured_noise(draw, n, truth["disp_noise_std"], corner, dt)
     if "sensor_bias" in effects:
-        offset, warm, drift = _pm(draw, 0.02, 0.08) * fy, _pm(draw, 0.01, 0.04) * fy, _pm(
+        offset, warm, drift = signed(draw, 0.02, 0.08) * fy, signed(draw, 0.01, 0.04) * fy, signed(
             draw, 0.0, 0.02) * fy
-        warm_time = _u(draw, 0.2, 1.0) * t[-1]
+        warm_time = uniform(draw, 0.2, 1.0) * t[-1]
         bias = offset + warm * (1.0 - np.exp(-t / warm_time)) + drift * t / t[-1]
         meas_force = meas_force + bias
         truth["force_bias"] = float(np.mean(bias))

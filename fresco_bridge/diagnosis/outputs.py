@@ -8,20 +8,21 @@ against the loop phase, measured against commanded displacement, and the residua
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..numbers import fmt, pct
-from .verdict import LOW_CONFIDENCE
+from ..report.diagnosis import BASIS_WORDS, confidence_text, on_basis
+from .decision import LOW_CONFIDENCE
+from .result import Diagnosis, json_ready
 
 __all__ = ["summary", "to_json", "write_json", "write_report"]
 
 
-def summary(result: dict[str, Any]) -> str:
-    """The terminal summary: record, baseline, gap, where, verdict, the candidate table."""
+def summary(diagnosis: Diagnosis) -> str:
+    """The terminal summary: record, baseline, gap, where, verdict, the candidate table; read
+    from the JSON document, so it prints what ``diagnosis.json`` holds."""
+    result = diagnosis.to_json()
     rec, base, verdict = result["record"], result["baseline"], result["verdict"]
     loc, noise = result["localization"], result["noise_floor"]
     cal, wh = rec["calibration"]["samples"], rec["withheld"]["samples"]
@@ -40,9 +41,9 @@ def summary(result: dict[str, Any]) -> str:
     ]
     layers = loc["layers"]
     interface = layers["interface"]
-    where = (f"where     force gap: interface {interface['share_pct']:.0f} %, specimen "
-             f"{layers['specimen']['share_pct']:.0f} %, sensor {layers['sensor']['share_pct']:.0f}"
-             f" %; worst phase {loc['worst_phase']} "
+    where = (f"where     force gap: interface {pct(interface['share_pct'], 0)}, specimen "
+             f"{pct(layers['specimen']['share_pct'], 0)}, sensor "
+             f"{pct(layers['sensor']['share_pct'], 0)}; worst phase {loc['worst_phase']} "
              f"(NRMS {pct(loc['phase'][loc['worst_phase']]['nrms_pct'])})")
     lines.append(where)
     if interface["measured"]:
@@ -52,7 +53,7 @@ def summary(result: dict[str, Any]) -> str:
             f"interface NRMS {pct(interface['nrms_pct'])}, FEI amplitude "
             f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
-    lines.append(f"VERDICT   {verdict['effect']} (confidence {verdict['confidence']:.2f}): "
+    lines.append(f"VERDICT   {verdict['effect']} (confidence {confidence_text(verdict)}): "
                  f"{verdict['explanation']}")
     if result.get("hidden"):
         lines.append("hidden    no command channel: the measured displacement drives the law, "
@@ -72,40 +73,30 @@ def summary(result: dict[str, Any]) -> str:
             lines.append(f"          {name} = {fmt(p['value'])} ± {fmt(p['std'], unit, 2)}"
                          f"  ({p['meaning']})"
                          + ("" if not flag else f"  [UNSURE: {flag}]"))
-    lines.append("candidates (withheld gap after, shrink, score = shrink − 2 %/parameter):")
+    basis = verdict.get("gap_basis", "raw")
+    lines.append(f"candidates (withheld gap after, shrink, score = shrink − 2 %/parameter; "
+                 f"{BASIS_WORDS.get(basis, basis)}, as the verdict):")
     families = [{**e, "name": f"law family {e['name']}"} for e in result.get("families", [])]
     for e in [*result["effects"], *result["pairs"][:3], *families]:
         mark = "" if e.get("compared_with") is None else f"  (vs the {e['compared_with']})"
-        lines.append(f"  {e['name']:<40} {pct(e['gap_after']['total_pct']):>9}  "
-                     f"{pct(e['shrink_pct']):>9}  {fmt(e['score'], digits=3):>6}{mark}")
+        after, shrink, score = on_basis(e, basis)
+        lines.append(f"  {e['name']:<40} {pct(after):>9}  {pct(shrink):>9}  "
+                     f"{fmt(score, digits=3):>6}{mark}")
     lines.extend(f"note      {n}" for n in rec["notes"])
     lines.append(f"time      {result['seconds']:.1f} s")
     return "\n".join(lines)
 
 
-def to_json(result: dict[str, Any]) -> str:
-    """The JSON document (the ``_series`` arrays used by the plots are left out)."""
-
-    def clean(obj: Any) -> Any:
-        if isinstance(obj, dict):
-            return {k: clean(v) for k, v in obj.items() if not k.startswith("_")}
-        if isinstance(obj, list | tuple):
-            return [clean(v) for v in obj]
-        if isinstance(obj, float | np.floating):
-            value = float(obj)
-            return value if math.isfinite(value) else None
-        if isinstance(obj, np.integer):
-            return int(obj)
-        return obj
-
-    return json.dumps(clean(result), indent=2)
+def to_json(doc: Diagnosis | dict[str, Any]) -> str:
+    """The JSON text of a diagnosis (or of a document holding diagnoses: ``--same-device``)."""
+    return json.dumps(json_ready(doc), indent=2)
 
 
-def write_json(result: dict[str, Any], path: Path) -> None:
+def write_json(result: Diagnosis, path: Path) -> None:
     path.write_text(to_json(result) + "\n", encoding="utf-8")
 
 
-def write_report(result: dict[str, Any], directory: Path) -> list[Path]:
+def write_report(result: Diagnosis, directory: Path) -> list[Path]:
     """Write summary.txt, diagnosis.json and the plots into ``directory``; the files."""
     from .figures import plots
 

@@ -30,12 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from ..numbers import fmt, pct
+from fresco_bridge.diagnosis.load import Record
+from fresco_bridge.diagnosis.model import EFFECT_NAMES, rate_force
+from fresco_bridge.diagnosis.verdict import diagnose
+from fresco_bridge.numbers import fmt, pct
+
 from .independent import UNDERSHOOT, IndependentRecord, case_label, independent_record
-from .load import Record
-from .model import EFFECT_NAMES, rate_force
 from .synth import SyntheticRecord, synthetic_record
-from .verdict import diagnose
 
 __all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "credit", "diagnose_one",
            "effect_magnitude", "format_bench", "generate", "row_credit", "summarise_bench"]
@@ -128,7 +129,7 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
     started = time.perf_counter()
     synthetic = generate(item)
     generated = time.perf_counter()
-    result = diagnose(synthetic.record)
+    result = diagnose(synthetic.record).to_json()
     verdict = result["verdict"]
     also = synthetic.also_present if isinstance(synthetic, SyntheticRecord) else {}
     # the candidate the estimates come from: the verdict's when it is right (the primary named

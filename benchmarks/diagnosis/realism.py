@@ -50,11 +50,11 @@ import numpy as np
 
 from .synth import (
     SyntheticRecord,
-    _signed,
-    _uniform,
     command_history,
     rig_record,
     sensor_effect,
+    signed,
+    uniform,
 )
 
 __all__ = ["REALISM", "realistic_record"]
@@ -84,15 +84,15 @@ REALISM: dict[str, str] = {
 
 
 def _specimen(rng: np.random.Generator) -> tuple[str, dict[str, float]]:
-    k0 = _uniform(rng, 5.0, 50.0)
-    fy = _uniform(rng, 10.0, 100.0)
-    alpha = _uniform(rng, 0.02, 0.15)
+    k0 = uniform(rng, 5.0, 50.0)
+    fy = uniform(rng, 10.0, 100.0)
+    alpha = uniform(rng, 0.02, 0.15)
     if rng.uniform() < 2.0 / 3.0:
-        total, share = _uniform(rng, 0.6, 1.6), _uniform(rng, 0.1, 0.9)
-        return "bouc-wen", {"k0": k0, "fy": fy, "alpha": alpha, "n": _uniform(rng, 1.0, 4.0),
+        total, share = uniform(rng, 0.6, 1.6), uniform(rng, 0.1, 0.9)
+        return "bouc-wen", {"k0": k0, "fy": fy, "alpha": alpha, "n": uniform(rng, 1.0, 4.0),
                             "beta": share * total, "gamma": (1.0 - share) * total}
     return "menegotto-pinto", {"k0": k0, "fy": fy, "alpha": alpha,
-                               "R0": _uniform(rng, 10.0, 20.0)}
+                               "R0": uniform(rng, 10.0, 20.0)}
 
 
 def realistic_record(effect: str, seed: int, *, steps: int = 3000,
@@ -102,68 +102,68 @@ def realistic_record(effect: str, seed: int, *, steps: int = 3000,
     kind, specimen = _specimen(rng)
     k0, fy = specimen["k0"], specimen["fy"]
     dy = fy / k0
-    peak = _uniform(rng, 3.0, 8.0) * dy
+    peak = uniform(rng, 3.0, 8.0) * dy
     cmd = command_history(rng, steps, dt, peak)
     path_u = float(np.sum(np.abs(np.diff(cmd)))) / dy
     v_rms = float(np.sqrt(np.mean((np.diff(cmd) / dt) ** 2)))
     actuator: dict[str, Any] = {"stroke": 10.0 * peak + 10.0, "force_capacity": 1e6}
     effects: dict[str, Any] = {}
-    lvdt: dict[str, Any] = {"noise_std": _uniform(rng, 0.0005, 0.002) * peak}
-    load_cell: dict[str, Any] = {"noise_std": _uniform(rng, 0.001, 0.004) * fy}
+    lvdt: dict[str, Any] = {"noise_std": uniform(rng, 0.0005, 0.002) * peak}
+    load_cell: dict[str, Any] = {"noise_std": uniform(rng, 0.001, 0.004) * fy}
     truth: dict[str, float] = {}
     also: dict[str, dict[str, float]] = {}
-    frame = {"stiffness": _uniform(rng, 5.0, 20.0) * k0}
+    frame = {"stiffness": uniform(rng, 5.0, 20.0) * k0}
     if effect in ("pinching", "degradation") and kind != "bouc-wen":
-        kind, specimen = "bouc-wen", {**specimen, "n": _uniform(rng, 1.0, 4.0),
+        kind, specimen = "bouc-wen", {**specimen, "n": uniform(rng, 1.0, 4.0),
                                       "beta": 0.5, "gamma": 0.5}
         specimen.pop("R0")
     if effect == "actuator_delay":
-        delay = _uniform(rng, 0.0, 0.005)
+        delay = uniform(rng, 0.0, 0.005)
         actuator["delay"] = delay
         if rng.uniform() < 0.5:
-            tau = _uniform(rng, 0.005, 0.030)
+            tau = uniform(rng, 0.005, 0.030)
             actuator["servo"] = {"kind": "first_order", "tau": tau}
             truth["tau"] = delay + tau
         else:
-            fn, zeta = _uniform(rng, 4.0, 12.0), _uniform(rng, 0.6, 1.0)
+            fn, zeta = uniform(rng, 4.0, 12.0), uniform(rng, 0.6, 1.0)
             actuator["servo"] = {"kind": "second_order", "natural_frequency": fn,
                                  "damping": zeta}
             truth["tau"] = delay + 2.0 * zeta / (2.0 * math.pi * fn)
     elif effect == "actuator_amplitude":
-        truth["amplitude_error"] = _signed(rng, 0.03, 0.10)
+        truth["amplitude_error"] = signed(rng, 0.03, 0.10)
         actuator["amplitude"] = 1.0 + truth["amplitude_error"]
         if truth["amplitude_error"] < 0.0:
-            actuator["undershoot"] = _uniform(rng, 0.0, 0.01) * peak
+            actuator["undershoot"] = uniform(rng, 0.0, 0.01) * peak
             # the rig's undershoot acts on the reference before the gain, as the candidate's
             also["actuator_undershoot"] = {"undershoot": actuator["undershoot"]}
     elif effect == "actuator_undershoot":
-        truth["undershoot"] = _uniform(rng, 0.01, 0.04) * peak
+        truth["undershoot"] = uniform(rng, 0.01, 0.04) * peak
         actuator["undershoot"] = truth["undershoot"]
-        lag = _uniform(rng, 0.001, 0.003)
+        lag = uniform(rng, 0.001, 0.003)
         actuator["servo"] = {"kind": "first_order", "tau": lag}
         also["actuator_delay"] = {"tau": lag}
     elif effect == "backlash":
-        truth["gap"] = _uniform(rng, 0.02, 0.08) * peak
+        truth["gap"] = uniform(rng, 0.02, 0.08) * peak
         effects.update(backlash={"gap": truth["gap"]}, frame=frame)
     elif effect == "friction":
-        truth["coulomb"] = _uniform(rng, 0.03, 0.10) * fy
+        truth["coulomb"] = uniform(rng, 0.03, 0.10) * fy
         effects.update(friction={"coulomb": truth["coulomb"]}, frame=frame)
     elif effect == "rate_dependence":
-        truth["viscous"] = _uniform(rng, 0.03, 0.10) * fy / v_rms
+        truth["viscous"] = uniform(rng, 0.03, 0.10) * fy / v_rms
         effects.update(friction={"viscous": truth["viscous"]}, frame=frame)
     elif effect == "pinching":
         kind = "bwbn"
-        truth.update(zeta_s=_uniform(rng, 0.3, 0.8), psi0=_uniform(rng, 0.1, 0.3),
-                     q=_uniform(rng, 0.0, 0.2))
-        specimen.update(truth, p=_uniform(rng, 0.3, 3.0), lam=_uniform(rng, 0.2, 0.9),
-                        delta_psi=_uniform(rng, 0.0, 0.02))
+        truth.update(zeta_s=uniform(rng, 0.3, 0.8), psi0=uniform(rng, 0.1, 0.3),
+                     q=uniform(rng, 0.0, 0.2))
+        specimen.update(truth, p=uniform(rng, 0.3, 3.0), lam=uniform(rng, 0.2, 0.9),
+                        delta_psi=uniform(rng, 0.0, 0.02))
     elif effect == "degradation":
         kind = "bwbn"
-        mean = _uniform(rng, 0.2, 0.6) / path_u
-        ratio = math.exp(_uniform(rng, -math.log(3.0), math.log(3.0)))
+        mean = uniform(rng, 0.2, 0.6) / path_u
+        ratio = math.exp(uniform(rng, -math.log(3.0), math.log(3.0)))
         nu = 2.0 * mean * ratio / (1.0 + ratio)
         truth.update(delta_nu=nu, delta_eta=2.0 * mean - nu)
-        specimen.update(truth, delta_a=_uniform(rng, 0.0, 0.5) * mean, p=0.0, q=0.0,
+        specimen.update(truth, delta_a=uniform(rng, 0.0, 0.5) * mean, p=0.0, q=0.0,
                         psi0=1.0, delta_psi=0.0, lam=1.0)
     elif effect in ("sensor_bias", "sensor_noise"):
         truth.update(sensor_effect(effect, rng, fy, peak, lvdt, load_cell))
