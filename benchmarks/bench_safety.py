@@ -19,9 +19,9 @@ import time
 from typing import Any
 
 from fresco_bridge.config import parse_config
-from fresco_bridge.daemon import make_controller
 from fresco_bridge.eager import Suspended, start_eager
-from fresco_bridge.sites import ExperimentalSite
+from fresco_bridge.sites.experimental import ExperimentalSite
+from fresco_bridge.sites.experimental_kind import site_controller as make_controller
 from protocol import Signals, SignalSizes
 
 SITE = """

@@ -30,6 +30,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +49,11 @@ SOURCE = ('[record]\nenabled = false\n[[sites]]\nname = "damper"\nport = 0\n'
 class RoundVoid(RuntimeError):
     """A run that did not measure what it should (its twin's learner was lost)."""
 
+
+
+def learners_of(bridge: Any) -> dict[str, Any]:
+    """``{source site: its learner}`` of a running bridge (the updatable kind's group)."""
+    return {k: v for g in bridge.bridge.groups for k, v in getattr(g, "learners", {}).items()}
 
 def _pin(cpu: int, pid: int = 0) -> bool:
     """Pin ``pid`` (0: this process) to ``cpu`` if the machine has it."""
@@ -98,7 +104,7 @@ def source_latency(messages: int, twin_toml: str | None, pace: float,
 
     text = SOURCE + (twin_toml or "")
     with BridgeThread(parse_config(text, "<bench>"), text, run_dir=folder) as bridge:
-        for learner in bridge.bridge.learners.values():
+        for learner in learners_of(bridge).values():
             if learner.pid is not None:
                 _pin(0, learner.pid)
         twin_link = (GenericClientLink("127.0.0.1", bridge.ports["twin1"], 1).connect()
@@ -123,7 +129,7 @@ def source_latency(messages: int, twin_toml: str | None, pace: float,
             period = (time.perf_counter() - start) / messages
         if twin_link is not None:
             twin_link.close()
-            lost = bridge.call(lambda: bridge.bridge.learners["damper"].losses)
+            lost = bridge.call(lambda: learners_of(bridge)["damper"].losses)
             if lost:  # the twin HOLDs from the loss on: not the run this benchmark measures
                 raise RoundVoid(f"the twin's learner was lost {lost} time(s) during the run")
     us = np.asarray(latency[20:]) * 1e6

@@ -195,11 +195,12 @@ def _run(args: argparse.Namespace) -> int:
         run = check_resumable(resolve_run(args.run, args.runs))
         return _serve_on_its_loop(args.config, run)
     if args.command == "check":
+        from .site_kinds import SITE_KINDS
+
         cfg, _ = load_config(args.config)
         print(f"{args.config}: OK ({len(cfg.sites)} site(s): "
-              + ", ".join(f"{s.name} {s.transport}:{s.port}" + (
-                  f" (updatable: {s.updater} learning from {s.learns_from}, {s.causality})"
-                  if s.kind == "updatable" else "") for s in cfg.sites) + ")")
+              + ", ".join(f"{s.name} {s.transport}:{s.port}" + SITE_KINDS[s.kind].describe(s)
+                          for s in cfg.sites) + ")")
         return 0
     if args.command == "demo":
         from .demo import run_demo, story_terminal

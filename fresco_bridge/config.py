@@ -20,189 +20,40 @@ from pydantic import (
 )
 
 from .config_lines import locate
-from .config_model import ClientAddress, ConfigPath, IPv4Address, StrictConfig
-from .controls.kind import ControllerConfigBase
-from .controls.registry import CONTROLLER_KINDS, controller_kind, known_kinds
-from .controls.sim import SimControllerConfig
-from .safety import ControlPointLimitsConfig
-from .setups import SetupError, SetupSpec, make_setup
-from .tangent import TangentMethod
+from .config_model import (
+    ClientAddress,
+    ConfigError,
+    ConfigPath,
+    IPv4Address,
+    Name,
+    StrictConfig,
+)
+from .controls.registry import CONTROLLER_KINDS, known_kinds
+from .site_kinds import DEFAULT_KIND, SITE_KINDS, known_site_kinds
+from .sites.kind import LabView
+from .sites.site_config import SiteConfigBase
 
-Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
-
-
-class ConfigError(ValueError):
-    """A configuration problem, already phrased for the user (file, key, reason)."""
-
+__all__ = ["BridgeConfig", "ConfigError", "LabConfig", "RecordConfig", "SiteConfig",
+           "SiteConfigBase", "TelemetryConfig", "load_config", "parse_config"]
 
 _Strict = StrictConfig  # every model of the lab config shares the one strict base
 
 
-def _controller_kind(v: Any) -> str:
-    """``kind`` may be omitted for the default in-process simulated controller."""
-    kind = v.get("kind", "sim") if isinstance(v, dict) else getattr(v, "kind", "sim")
+def _site_kind(v: Any) -> str:
+    """``kind`` may be omitted for an experimental site."""
+    kind = v.get("kind", DEFAULT_KIND) if isinstance(v, dict) else getattr(v, "kind",
+                                                                            DEFAULT_KIND)
     return str(kind)
 
 
 if TYPE_CHECKING:
-    ControllerConfig = ControllerConfigBase
-else:  # the discriminated union of every registered kind's config model
-    ControllerConfig = Annotated[
-        Union[tuple(Annotated[k.config, Tag(k.name)] for k in CONTROLLER_KINDS.values())],  # noqa: UP007
-        Discriminator(_controller_kind),
+    SiteConfig = SiteConfigBase
+else:  # the discriminated union of every registered site kind's config model
+    SiteConfig = Annotated[
+        Union[tuple(Annotated[k.config, Tag(k.name)] for k in SITE_KINDS.values())],  # noqa: UP007
+        Discriminator(_site_kind),
     ]
-
-
-class SiteConfig(_Strict):
-    """One site: a listener the integrator connects to, and its controller (``experimental``)
-    or the twin of an experimental site's element (``updatable``, ``twins/``)."""
-
-    name: Name
-    kind: Literal["experimental", "updatable"] = "experimental"
-    """``updatable``: the force comes from an updater learning online from ``learns_from``."""
-    port: int = Field(ge=0, le=65535)
-    """0 picks a free port (tests, demo); the chosen port is logged and printed."""
-    transport: Literal["tcp", "udp"] = "tcp"
-    protocol: Literal["element", "site"] = "element"
-    """``element``: OpenSees genericClient / OpenFresco EE* clients; ``site``: ShadowExpSite."""
-    dofs: int = Field(default=1, ge=1, le=64)
-    """Number of basic DOFs of the element served (the -dof entries of genericClient)."""
-    setup: SetupSpec = "NoTransformation"
-    """A name (``NoTransformation``, ``OneActuator``) or a ``[sites.setup]`` table: OpenFresco's
-    setup as ``kind`` with its parameters (docs/openfresco-setups.md)."""
-    tangent: TangentMethod = "controller"
-    """The tangent answered to action 13: the controller's (``controller``), its first answer
-    kept (``initial``), or estimated from the committed steps (``broyden``, ``bfgs``,
-    ``transpose``; docs/openfresco-setups.md)."""
-    controller: ControllerConfig = Field(default_factory=SimControllerConfig)
-    """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
-    ``modbus``, ``mts``."""
-    damping: list[list[float]] | None = None
-    """n×n damping matrix in basic DOFs, row by row (answers action 14); default zero."""
-    mass: list[list[float]] | None = None
-    """n×n mass matrix in basic DOFs, row by row (answers action 15); default zero."""
-    allowed_clients: list[ClientAddress] | None = None
-    """Client IPv4 addresses (or CIDR networks) allowed to connect; default: the bridge-wide
-    list. ``[]`` admits anyone and needs ``bridge.allow_any_client = true``."""
-    actor_tag: int = 1
-    """Tag this site reports to a ShadowExpSite (site protocol only)."""
-    limits: list[ControlPointLimitsConfig] = Field(default_factory=list)
-    """``[[sites.limits]]``, one per control point (actuator after the setup); default none."""
-    tls: bool = False
-    """Mutual TLS as OpenFresco's ``TCP_SocketSSL``: the site presents ``cert_file`` /
-    ``key_file`` and admits only clients whose certificate ``client_ca_file`` issued directly
-    (verify depth 1). TCP only."""
-    cert_file: ConfigPath | None = None
-    """PEM certificate the site presents (OpenFresco's ``server.crt``)."""
-    key_file: ConfigPath | None = None
-    """PEM private key of ``cert_file`` (OpenFresco's ``server.key``)."""
-    client_ca_file: ConfigPath | None = None
-    """PEM CA certificate(s) that issue the clients' certificates (OpenFresco's
-    ``server_ca.crt``)."""
-    learns_from: Name | None = None
-    """Updatable site: the experimental site (one actuator) whose committed steps it learns
-    from."""
-    updater: str | None = None
-    """Updatable site: a name of ``updating/registry.py`` (``none``, ``offline_ann``,
-    ``online_ann``, ``online_ukf``, ``online_improved``)."""
-    offline: ConfigPath | None = None
-    """Updatable site: the offline database (CSV ``time,disp,force``, the bridge's export CSV
-    or a run directory), relative to the config file's folder."""
-    model: ConfigPath | None = None
-    """Updatable site: an ANN model file (``updater pretrain``), relative to the config file's
-    folder."""
-    causality: Literal["previous-step", "same-step"] = "previous-step"
-    """Updatable site: ``previous-step``: the twin's step i answers from what was learned
-    through the source's step i-1; ``same-step``: also from the source's measurement of step
-    i (the paper's order; one trial per step: explicit schemes; in-process sources)."""
-    on_learner_loss: Literal["hold", "freeze"] = "hold"
-    """Updatable site: when the learner dies or misses its deadline, ``hold`` (the site's HOLD:
-    NaN answers, the integrator stops) or ``freeze`` (answer from the learner's last snapshot,
-    parameters frozen, until a new worker has caught up)."""
-    updater_options: dict[str, Any] = Field(default_factory=dict)
-    """Updatable site: the updater's options (as ``updater replay --option KEY=VALUE``)."""
-    learner_deadline: float = Field(default=2.0, gt=0, le=600)
-    """Updatable site: seconds the twin waits for its learner's answer; past it the learner
-    counts as lost (``on_learner_loss``). Shorter than ``bridge.controller_timeout``."""
-
-    @field_validator("limits", mode="before")
-    @classmethod
-    def _single_limits_table(cls, v: Any) -> Any:
-        """``[sites.limits]`` (one table, not an array) is the one control point's limits."""
-        return [v] if isinstance(v, dict) else v
-
-    @model_validator(mode="after")
-    def _matrices_fit(self) -> SiteConfig:
-        for key in ("damping", "mass"):
-            m = getattr(self, key)
-            if m is not None and (len(m) != self.dofs or any(len(r) != self.dofs for r in m)):
-                n = self.dofs
-                raise ValueError(f"{key} must be a {n}×{n} matrix (dofs = {n})")
-        if self.setup == "OneActuator" and self.dofs > 2:
-            raise ValueError("setup OneActuator serves dofs = 1 or 2 (two nodes, -dof 1 -dof 1)")
-        try:
-            setup = make_setup(self.setup, self.dofs)  # setups/ owns the count and geometry
-        except SetupError as exc:
-            raise ValueError(str(exc)) from None
-        n_act = setup.n_actuators
-        problem = controller_kind(self.controller.kind).actuators_problem(
-            self.controller, n_act, setup.specimen_geometry())
-        if problem is not None:
-            raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
-        self._kind_keys_fit(n_act)
-        actuators = [lim.actuator for lim in self.limits]
-        if any(a > n_act for a in actuators):
-            raise ValueError(f"limits: actuator {max(actuators)} does not exist (setup "
-                             f"{self.setup} with {self.dofs} DOF(s) drives {n_act} actuator(s))")
-        if len(set(actuators)) != len(actuators):
-            raise ValueError(f"limits: one [[sites.limits]] table per actuator; repeated: "
-                             f"{sorted({a for a in actuators if actuators.count(a) > 1})}")
-        self._tls_fits()
-        return self
-
-    def _kind_keys_fit(self, n_act: int) -> None:
-        twin_keys = [k for k in _TWIN_KEYS if k in self.model_fields_set]
-        if self.kind == "experimental":
-            if twin_keys:
-                raise ValueError(f"{', '.join(twin_keys)}: keys of kind = \"updatable\" sites "
-                                 "(this site is experimental)")
-            return
-        if "controller" in self.model_fields_set:
-            raise ValueError("an updatable site has no [sites.controller] table (its force is "
-                             "the twin's, learned from learns_from)")
-        missing = [k for k in ("learns_from", "updater") if getattr(self, k) is None]
-        if missing:
-            raise ValueError(f"kind = \"updatable\" needs {' and '.join(missing)}")
-        if n_act != 1:
-            raise ValueError(f"an updatable site drives one actuator (its twin is uniaxial); "
-                             f"setup {self.setup} with {self.dofs} DOF(s) drives {n_act}")
-        if self.offline is not None and self.model is not None:
-            raise ValueError("give offline or model, not both")
-
-    def _tls_fits(self) -> None:
-        files = {"cert_file": self.cert_file, "key_file": self.key_file,
-                 "client_ca_file": self.client_ca_file}
-        if not self.tls:
-            given = [k for k, v in files.items() if v is not None]
-            if given:
-                raise ValueError(f"{', '.join(given)} set but tls = false (set tls = true)")
-            return
-        if self.transport != "tcp":
-            raise ValueError("tls = true needs transport = \"tcp\" (OpenFresco's SSL channel is "
-                             "TCP; there is no TLS over UDP here)")
-        missing = [k for k, v in files.items() if v is None]
-        if missing:
-            raise ValueError(f"tls = true needs {', '.join(missing)} (OpenFresco's server.crt, "
-                             "server.key and server_ca.crt)")
-        for key, path in files.items():
-            assert path is not None
-            if not path.is_file():
-                raise ValueError(f"{key}: no such file {str(path)!r}")
-
-
-_TWIN_KEYS = ("learns_from", "updater", "offline", "model", "causality", "on_learner_loss",
-              "updater_options", "learner_deadline")
-"""The keys only an updatable site takes."""
+"""One ``[[sites]]`` entry: the config model of its ``kind`` (``site_kinds.py``)."""
 
 
 class BridgeConfig(_Strict):
@@ -374,18 +225,22 @@ def _format_errors(source: str, exc: ValidationError, text: str = "",
                    raw: dict[str, Any] | None = None) -> str:
     lines = [f"{source}: invalid configuration ({exc.error_count()} problem(s))"]
     for err in exc.errors():
-        parts = list(err["loc"])
-        parts = [p for i, p in enumerate(parts) if not (i and parts[i - 1] == "controller"
-                                                         and p in CONTROLLER_KINDS)]
+        at = list(err["loc"])
+        parts = [p for i, p in enumerate(at) if not (
+            (i and at[i - 1] == "controller" and p in CONTROLLER_KINDS)
+            or (i > 1 and at[i - 2] == "sites" and p in SITE_KINDS))]
         loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in parts)
         loc = loc.replace(".[", "[")
         where = locate(text, raw or {}, parts)  # "line 12, site damper"
         loc = f"{where}: {loc}" if where else loc
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
-            msg = "unknown key (typo?)"
+            msg = _unknown_key(at)
         elif err["type"] == "union_tag_invalid":
-            msg = f"unknown controller kind {err['ctx']['tag']!r}; expected {known_kinds()}"
+            tag = err["ctx"]["tag"]
+            msg = (f"unknown site kind {tag!r}; expected {known_site_kinds()}"
+                   if at[-1] != "controller" and at[:1] == ["sites"] and len(at) == 2
+                   else f"unknown controller kind {tag!r}; expected {known_kinds()}")
         got = err.get("input")
         quiet = err["type"] in ("missing", "extra_forbidden") or isinstance(got, dict | list)
         shown = "" if quiet else f" (got {got!r})"
@@ -393,10 +248,23 @@ def _format_errors(source: str, exc: ValidationError, text: str = "",
     return "\n".join(lines)
 
 
+def _unknown_key(loc: list[str | int]) -> str:
+    """An unknown key; one that belongs to another site kind says so (a twin's controller
+    table, an experimental site's updater)."""
+    if len(loc) == 4 and loc[0] == "sites" and loc[2] in SITE_KINDS:
+        kind, key = str(loc[2]), str(loc[3])
+        owners = [k for k in SITE_KINDS.values() if k.name != kind and key in k.config.model_fields]
+        if owners:
+            return (f"a key of kind = \"{owners[0].name}\" sites (this site is {kind}: "
+                    f"{SITE_KINDS[kind].summary.split(';')[0]})")
+    return "unknown key (typo?)"
+
+
 def parse_config(text: str, source: str = "<config>", *, base: Path | None = None) -> LabConfig:
-    """Parse TOML text; raise ConfigError with file, key and reason. Relative data paths of
-    updatable sites resolve against ``base`` (the config file's folder; default: the current
-    directory)."""
+    """Parse TOML text; raise ConfigError with file, key and reason. Each site kind resolves
+    its entries against the whole config (``SiteKind.resolve``: data paths relative to
+    ``base``, the config file's folder, default the current directory; cross-site
+    references)."""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -405,88 +273,20 @@ def parse_config(text: str, source: str = "<config>", *, base: Path | None = Non
         cfg = LabConfig.model_validate(raw)
     except ValidationError as exc:
         raise ConfigError(_format_errors(source, exc, text, raw)) from None
-    if not any(s.kind == "updatable" for s in cfg.sites):
-        return cfg
-    cfg, problems = _updatable_sites(cfg, Path.cwd() if base is None else base)
+    lab = LabView({s.name: s for s in cfg.sites}, cfg.bridge.controller_timeout,
+                  Path.cwd() if base is None else base, lambda k: SITE_KINDS[k].predicted)
+    sites: list[SiteConfigBase] = []
+    problems: list[str] = []
+    for i, site in enumerate(cfg.sites):
+        resolve = SITE_KINDS[site.kind].resolve
+        if resolve is not None:
+            site, found = resolve(site, lab)
+            problems += [f"sites[{i}].{p}" for p in found]
+        sites.append(site)
     if problems:
         raise ConfigError("\n".join([f"{source}: invalid configuration ({len(problems)} "
                                      "problem(s))", *(f"  {p}" for p in problems)]))
-    return cfg
-
-
-def _updatable_sites(cfg: LabConfig, base: Path) -> tuple[LabConfig, list[str]]:
-    """``cfg`` with the updatable sites' data paths resolved against ``base``, and what is
-    wrong with those sites (``sites[i].key: reason``): their source, updater and data. The
-    updater registry and the data readers load only for a config with updatable sites."""
-    from .updating.base import UpdaterError
-    from .updating.histories import read_history
-    from .updating.modelfile import load_model
-    from .updating.registry import UPDATERS, updater_options
-
-    problems: list[str] = []
-    by_name = {s.name: s for s in cfg.sites}
-    sites = list(cfg.sites)
-    for i, site in enumerate(sites):
-        if site.kind != "updatable":
-            continue
-        key = f"sites[{i}]"
-        source = by_name.get(site.learns_from or "")
-        if source is None:
-            problems.append(f"{key}.learns_from: no site named {site.learns_from!r} (sites: "
-                            f"{', '.join(by_name)})")
-        elif source.kind != "experimental":
-            problems.append(f"{key}.learns_from: site {source.name!r} is {source.kind}; a twin "
-                            "learns from an experimental site")
-        elif (n := make_setup(source.setup, source.dofs).n_actuators) != 1:
-            problems.append(f"{key}.learns_from: site {source.name!r} drives {n} actuators "
-                            f"(setup {source.setup}, dofs {source.dofs}); a twin learns from a "
-                            "one-actuator site")
-        if site.learner_deadline >= cfg.bridge.controller_timeout:
-            problems.append(f"{key}.learner_deadline: {site.learner_deadline:g} s must be "
-                            f"shorter than bridge.controller_timeout "
-                            f"({cfg.bridge.controller_timeout:g} s)")
-        if (site.causality == "same-step"
-                and 2 * site.learner_deadline >= cfg.bridge.controller_timeout):
-            problems.append(f"{key}.learner_deadline: same-step waits up to it for the "
-                            "source's trial, then for the learner: twice it must be "
-                            "shorter than bridge.controller_timeout "
-                            f"({cfg.bridge.controller_timeout:g} s)")
-        name = site.updater or ""
-        if name not in UPDATERS:
-            problems.append(f"{key}.updater: unknown updater {name!r}; known: "
-                            f"{', '.join(UPDATERS)}")
-            continue
-        paths = {k: p if p is None or p.is_absolute() else base / p
-                 for k, p in (("offline", site.offline), ("model", site.model))}
-        site = sites[i] = site.model_copy(update=paths)
-        accepted = updater_options(name)
-        for k, option in (("offline", "offline"), ("model", "model_file")):
-            if paths[k] is not None and option not in accepted:
-                problems.append(f"{key}.{k}: updater {name!r} takes no {k}")
-        needs = UPDATERS[name].needs
-        if needs and site.offline is None and (site.model is None or "model_file" not in needs):
-            wanted = " or ".join(f"{k} = \"...\"" for k, o in (("offline", "offline"),
-                                                                ("model", "model_file"))
-                                 if o in needs)
-            problems.append(f"{key}.updater: updater {name!r} needs {wanted} (the offline "
-                            "database or a pre-trained model)")
-        given = set(site.updater_options)
-        unknown = sorted(given - set(accepted))
-        if unknown:
-            problems.append(f"{key}.updater_options: unknown option(s) {', '.join(unknown)} of "
-                            f"updater {name!r}; allowed: {', '.join(accepted) or '(none)'}")
-        for option, instead in (("offline", "offline"), ("model_file", "model")):
-            if option in given:
-                problems.append(f"{key}.updater_options.{option}: give it as the site's "
-                                f"{instead} = \"...\" (a path)")
-        try:
-            if site.model is not None:
-                load_model(site.model)
-            if site.offline is not None:
-                read_history(site.offline)
-        except UpdaterError as exc:
-            problems.append(f"{key}.{'model' if site.model is not None else 'offline'}: {exc}")
-    return cfg.model_copy(update={"sites": sites}), problems
+    return cfg.model_copy(update={"sites": sites})
 
 
 def load_config(path: Path) -> tuple[LabConfig, str]:

@@ -19,6 +19,14 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, SecretStr
 
 
+class ConfigError(ValueError):
+    """A configuration problem, already phrased for the user (file, key, reason)."""
+
+
+Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
+"""A site's or a run's name (a file name, a topic level, a record key)."""
+
+
 class StrictConfig(BaseModel):
     """Base of every config model: exact types, finite numbers, no unknown keys, frozen."""
 

@@ -19,10 +19,8 @@ from typing import TypeVar
 from pydantic import SecretStr
 
 from . import __version__, loops
-from .config import ConfigError, LabConfig, SiteConfig, TelemetryConfig
+from .config import ConfigError, LabConfig, SiteConfigBase, TelemetryConfig
 from .config_model import redact_config_text, secret_values
-from .controls import registry as controls
-from .controls.base import Controller, ControllerError
 from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
 from .loops import LoopKind
@@ -32,24 +30,16 @@ from .server.connection import SiteListener
 from .server.tcp import TcpConnection
 from .server.tls import TlsConfigError, server_context
 from .server.udp import UdpSiteEndpoint
-from .setups import make_setup
-from .sites import ExperimentalSite
+from .site_kinds import SITE_KINDS
+from .sites import Site
 from .sites.access import Allowlist
+from .sites.kind import SiteContext, SiteGroup
 from .telemetry import MqttTelemetry
 from .telemetry.metrics import Metrics, MetricsServer
 from .telemetry.taps import MonitorBatch, SiteTaps
-from .twins.build import build_twins, preload_from_record
-from .twins.controller import TwinController
-from .twins.learner import Learner, LearnerError
 
 log = logging.getLogger("fresco_bridge")
 T = TypeVar("T")
-
-
-def make_controller(cfg: SiteConfig) -> Controller:
-    """The controller adapter a site's config asks for (its kind's factory, ``controls/``)."""
-    setup = make_setup(cfg.setup, cfg.dofs)
-    return controls.make_controller(cfg.controller, setup.n_actuators, setup.specimen_geometry())
 
 
 def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:
@@ -66,7 +56,7 @@ def _tls_context(tcfg: TelemetryConfig) -> ssl.SSLContext | None:
     return context
 
 
-def _site_tls(scfg: SiteConfig) -> ssl.SSLContext | None:
+def _site_tls(scfg: SiteConfigBase) -> ssl.SSLContext | None:
     """The site's mutual-TLS server context (OpenFresco's SSL channel), if ``tls = true``."""
     if not scfg.tls:
         return None
@@ -78,16 +68,6 @@ def _secret(value: SecretStr | None) -> str | None:
     return None if value is None else value.get_secret_value()
 
 
-def _event_sink(site: ExperimentalSite) -> Callable[[str, str, dict[str, object]], None]:
-    """A learner's events as events of one of its twin sites; a lost learner HOLDs a ``hold``
-    twin at once, not only at its next request (a ``freeze`` twin answers from its snapshot)."""
-    def sink(kind: str, reason: str, extra: dict[str, object]) -> None:
-        site.event(kind, reason, **extra)
-        if kind == "learner-lost" and site.in_session and site.cfg.on_learner_loss == "hold":
-            site.enter_hold(reason)
-    return sink
-
-
 class Bridge:
     def __init__(self, config: LabConfig, config_text: str, *, run_dir: Path | None = None,
                  resume: Path | None = None) -> None:
@@ -97,7 +77,7 @@ class Bridge:
         self.resume = resume
         """An interrupted run directory to continue instead of starting a new one."""
         self.record: RunRecord | None = None
-        self.sites: dict[str, ExperimentalSite] = {}
+        self.sites: dict[str, Site] = {}
         self._servers: list[asyncio.Server | asyncio.DatagramTransport] = []
         self.ports: dict[str, int] = {}
         self.telemetry: MqttTelemetry | None = None
@@ -107,8 +87,8 @@ class Bridge:
         self.desk = OperatorDesk(self.sites)
         self.control: ControlServer | None = None
         self._monitor_batches: list[MonitorBatch] = []
-        self.learners: dict[str, Learner] = {}
-        """The learner of each source site of updatable sites, by source name."""
+        self.groups: list[SiteGroup] = []
+        """Each site kind's group (``site_kinds.py``): its sites and what they share."""
 
     async def start(self) -> None:
         cfg = self.config
@@ -139,27 +119,20 @@ class Bridge:
         flag_interrupted(run_root, exclude=None if self.record is None
                          else self.record.directory)
         loop = asyncio.get_running_loop()
-        learners, twins = build_twins(cfg)
-        self.learners = learners
-        if self.resume is not None:
-            preload_from_record(learners, self.resume, cfg)
+        context = SiteContext(self.record, cfg.bridge.controller_timeout,
+                              cfg.bridge.controller_recovery, self.resume)
         try:
-            await self._start_learners()
+            built: dict[str, Site] = {}
+            for kind in SITE_KINDS.values():
+                configs = [s for s in cfg.sites if s.kind == kind.name]
+                if configs:
+                    group = kind.build(configs, context)
+                    self.groups.append(group)
+                    built.update(group.sites)
+            for group in self.groups:  # before any site listens: controllers, learners
+                await group.start()
             for scfg in cfg.sites:
-                controller = twins[scfg.name] if scfg.name in twins else make_controller(scfg)
-                site = ExperimentalSite(
-                    scfg, controller, self.record,
-                    controller_timeout=cfg.bridge.controller_timeout,
-                    controller_recovery=cfg.bridge.controller_recovery,
-                )
-                try:
-                    await asyncio.wait_for(site.controller.connect(), site.guard.timeout)
-                except (ControllerError, TimeoutError) as exc:
-                    # Not fatal: the site serves anyway and HOLDs at the first command if the
-                    # controller is still unreachable (adapters reconnect on reads).
-                    log.error("site %s: controller not reachable at start: %s", scfg.name,
-                              exc or "timeout")
-                self.sites[scfg.name] = site
+                site = self.sites[scfg.name] = built[scfg.name]
                 if scfg.name in resumed:
                     last = resumed[scfg.name]
                     site.resume_from(last.session, last.step, last.time)
@@ -187,7 +160,8 @@ class Bridge:
                 log.info("site %s: listening on %s %s:%d (%s protocol, %d DOF, setup %s)",
                          scfg.name, scfg.transport.upper(), cfg.bridge.host, port,
                          scfg.protocol, scfg.dofs, scfg.setup)
-            self._wire_learners()
+            for group in self.groups:
+                group.wire(self.sites)
         except (OSError, TlsConfigError, ConfigError):
             await self._abandon_start()
             raise
@@ -213,28 +187,7 @@ class Bridge:
                 raise
         self._attach_taps()
 
-    async def _start_learners(self) -> None:
-        """Every learner's worker, built and ready before any site listens."""
-        results = await asyncio.gather(*(learner.start() for learner in self.learners.values()),
-                                       return_exceptions=True)
-        for source, result in zip(self.learners, results, strict=True):
-            if isinstance(result, LearnerError):
-                raise ConfigError(f"the learner of site {source} did not start: {result}")
-            if isinstance(result, BaseException):
-                raise result
-
-    def _wire_learners(self) -> None:
-        """Each learner listens to its source's committed steps; its events go to its twins."""
-        for source, learner in self.learners.items():
-            self.sites[source].add_listener(learner)
-            for twin in learner.spec.twins:
-                site = self.sites[twin.name]
-                learner.add_event_sink(_event_sink(site))
-                assert isinstance(site.controller, TwinController)
-                site.controller.bind(site, self.sites[source])
-                site.add_listener(site.controller)  # its update lines, after its step lines
-
-    def _listener(self, site: ExperimentalSite) -> SiteListener:
+    def _listener(self, site: Site) -> SiteListener:
         """What the site's connections share; an open allowlist is said loudly."""
         bcfg = self.config.bridge
         entries = site.cfg.allowed_clients
@@ -267,8 +220,8 @@ class Bridge:
             raise OSError(exc.errno, f"metrics endpoint {host}:{port}: {exc.strerror}") from exc
         for site in self.sites.values():
             site.metrics = self.metrics.for_site(site.name)
-        for learner in self.learners.values():
-            learner.update_observer = self.metrics.observe_updater_step
+        for group in self.groups:
+            group.attach_metrics(self.metrics)
         log.info("metrics: http://%s:%d/metrics", host, self.metrics_server.port)
 
     def _attach_taps(self) -> None:
@@ -290,7 +243,7 @@ class Bridge:
                 continue
             taps = SiteTaps(self.telemetry, site.metrics,
                             site.recorder if tcfg.monitors else None, monitor, site.monitor_warning,
-                            predicted=site.cfg.kind == "updatable")
+                            predicted=SITE_KINDS[site.cfg.kind].predicted)
             site.add_listener(taps)
             taps.publish_status(site.status_now())
 
@@ -324,12 +277,8 @@ class Bridge:
         self._servers.clear()
         for site in self.sites.values():
             site.close_session("bridge shutting down")
-            try:
-                await asyncio.wait_for(site.controller.close(), site.guard.timeout)
-            except Exception as exc:  # closing must go on for the other sites
-                log.warning("site %s: controller close failed: %s", site.name, exc)
-        for learner in self.learners.values():
-            await learner.close()
+        for group in self.groups:
+            await group.close()
         if self.metrics_server is not None:
             self.metrics_server.close()
             self.metrics_server = None

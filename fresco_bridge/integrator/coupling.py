@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, Protocol, get_args, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -45,6 +45,8 @@ import numpy.typing as npt
 from fresco_bridge.integrator.ground_motion import GroundMotion
 from fresco_bridge.integrator.newmark import ExperimentalForce, ExplicitNewmark, Response
 from fresco_bridge.integrator.shear_building import ShearBuilding
+
+from ..causality import CAUSALITIES, Causality
 
 if TYPE_CHECKING:
     from fresco_bridge.updating.base import Updater
@@ -66,9 +68,6 @@ __all__ = [
 ]
 
 FloatArray = npt.NDArray[np.float64]
-Causality = Literal["same-step", "previous-step"]
-"""What a learning twin's force at step ``i`` may depend on (see the module docstring)."""
-CAUSALITIES: tuple[Causality, ...] = get_args(Causality)
 
 
 @runtime_checkable

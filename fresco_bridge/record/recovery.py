@@ -117,16 +117,21 @@ def _raw_lines(run_dir: Path) -> Iterator[dict[str, Any]]:
 
 
 def open_sessions(run_dir: Path) -> list[tuple[str, int]]:
-    """(site, session) opened in the record and never closed."""
+    """(site, session) opened in the record and never closed. A session cut by an
+    interruption that the run then resumed (the site's ``resumed`` event) is not open any
+    more: the resumed run continues it as the next session."""
     opened: dict[tuple[str, int], bool] = {}
     for rec in _lines(run_dir):
         if rec.get("kind") != "event":
             continue
-        key = (str(rec.get("site", "")), int(rec.get("session", 0)))
+        site = str(rec.get("site", ""))
+        key = (site, int(rec.get("session", 0)))
         if rec.get("event") == "session-open":
             opened[key] = True
         elif rec.get("event") == "session-close":
             opened.pop(key, None)
+        elif rec.get("event") == "resumed":
+            opened = {k: v for k, v in opened.items() if k[0] != site}
     return list(opened)
 
 

@@ -1,9 +1,8 @@
 """The ``Site`` protocol: what the transports (``server/``) and the operator desk (``ctl.py``)
 need of a site, and nothing more.
 
-``ExperimentalSite`` (a controller behind setup and safety) implements it; a second kind of site
-(e.g. an updatable numerical site whose forces come from an updater fed by another site's
-committed steps) implements the same and is served, refused, paused and aborted the same way.
+Every site kind (``site_kinds.py``) implements it, and is served, refused, paused, aborted,
+recorded and published the same way; nothing outside a kind's module knows more of a site.
 """
 
 from __future__ import annotations
@@ -13,11 +12,14 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeAlias, TypeVar
 
 from protocol import Signals, SignalSizes
 
-from ..config import SiteConfig
+from .site_config import SiteConfigBase
 
 if TYPE_CHECKING:
+    from ..record.site import SiteRecorder
     from ..telemetry.metrics import SiteMetrics
+    from ..telemetry.schema import SiteStatus
     from .access import RejectionLog
+    from .listeners import EventListener, StepListener
 
 __all__ = ["Later", "Site", "SiteError"]
 
@@ -34,7 +36,7 @@ class Site(Protocol):
     """A site as a transport and an operator see it (OpenFresco's *experimental site*)."""
 
     name: str
-    cfg: SiteConfig
+    cfg: SiteConfigBase
     session: int
     """Number of the current (or last) integrator session."""
     pending: tuple[float, ...] | None
@@ -44,6 +46,14 @@ class Site(Protocol):
     """Column-major n×n matrices answering actions 14 and 15."""
     metrics: SiteMetrics | None
     rejections: RejectionLog | None
+    step: int
+    """The last committed step (of the current or last session)."""
+    time: float
+    trial: Signals
+    """The current trial (element side, basic DOFs)."""
+    in_session: bool
+    recorder: SiteRecorder | None
+    """The one writer of this site's lines in the run record (None: recording off)."""
 
     @property
     def busy(self) -> bool:
@@ -112,3 +122,18 @@ class Site(Protocol):
     def status(self) -> dict[str, object]:
         """A JSON-able snapshot for ``fresco-bridge ctl status``."""
         ...
+
+    # -- the core the kinds share (the daemon, the kinds' groups, telemetry) -----------------
+    def add_listener(self, listener: StepListener | EventListener) -> None: ...
+
+    def event(self, kind: str, reason: str, **extra: object) -> None: ...
+
+    def enter_hold(self, reason: str) -> None: ...
+
+    def resume_from(self, session: int, step: int, time: float) -> None:
+        """A resumed run: the next session is ``session + 1``, after committed ``step``."""
+        ...
+
+    def status_now(self) -> SiteStatus: ...
+
+    def monitor_warning(self, reason: str, step: int) -> None: ...

@@ -29,13 +29,13 @@ from typing import TYPE_CHECKING
 
 from protocol import Signals, SignalSizes
 
-from ..config import SiteConfig
 from ..controls.base import Controller, Daq, InlineController
 from ..logs import cause_of
 from ..record import RecordError, RunRecord
 from ..record.site import SiteRecorder
 from ..safety import (
     Limiter,
+    LimitHit,
     SiteState,
     TransitionRefused,
     Trigger,
@@ -44,12 +44,13 @@ from ..safety import (
 )
 from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
-from ..tangent import TangentEstimate
+from ..tangent import TangentEstimate, TangentMethod
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
 from .gate import CommandGate
 from .guard import ControllerGuard
-from .listeners import EventListener, StepListener
+from .listeners import EventListener, Listeners, StepListener
+from .site_config import SiteConfigBase
 from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
@@ -66,13 +67,13 @@ half-open client cannot keep an aborted site)."""
 RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
 
 
-class ExperimentalSite(CommandGate):
+class ExperimentalSite:
     """One site: config, setup, limits, controller (behind its guard), state, the current
     session's signals, and the listeners its committed steps and events go to."""
 
     def __init__(
         self,
-        cfg: SiteConfig,
+        cfg: SiteConfigBase,
         controller: Controller,
         record: RunRecord | None,
         *,
@@ -82,6 +83,13 @@ class ExperimentalSite(CommandGate):
         self.cfg = cfg
         self.name = cfg.name
         self.controller = controller
+        self._reset_on_new_session = bool(getattr(getattr(cfg, "controller", None),
+                                                  "reset_on_new_session", False))
+        """``[sites.controller] reset_on_new_session``: a new session starts a fresh specimen
+        (not the session that continues a resumed run)."""
+        self._tangent_method: TangentMethod = getattr(cfg, "tangent", "controller")
+        """``[[sites]] tangent`` of an experimental site (``tangent.py``); a kind without the
+        key (a twin) answers its controller's tangent."""
         self.setup: Setup = make_setup(cfg.setup, cfg.dofs)
         self._plain = self.setup.identity
         """ctrl = trial, out = daq (T = I, no tracking-error spread): the step path skips the
@@ -104,11 +112,8 @@ class ExperimentalSite(CommandGate):
         self.mass = column_major(cfg.mass, cfg.dofs)
         self.holds = 0
         self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
-        self._step_listeners: list[StepListener] = []
-        self._step_values: tuple[Callable[[int, int, float, tuple[float, ...],
-                                           tuple[float, ...]], None], ...] | None = None
-        """Every step listener's ``step_values``, when they all have one (``_committed``)."""
-        self._event_listeners: list[EventListener] = []
+        self.listeners = Listeners()
+        """Who takes the committed steps, events and forwarded trials of this site."""
         self.recorder = None if record is None else SiteRecorder(record, cfg.name)
         """The one writer of this site's lines in the run record (None: recording off)."""
         if self.recorder is not None:
@@ -117,11 +122,10 @@ class ExperimentalSite(CommandGate):
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
-        self._ctrl_limiter = limiter if limiter is not None and limiter.has_ctrl else None
+        self.gate = CommandGate(self, limiter, inline=self._now is not None)
+        """The limits and the operator's pause between a target and the controller."""
+        self._ctrl_limiter = self.gate.limiter
         self._daq_limiter = limiter if limiter is not None and limiter.has_daq else None
-        self.limit_counts: dict[str, int] = {}
-        self._reference: tuple[float, ...] | None = None  # last command the controller got
-        self._wake: asyncio.Event | None = None
         self.paused_since: float | None = None
         self.pending: tuple[float, ...] | None = None  # waits for an operator or a recovery
         self._end_session: Callable[[str], None] | None = None  # the transport's, per session
@@ -134,7 +138,7 @@ class ExperimentalSite(CommandGate):
         n, na = self.cfg.dofs, self.setup.n_actuators
         self.step = self._session_first_step = 0
         self.time = 0.0
-        self._commit_time = 0.0
+        self.commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
         self.target: tuple[float, ...] = (0.0,) * na  # what the integrator asked for (ctrl)
         self.ctrl: tuple[float, ...] = (0.0,) * na  # what the controller was sent last
@@ -144,11 +148,16 @@ class ExperimentalSite(CommandGate):
         self._daq_valid = False
         self._acquiring: asyncio.Future[Daq] | None = None
         """The controller read in flight (network controllers): one read per trial, whoever
-        asks (the site's own force request, or a same-step twin learning from it)."""
+        asks (the site's own force request, or a trial listener reading the published
+        trial's measurement)."""
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
-        self._estimate = TangentEstimate(self.cfg.tangent, na)  # per session
+        self._estimate = TangentEstimate(self._tangent_method, na)  # per session
         self._k_initial: tuple[float, ...] | None = None
         self.stop_reason: str | None = None  # set: this session's answers are NaN
+
+    @property
+    def resets_on_new_session(self) -> bool:
+        return self._reset_on_new_session
 
     @property
     def busy(self) -> bool:
@@ -193,17 +202,18 @@ class ExperimentalSite(CommandGate):
         self.claim(peer)
         self.session += 1
         self._reset_signals()
-        if self._resume_at is not None:  # the first session after a crash: numbering goes on
-            self.step, self.time = self._resume_at
-            self._commit_time = self.time
+        resumed = self._resume_at is not None
+        if self._resume_at is not None:  # the first session after a crash: it goes on (its
+            self.step, self.time = self._resume_at  # numbering; the specimen is not reset)
+            self.commit_time = self.time
             self._resume_at = None
         self._session_first_step = self.step  # the close line counts the session's own steps
         reset = getattr(self.controller, "reset", None)
-        if reset is not None and getattr(self.cfg.controller, "reset_on_new_session", False):
+        if reset is not None and self._reset_on_new_session and not resumed:
             reset()
-            self._reference = None
+            self.gate.reference = None
         log.info("site %s: session %d opened by %s", self.name, self.session, peer)
-        self._transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
+        self.transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
         self.peer, self.in_session = peer, True
         return self.session
 
@@ -221,7 +231,7 @@ class ExperimentalSite(CommandGate):
             self._enter(Trigger.INTEGRATOR_LOST,
                         f"integrator session ended with an uncommitted command at step "
                         f"{self.step + 1} ({reason})")
-        self._transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
+        self.transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
         self.peer, self.in_session, self._end_session = "", False, None
         return True
 
@@ -231,6 +241,7 @@ class ExperimentalSite(CommandGate):
         command is the client's, checked against the measured position."""
         self.session = session
         self._resume_at = (step, time)
+        self.step, self.time = step, time  # what ``ctl status`` shows until the session opens
         self.event("resumed", f"run resumed after an interruption: site {self.name} continues "
                     f"from committed step {step} (t = {time:g} s) with session {session + 1}",
                     step=step, time=time)
@@ -262,7 +273,7 @@ class ExperimentalSite(CommandGate):
             raise SiteError(f"{who} sizes do not fit site {self.name}: " + "; ".join(problems))
 
     # -- states --------------------------------------------------------------------------------
-    def _transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
+    def transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
         """Move along ``safety.states.TRANSITIONS``; record and publish it with its reason."""
         old = self.state
         new = next_state(old, trigger, self.in_session)
@@ -284,7 +295,7 @@ class ExperimentalSite(CommandGate):
             log.warning("site %s: %s while in %s: %s", self.name, trigger, self.state, reason)
             return
         try:
-            new = self._transition(trigger, reason, step=self.step)
+            new = self.transition(trigger, reason, step=self.step)
         except TransitionRefused as exc:
             log.error("site %s: %s (%s)", self.name, exc, reason)
             return
@@ -301,11 +312,10 @@ class ExperimentalSite(CommandGate):
 
     def recovered(self, reason: str, **extra: object) -> None:
         """HOLD → RUNNING: the guard's recovery found the controller answering again."""
-        self._transition(Trigger.RECOVERED, reason, **extra)
+        self.transition(Trigger.RECOVERED, reason, **extra)
 
     def _wake_waiter(self) -> None:
-        if self._wake is not None:
-            self._wake.set()
+        self.gate.wake()
         self.guard.wake()
 
     # -- operator ------------------------------------------------------------------------------
@@ -313,7 +323,7 @@ class ExperimentalSite(CommandGate):
         """Stop forwarding at the next trial; the integrator's request waits for resume/abort."""
         if self.state is PAUSED:
             return f"site {self.name} is already PAUSED ({self.reason})"
-        self._transition(Trigger.PAUSE, f"operator pause ({source})")
+        self.transition(Trigger.PAUSE, f"operator pause ({source})")
         log.warning("site %s: PAUSED by the operator (%s) at step %d; the next command waits "
                     "for 'fresco-bridge ctl resume' or 'abort'", self.name, source, self.step)
         return f"site {self.name} PAUSED at step {self.step}"
@@ -321,7 +331,7 @@ class ExperimentalSite(CommandGate):
     def operator_resume(self, source: str) -> str:
         """PAUSED → RUNNING (the waiting command is checked again) or FAULT → IDLE."""
         old = self.state
-        new = self._transition(Trigger.RESUME, f"operator resume ({source})")
+        new = self.transition(Trigger.RESUME, f"operator resume ({source})")
         log.warning("site %s: %s → %s by the operator (%s)", self.name, old, new, source)
         self._wake_waiter()
         return f"site {self.name} {old} → {new}"
@@ -329,7 +339,7 @@ class ExperimentalSite(CommandGate):
     def operator_abort(self, source: str) -> str:
         """FAULT: hold the controller, answer the session NaN (it stops), refuse new ones."""
         old = self.state
-        self._transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
+        self.transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
         log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
                   "sessions refused until 'fresco-bridge ctl resume'", self.name, source,
                   self.step, old)
@@ -353,7 +363,7 @@ class ExperimentalSite(CommandGate):
             "paused_for": None if since is None else round(_time.monotonic() - since, 3),
             "recovering_for": None if self.guard.recovering_since is None
             else round(_time.monotonic() - self.guard.recovering_since, 3),
-            "holds": self.holds, "limit_events": dict(self.limit_counts),
+            "holds": self.holds, "limit_events": dict(self.gate.limit_counts),
             "record": None if self.recorder is None or self.recorder.failure is None
             else str(self.recorder.failure),
             "refused": {} if self.rejections is None else dict(self.rejections.counts),
@@ -396,14 +406,16 @@ class ExperimentalSite(CommandGate):
 
     # -- listeners ------------------------------------------------------------------------------
     def add_listener(self, listener: StepListener | EventListener) -> None:
-        """Committed steps (``step_committed``) and/or events (``site_event``) go to
-        ``listener`` from now on, after those added before it."""
-        if isinstance(listener, StepListener):
-            self._step_listeners.append(listener)
-            lean = [getattr(x, "step_values", None) for x in self._step_listeners]
-            self._step_values = None if None in lean else tuple(lean)  # type: ignore[arg-type]
-        if isinstance(listener, EventListener):
-            self._event_listeners.append(listener)
+        """Committed steps (``step_committed``), events (``site_event``) and/or forwarded
+        trials (``trial_forwarded``) go to ``listener`` from now on, after the earlier ones."""
+        self.listeners.add(listener)
+
+    def _forwarded(self) -> None:
+        """The current trial reached the controller: its listeners get it (and a way to read
+        its one measurement)."""
+        if self.listeners.trials and self.state is RUNNING:
+            self.listeners.trial(SourceTrial(self, self.session, self.step + 1, self.time,
+                                             self.ctrl))
 
     def status_now(self) -> SiteStatus:
         """The site's state for telemetry (retained status)."""
@@ -412,12 +424,9 @@ class ExperimentalSite(CommandGate):
 
     def event(self, kind: str, reason: str, **extra: object) -> None:
         """An event of this site (a state change, a limit hit, a fault…) to its listeners."""
-        if not self._event_listeners:
-            return
-        notice = SiteNotice(self.name, self.session, self.step, self.time, kind, reason, extra)
-        status = self.status_now()
-        for listener in self._event_listeners:
-            listener.site_event(notice, status)
+        if self.listeners.events:
+            self.listeners.event(SiteNotice(self.name, self.session, self.step, self.time, kind,
+                                            reason, extra), self.status_now())
 
     def monitor_warning(self, reason: str, step: int) -> None:
         """An online monitor's warning at committed ``step`` (the taps raise it)."""
@@ -465,7 +474,7 @@ class ExperimentalSite(CommandGate):
             return None
         self._daq_valid = False
         if self.state is RUNNING and (self._ctrl_limiter is None
-                                      or self.clear_of_limits(target)):  # the hot path
+                                      or self.gate.clear_of_limits(target)):  # the hot path
             self.ctrl = target
             if self.recorder is not None:
                 self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
@@ -477,13 +486,21 @@ class ExperimentalSite(CommandGate):
                 self._uncommitted = True
                 self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
                 self._sent(target)
+            if self.listeners.trials:
+                self._forwarded()
             return None
-        return self.set_trial_later(trial, target)
+        return self._gated(trial, target)
+
+    async def _gated(self, trial: Signals, target: tuple[float, ...]) -> None:
+        await self.gate.set_trial_later(trial, target)
+        if self.guard.sent == self.ctrl:
+            self._forwarded()
 
     async def _send_later(self, command: tuple[float, ...]) -> None:
-        await self._send(command)
+        if await self.send(command):
+            self._forwarded()
 
-    async def _send(self, command: tuple[float, ...]) -> bool:
+    async def send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
         self._uncommitted = True
         if self._now is not None:
@@ -493,18 +510,35 @@ class ExperimentalSite(CommandGate):
                                      command)
         return self._sent(command)
 
+    @property
+    def sent(self) -> tuple[float, ...] | None:
+        """The last setpoint the controller acknowledged in this session."""
+        return self.guard.sent
+
+    async def read_position(self) -> Daq | None:
+        """A fresh measurement for the limits' reference (None: the controller failed)."""
+        return await self.guard.guarded("get_daq (reference position)", self.controller.get_daq)
+
+    def resend_refused(self, command: tuple[float, ...],
+                       measured: tuple[float, ...]) -> str | None:
+        """Why the guard may not re-send ``command`` from ``measured`` (the limits), or None."""
+        return self.gate.resend_refused(command, measured)
+
+    @property
+    def limit_counts(self) -> dict[str, int]:
+        """Limit hits by limit (``ctl status``, metrics)."""
+        return self.gate.limit_counts
+
+    def limit_event(self, hit: LimitHit, action: str) -> None:
+        self.gate.limit_event(hit, action)
+
     def _sent(self, command: tuple[float, ...]) -> bool:
         """After ``command`` went to the controller (or failed: the site is in HOLD)."""
         if self.state is HOLD or self.state is FAULT:
-            self._reference = None  # where the actuator stopped is not known
+            self.gate.reference = None  # where the actuator stopped is not known
             return False
-        self.guard.sent = self._reference = command
+        self.guard.sent = self.gate.reference = command
         return True
-
-    async def acquire(self) -> Daq:
-        """The measurement for the current command, acquired once per trial."""
-        daq = self.acquire_eager()
-        return daq if isinstance(daq, Daq) else await daq
 
     def acquire_eager(self) -> Daq | Later[Daq]:
         """The measurement for the current command, acquired once per trial."""
@@ -536,12 +570,6 @@ class ExperimentalSite(CommandGate):
         fut.set_result(daq)
         return daq
 
-    @property
-    def trial_forwarded(self) -> bool:
-        """The current trial's command has reached the controller (or needed no move): a
-        measurement taken now is the trial's."""
-        return self.guard.sent == self.ctrl
-
     def _measured(self, daq: Daq | None) -> Daq:
         """Check and record what the controller measured (None: it failed, the site HOLDs)."""
         if daq is None:
@@ -554,7 +582,7 @@ class ExperimentalSite(CommandGate):
             if hit is not None:
                 if self.recorder is not None:  # a real measurement: keep it in the record
                     self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
-                self.limit_event(hit, "hold")
+                self.gate.limit_event(hit, "hold")
                 self.enter_hold(f"daq limit exceeded: {hit.describe()}")
                 return self.daq
         self.daq = daq
@@ -599,25 +627,26 @@ class ExperimentalSite(CommandGate):
         """The controller committed (or failed to: then the site is in HOLD): the step counts."""
         self.step += 1
         self._uncommitted = False
-        commit_time, self._commit_time = self._commit_time, self.time
+        commit_time, self.commit_time = self.commit_time, self.time
         if (refused := self._estimate.committed(self.ctrl, self.daq.force)) is not None:
             self.event("tangent-fallback", refused)
-        lean = self._step_values
+        outlets = self.listeners
+        lean = outlets.step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
                 session, step, time_, ctrl, disp = (self.session, self.step, self.time,
                                                     self.ctrl, self.daq.disp)
                 for listener_values in lean:
                     listener_values(session, step, time_, ctrl, disp)
-            elif self._step_listeners:
+            elif outlets.steps:
                 committed = CommittedStep(self.name, self.session, self.step, self.time,
                                           self.trial.disp, self.ctrl, self.daq.disp,
                                           self.daq.force, str(self.state))
-                for listener in self._step_listeners:
+                for listener in outlets.steps:
                     listener.step_committed(committed)
         except RecordError as exc:  # the record is the first listener: nobody saw the step
             self.step -= 1
-            self._commit_time = commit_time
+            self.commit_time = commit_time
             self.record_failed(exc)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
@@ -695,3 +724,30 @@ class ExperimentalSite(CommandGate):
             if k is not None:
                 self._k_initial = self.setup.basic_matrix(k)
         return self._k_initial if self._k_initial is not None else self._k_tangent
+
+
+class SourceTrial:
+    """A trial of an ``ExperimentalSite`` as its trial listeners get it (``ForwardedTrial``):
+    its step, time and command, and its one measurement, read through the site's
+    single-flight acquisition while it is the site's current trial."""
+
+    __slots__ = ("_site", "ctrl", "session", "step", "time")
+
+    def __init__(self, site: ExperimentalSite, session: int, step: int, time: float,
+                 ctrl: tuple[float, ...]) -> None:
+        self._site = site
+        self.session, self.step, self.time, self.ctrl = session, step, time, ctrl
+
+    def _current(self) -> bool:
+        site = self._site
+        return (site.state is RUNNING and site.session == self.session
+                and site.step + 1 == self.step and site.time == self.time
+                and site.ctrl == self.ctrl and site.guard.sent == self.ctrl)
+
+    async def read(self) -> Daq | None:
+        if not self._current():
+            return None
+        daq = self._site.acquire_eager()
+        if not isinstance(daq, Daq):
+            daq = await daq
+        return daq if self._current() else None

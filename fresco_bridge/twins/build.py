@@ -1,26 +1,34 @@
-"""From the lab config to learners and twin controllers: one learner per source site, one
-twin controller per updatable site."""
+"""From the updatable sites' configs to their learners and sites: one learner per source site,
+one twin site per updatable site, and the wiring to the sources once every site exists."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..config import ConfigError, LabConfig, SiteConfig
-from ..record.export import committed_steps
+from ..config_model import ConfigError
+from ..record.export import read_record
+from ..sites import controlled_site
+from ..sites.base import Site
 from ..updating.base import UpdaterError
 from ..updating.histories import read_history
 from .controller import TwinController
 from .learner import Learner
+from .source import SourceFeed
 from .worker import LearnerSpec, Message, TwinSpec
 
-__all__ = ["build_twins", "preload_from_record", "twin_spec"]
+if TYPE_CHECKING:
+    from ..sites.kind import SiteContext
+    from .config import UpdatableSiteConfig
+
+__all__ = ["build_twins", "preload_from_record", "twin_spec", "wire_twins"]
 
 
-def twin_spec(cfg: SiteConfig) -> TwinSpec:
+def twin_spec(cfg: UpdatableSiteConfig) -> TwinSpec:
     """The updater of updatable site ``cfg`` with its data read (paths already resolved)."""
-    assert cfg.updater is not None
     options: dict[str, Any] = dict(cfg.updater_options)
     try:
         if cfg.offline is not None:
@@ -33,44 +41,133 @@ def twin_spec(cfg: SiteConfig) -> TwinSpec:
     return TwinSpec(cfg.name, cfg.updater, options, cfg.on_learner_loss)
 
 
-def build_twins(config: LabConfig) -> tuple[dict[str, Learner], dict[str, TwinController]]:
-    """``({source site: its learner}, {updatable site: its controller})`` (not started)."""
-    groups: dict[str, list[SiteConfig]] = {}
-    for scfg in config.sites:
-        if scfg.kind == "updatable":
-            assert scfg.learns_from is not None
-            groups.setdefault(scfg.learns_from, []).append(scfg)
+def build_twins(configs: Sequence[UpdatableSiteConfig], context: SiteContext
+                ) -> tuple[dict[str, Learner], dict[str, Site], dict[str, TwinController],
+                           dict[str, SourceFeed | None]]:
+    """``({source site: its learner}, {updatable site: its site}, {updatable site: its twin
+    controller}, {source site: its feed of trials, if a twin of it is same-step})`` (not
+    started)."""
+    groups: dict[str, list[UpdatableSiteConfig]] = {}
+    for cfg in configs:
+        groups.setdefault(cfg.learns_from, []).append(cfg)
     learners: dict[str, Learner] = {}
+    sites: dict[str, Site] = {}
     controllers: dict[str, TwinController] = {}
+    feeds: dict[str, SourceFeed | None] = {}
     for source, twins in groups.items():
         spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
         learner = learners[source] = Learner(source, spec,
                                              deadline=min(t.learner_deadline for t in twins))
+        same_step = [t for t in twins if t.causality == "same-step"]
+        feed = feeds[source] = SourceFeed(source) if same_step else None
         for t in twins:
-            assert t.updater is not None
-            controllers[t.name] = TwinController(learner, t.name, updater=t.updater,
-                                                 causality=t.causality)
-    return learners, controllers
+            controller = controllers[t.name] = TwinController(
+                learner, t.name, updater=t.updater, causality=t.causality,
+                feed=feed if t in same_step else None)
+            sites[t.name] = controlled_site(t, controller, context)
+    return learners, sites, controllers, feeds
 
 
-def preload_from_record(learners: dict[str, Learner], run_dir: Path, config: LabConfig) -> None:
+def _event_sink(site: Site, on_loss: str) -> Callable[[str, str, dict[str, object]],
+                                                                  None]:
+    """A learner's events as events of one of its twin sites; a lost learner HOLDs a ``hold``
+    twin at once, not only at its next request (a ``freeze`` twin answers from its snapshot)."""
+    def sink(kind: str, reason: str, extra: dict[str, object]) -> None:
+        site.event(kind, reason, **extra)
+        if kind == "learner-lost" and site.in_session and on_loss == "hold":
+            site.enter_hold(reason)
+    return sink
+
+
+def _any_in_session(sites: list[Site]) -> Callable[[], bool]:
+    return lambda: any(site.in_session for site in sites)
+
+
+def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
+               controllers: Mapping[str, TwinController],
+               feeds: Mapping[str, SourceFeed | None],
+               sites: Mapping[str, Site]) -> None:
+    """Each learner listens to its source's committed steps; its events go to its twins, and
+    each twin site writes its update lines after its step lines."""
+    for source_name, learner in learners.items():
+        source = sites[source_name]
+        feed = feeds.get(source_name)
+        if feed is not None:
+            source.add_listener(feed)  # its trials, commits and state
+        source.add_listener(learner)
+        learner.twins_active = _any_in_session([twins[t.name] for t in learner.spec.twins])
+        for spec in learner.spec.twins:
+            site = twins[spec.name]
+            learner.add_event_sink(_event_sink(site, spec.on_loss))
+            controller = controllers[spec.name]
+            controller.bind(site)
+            site.add_listener(controller)
+
+
+@dataclass
+class _Replayed:
+    """One learner's history being rebuilt from a record (``preload_from_record``)."""
+
+    log: list[Message] = field(default_factory=list)
+    source_session: int = 0
+    source_step: int = 0
+    commits: int = 0
+    awaiting: dict[str, tuple[float, int]] = field(default_factory=dict)
+    """Twin -> (its committed trial, its step) until its update line says how far it
+    learned."""
+
+    def twin_committed(self, twin: str, through: tuple[int, int] | None = None) -> None:
+        d, step = self.awaiting.pop(twin)
+        self.log += [("trial", 0, twin, d, through or (self.source_session, step - 1)),
+                     ("commit", twin)]
+        self.commits += 1
+
+
+def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
+                        configs: Sequence[UpdatableSiteConfig]) -> None:
     """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
-    committed steps and each twin's committed trials, in the record's order (the order the
-    bridge saw them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
-    steps = committed_steps(run_dir)
-    same_step = {s.name for s in config.sites if s.causality == "same-step"}
-    for learner in learners.values():
-        twins = {t.name for t in learner.spec.twins}
-        log: list[Message] = []
-        source_step = commits = 0
-        for step in steps:
-            if step.site == learner.source:
-                d, f = step.meas_disp[0], step.meas_force[0]
-                source_step = step.step
+    committed steps keyed by (session, step) and each twin's committed trials with how far
+    each learned (the source's session open then; through the twin's step if its update line
+    says same-step, else the step before), in the record's order (the order the bridge saw
+    them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
+    same_step = {c.name for c in configs if c.causality == "same-step"}
+    by_source = {learner.source: _Replayed() for learner in learners.values()}
+    of_twin = {t.name: by_source[learner.source] for learner in learners.values()
+               for t in learner.spec.twins}
+    last_trial: dict[tuple[str, int], dict[str, Any]] = {}
+    last_daq: dict[tuple[str, int], dict[str, Any]] = {}
+    for rec in read_record(run_dir):
+        kind, site = rec["kind"], str(rec.get("site", ""))
+        key = (site, int(rec.get("session", 0)))
+        if kind == "trial":
+            last_trial[key] = rec
+            last_daq.pop(key, None)
+        elif kind == "daq":
+            last_daq[key] = rec
+        elif kind == "event" and site in by_source and rec.get("event") == "session-open":
+            by_source[site].source_session = key[1]
+        elif kind == "commit" and key in last_trial and key in last_daq:
+            step = int(rec["step"])
+            if site in by_source:
+                src = by_source[site]
+                d, f = float(last_daq[key]["disp"][0]), float(last_daq[key]["force"][0])
+                src.source_session, src.source_step = key[1], step
                 if math.isfinite(d) and math.isfinite(f):
-                    log.append(("observe", step.step, d, f))
-            elif step.site in twins:
-                log += [("trial", 0, step.site, step.cmd_disp[0], step.site in same_step),
-                        ("commit", step.site)]
-                commits += 1
-        learner.preload(log, source_step=source_step, commits=commits)
+                    src.log.append(("observe", key[1], step, d, f))
+            elif site in of_twin:
+                replayed = of_twin[site]
+                if site in replayed.awaiting:  # a commit without its update line
+                    replayed.twin_committed(site)
+                replayed.awaiting[site] = (float(last_trial[key]["ctrl"][0]), step)
+        elif kind == "update" and site in of_twin and site in of_twin[site].awaiting:
+            replayed = of_twin[site]
+            step = replayed.awaiting[site][1]
+            same = site in same_step and int(rec.get("through", -1)) == step
+            replayed.twin_committed(site, (replayed.source_session, step if same else step - 1))
+    for learner in learners.values():
+        replayed = by_source[learner.source]
+        for twin in list(replayed.awaiting):
+            replayed.twin_committed(twin)
+        learner.preload(replayed.log, source_step=replayed.source_step,
+                        commits=replayed.commits)
+        learner.source_session = replayed.source_session

@@ -1,19 +1,20 @@
-"""The twin controller: what makes an ordinary site an updatable one.
+"""The twin controller: how an updatable site answers (``twins/kind.py``).
 
-An updatable site is an ``ExperimentalSite`` whose controller answers from a twin instead of
-an actuator, so sessions, the state table, limits, the operator, the NaN stop, the record,
-telemetry and status apply unchanged (``docs/architecture.md``, "Updatable sites"). A learner
-that cannot answer is a ``ControllerError``: the site HOLDs, the integrator stops, and the
-experimental source is never touched.
+An updatable site is served through the shared site core with this controller
+(``sites.controlled_site``), so sessions, the state table, limits, the operator, the NaN stop,
+the record, telemetry and status apply unchanged (``docs/architecture.md``, "Updatable
+sites"). A learner that cannot answer is a ``ControllerError``: the site HOLDs, the integrator
+stops, and the experimental source is never touched.
 
-With ``causality = "same-step"`` the twin's trial of step k waits (up to the learner's
-deadline) for the source's trial of the same step and time to reach its controller, takes the
-source's measurement of it (the one read of that trial, shared with the source's own force
-request) and has the learner learn it before answering: the paper's order. OpenSees sends every
-element's trial before any force request, so the source's trial arrives whatever the element
-order; a client that asks the twin's force before sending the source's trial would wait
-forever: past the deadline the twin answers ``previous-step`` for the rest of the session,
-said in a ``same-step-fallback`` event.
+With ``causality = "same-step"`` the twin's trial of step k awaits (up to the learner's
+deadline) its source's published trial of the same step and time (``twins/source.py``: no
+polling, no reference to the source site), takes that trial's measurement (the one read of
+that trial, shared with the source's own force request; or the committed one when the source
+already committed the step) and has the learner learn it before answering: the paper's order.
+Where the order of messages makes that impossible (the client asks the twin's force before
+sending the source's trial; an implicit scheme's several trials per step) the twin answers
+``previous-step`` for the rest of the session, said once in a ``same-step-fallback`` event
+with the true reason.
 
 The controller is also a step listener of its own site, after the site's record writer: each
 committed twin step gets an update line (the source step its answer was learned through, the
@@ -23,19 +24,33 @@ step's update time, the source's one-step error) from the one writer of the site
 
 from __future__ import annotations
 
-import asyncio
 import math
+from typing import TYPE_CHECKING, Protocol
 
+from protocol import Signals
+
+from ..causality import Causality
 from ..controls.base import Controller, ControllerError, Daq
-from ..safety import SiteState
 from ..site_output import CommittedStep
-from ..sites import ExperimentalSite
 from .learner import Learner, LearnerError
+from .source import SameStepImpossible, SourceFeed
+
+if TYPE_CHECKING:
+    from ..record.site import SiteRecorder
 
 __all__ = ["TwinController"]
 
-POLL = 0.0002
-"""Seconds between two looks at the source's trial while a same-step trial waits for it."""
+class TwinHost(Protocol):
+    """What the twin controller reads of its own site (its step, trial, events, record)."""
+
+    session: int
+    step: int
+    time: float
+    trial: Signals
+    in_session: bool
+    recorder: SiteRecorder | None
+
+    def event(self, kind: str, reason: str, **extra: object) -> None: ...
 
 
 class TwinController(Controller):
@@ -44,7 +59,8 @@ class TwinController(Controller):
     n_actuators = 1
     inline = False
 
-    def __init__(self, learner: Learner, twin: str, *, updater: str, causality: str) -> None:
+    def __init__(self, learner: Learner, twin: str, *, updater: str, causality: Causality,
+                 feed: SourceFeed | None = None) -> None:
         self.learner = learner
         self.twin = twin
         self.updater = updater
@@ -60,23 +76,30 @@ class TwinController(Controller):
         """The source's one-step error of the twin's current step (the last answer's)."""
         self._answered = False
         """Whether the last trial was answered by the learner (else no update line)."""
-        self._site: ExperimentalSite | None = None
-        self._source: ExperimentalSite | None = None
+        self._committed: tuple[int, float] | None = None
+        """The session and displacement of the twin's last commit: a trial of it again moves
+        nothing and asks nothing of the source (``twins/source.py``)."""
+        self._site: TwinHost | None = None
+        self._feed = feed
+        """The source's published trials and commits (same-step)."""
         self._fallback_session = -1
         """The session in which same-step fell back to previous-step."""
         self.same_step_steps = 0
         """Trials answered same-step."""
 
-    def bind(self, site: ExperimentalSite, source: ExperimentalSite) -> None:
-        """The twin's own site and its source's (same-step matches their trials)."""
-        self._site, self._source = site, source
+    def bind(self, site: TwinHost) -> None:
+        """The twin's own site (its step and trial time, its events and record)."""
+        self._site = site
 
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
-        same = self.causality == "same-step" and await self._source_measured()
+        site = self._site
+        moves = site is None or (site.session, disp[0]) != self._committed
+        same = self.causality == "same-step" and moves and await self._source_measured()
         self._answered = False
         try:
             force, tangent, through, seconds, error = await self.learner.trial(
-                self.twin, disp[0], same_step=same)
+                self.twin, disp[0], step=site.step + 1 if site is not None else 1,
+                same_step=same)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
@@ -85,37 +108,30 @@ class TwinController(Controller):
         self.same_step_steps += same
 
     async def _source_measured(self) -> bool:
-        """Wait for the source's trial of this step; the learner gets its measurement. False:
-        previous-step for this trial (fallen back, no trial time, source not running)."""
-        site, source = self._site, self._source
-        if site is None or source is None or self._fallback_session == site.session:
+        """The source's measurement of this step to the learner. False: previous-step for this
+        trial (fallen back, no trial time, the source stopped)."""
+        site, feed = self._site, self._feed
+        if site is None or feed is None or self._fallback_session == site.session:
             return False
         step, t = site.step + 1, site.time
         if not site.trial.time:
             self._fall_back(site, "the client sends no trial time (the source's step cannot "
                             "be matched)")
             return False
-        loop = asyncio.get_running_loop()
-        end = loop.time() + self.learner.deadline
-        while not (source.step + 1 == step and source.time == t and source.pending is None
-                   and source.trial_forwarded):
-            if source.state in (SiteState.HOLD, SiteState.FAULT):
-                return False  # the integrator is being stopped: nothing to learn
-            if loop.time() > end:
-                self._fall_back(site, f"the source's trial of step {step} (t = {t:g} s) did "
-                                f"not arrive within {self.learner.deadline:g} s of the twin's: "
-                                "the client asks the twin's force before sending the source's "
-                                "trial")
-                return False
-            await asyncio.sleep(POLL)
-        daq = await source.acquire()
-        d, f = daq.disp[0], daq.force[0]
-        if source.state is not SiteState.RUNNING or not (math.isfinite(d) and math.isfinite(f)):
+        try:
+            got = await feed.measurement(step, t, self.learner.deadline)
+        except SameStepImpossible as exc:
+            self._fall_back(site, str(exc))
             return False
-        self.learner.observe_same_step(step, d, f)
+        if got is None:
+            return False  # the integrator is being stopped: nothing to learn
+        d, f, committed = got
+        if not (math.isfinite(d) and math.isfinite(f)):
+            return False
+        self.learner.observe_same_step(step, d, f, committed=committed)
         return True
 
-    def _fall_back(self, site: ExperimentalSite, why: str) -> None:
+    def _fall_back(self, site: TwinHost, why: str) -> None:
         self._fallback_session = site.session
         site.event("same-step-fallback", f"twin {self.twin}: {why}; previous-step from step "
                    f"{site.step + 1} to the end of session {site.session}", step=site.step + 1)
@@ -124,6 +140,8 @@ class TwinController(Controller):
         return Daq((self._d,), (self._force,))
 
     async def commit(self) -> None:
+        if self._site is not None:
+            self._committed = (self._site.session, self._d)
         try:
             self.learner.commit(self.twin)
         except LearnerError as exc:
@@ -157,5 +175,5 @@ class TwinController(Controller):
         fallen = site is not None and self._fallback_session == site.session
         return {"kind": "updatable", "source": self.learner.source, "updater": self.updater,
                 "causality": self.causality + (" (fell back to previous-step)" if fallen
-                                               else ""),
-                **self.learner.status(self.twin)}
+                                                    else ""),
+                **self.learner.status(self.twin, active=site is not None and site.in_session)}

@@ -33,7 +33,8 @@ from multiprocessing.process import BaseProcess
 from typing import Any
 
 from .. import WORKER_PROCESS_PREFIX
-from ..site_output import CommittedStep
+from ..site_output import CommittedStep, SiteNotice
+from ..telemetry.schema import SiteStatus
 from ..worker_output import OUTPUT, quiet_tracker, relay_output
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
@@ -46,7 +47,14 @@ QUEUE_SIZE = 4096
 FLUSH_PAUSE = 0.002
 """Seconds the flush task waits for room in the queue between two attempts."""
 SNAPSHOT_EVERY = 50
-"""Twin steps between two snapshots of the worker (kept for ``on_learner_loss = "freeze"``)."""
+"""Twin steps between two snapshots of the worker when a twin may freeze
+(``on_learner_loss = "freeze"``: the frozen copy starts from the last one)."""
+CHECKPOINT_EVERY = 2000
+"""Messages to the worker between two snapshots otherwise: a new worker starts from the last
+one and replays only what came after it, and the log behind it is dropped (memory bounded)."""
+LEARN_AHEAD = 64
+"""Source steps committed while no twin of the source is in a session, sent to the worker to
+be learned at once in batches of this many (a twin's next trial finds them learned)."""
 STOP_DEADLINE = 5.0
 """Seconds a worker is given to end after the stop message, then it is killed."""
 
@@ -74,12 +82,27 @@ class Learner:
         """Source steps with a non-finite measurement, never sent for training."""
         self.losses = 0
         self.log: list[Message] = []
-        """What changed the worker's state, in order: replayed to a new worker."""
-        self._last_trial: dict[str, tuple[float, bool]] = {}
-        """Each twin's last trial: its displacement and whether it was answered same-step."""
+        """What changed the worker's state since the last snapshot, in order: replayed to a
+        new worker started from that snapshot."""
+        self._log_base = 0
+        """The absolute position of ``log[0]`` (what the snapshots dropped before it)."""
+        self._asked_at = 0
+        """The absolute log position of the last snapshot asked."""
+        self._ahead = 0
+        self._learning: deque[asyncio.Future[tuple[Any, ...]]] = deque()
+        """Background learning asked of the worker and not answered yet, in order."""
+        self.twins_active: Callable[[], bool] = lambda: True
+        """Whether a twin of this source is in a session (set by the wiring); while none is,
+        the source's steps are learned as they come (``LEARN_AHEAD``)."""
+        self.source_session = 0
+        """The source's current (or last) session: a twin's trial may learn every step of
+        the sessions before it (source-only sessions are learned from)."""
+        self._last_trial: dict[str, tuple[float, tuple[int, int]]] = {}
+        """Each twin's last trial: its displacement and how far it learned ((session,
+        step), inclusive)."""
         self._through: dict[str, int] = {}
         """The source step each twin's last live answer was learned through."""
-        self._same_step_sent: dict[int, tuple[float, float]] = {}
+        self._same_step_sent: dict[tuple[int, int], tuple[float, float]] = {}
         """Source steps already sent at their trial (same-step), until their commit."""
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
@@ -117,6 +140,7 @@ class Learner:
         """Start from a recorded history (``serve --resume``): the worker replays ``log_``
         before it answers, as a new worker after a loss does."""
         self.log = list(log_)
+        self._log_base = 0
         self.source_step = source_step
         self._commits = commits
 
@@ -153,7 +177,8 @@ class Learner:
         quiet_tracker()  # its report of a killed bridge's semaphores (worker_output)
         inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
         outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
-        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox),
+        start = None if self._snapshot is None else self._snapshot[2]
+        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox, start),
                            name=f"{WORKER_PROCESS_PREFIX}learner-{self.source}", daemon=True)
         self._generation += 1
         self._ready = self._loop.create_future()
@@ -222,6 +247,7 @@ class Learner:
         if asked is not None:
             if kind == "snapshot":
                 self._snapshot = (*asked, reply[2])
+                self._trim(asked[0])
             else:
                 log.error("learner of %s: %s; freeze answers from an older snapshot or HOLDs",
                           self.source, reply[2])
@@ -248,6 +274,7 @@ class Learner:
             if not fut.done():
                 fut.set_exception(LearnerError(f"learner lost: {reason}"))
         self._pending.clear()
+        self._learning.clear()
         self._event("learner-lost", f"learner of {self.source} lost: {reason}",
                     losses=self.losses)
         if self._freezes:
@@ -280,11 +307,49 @@ class Learner:
         self._ask_snapshot()
 
     def _ask_snapshot(self) -> None:
-        """Ask the worker for a snapshot of its state (only when a twin may freeze)."""
-        if self._freezes:
-            rid = next(self._ids)
-            self._snapshot_asked[rid] = (len(self.log), self._commits // len(self.spec.twins))
-            self._put(("snapshot", rid))
+        """Ask the worker for a snapshot of its state: where a new worker starts, and the
+        frozen copy of ``freeze`` twins."""
+        rid = next(self._ids)
+        self._snapshot_asked[rid] = (self._log_base + len(self.log),
+                                     self._commits // len(self.spec.twins))
+        self._asked_at = self._log_base + len(self.log)
+        self._put(("snapshot", rid))
+
+    def _learn_ahead(self, through: tuple[int, int]) -> None:
+        """Have the worker learn through ``through`` now (its answer is awaited by the next
+        trial: background learning is not that trial's work, and its own deadline starts
+        once it is done)."""
+        assert self._loop is not None
+        rid = next(self._ids)
+        fut: asyncio.Future[tuple[Any, ...]] = self._loop.create_future()
+        self._pending[rid] = fut
+        self._learning.append(fut)
+        self._put(("learn", rid, through))
+
+    async def _caught_up(self) -> None:
+        """Wait until the background learning asked before is done, each batch within the
+        deadline of the one before it (the worker progresses; a silent one is lost)."""
+        while self._learning:
+            fut = self._learning[0]
+            try:
+                await asyncio.wait_for(asyncio.shield(fut), self.deadline)
+            except TimeoutError:
+                self._lose(f"no progress in the background learning within {self.deadline:g} s")
+                raise LearnerError(f"learner lost: {self.reason}") from None
+            if self._learning and self._learning[0] is fut:
+                self._learning.popleft()
+
+    def _trim(self, position: int) -> None:
+        """The snapshot covers the log up to ``position`` (absolute): drop what is behind."""
+        cut = position - self._log_base
+        if cut > 0:
+            del self.log[:cut]
+            self._log_base = position
+
+    def _maybe_checkpoint(self) -> None:
+        if (self.state == "live"
+                and self._log_base + len(self.log) - self._asked_at >= CHECKPOINT_EVERY):
+            self._ask_snapshot()
 
     def _freeze(self) -> None:
         """The local copy for ``freeze`` twins: the last snapshot, the twins' commits since
@@ -296,7 +361,7 @@ class Learner:
             return
         position, steps, data = self._snapshot
         local: LearnerState = pickle.loads(data)
-        for msg in self.log[position:]:
+        for msg in self.log[position - self._log_base:]:
             if msg[0] != "observe":
                 local.handle(msg)
         self._local = local
@@ -401,8 +466,8 @@ class Learner:
     def step_committed(self, step: CommittedStep) -> None:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
-        self.source_step = step.step
-        sent = self._same_step_sent.pop(step.step, None)
+        self.source_step, self.source_session = step.step, step.session
+        sent = self._same_step_sent.pop((step.session, step.step), None)
         if sent is not None:  # learned at its trial already (same-step)
             if sent != (d, f):
                 log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
@@ -420,37 +485,59 @@ class Learner:
                         f"measurement (d {d!r} mm, F {f!r} kN) not trained on",
                         source_step=step.step)
             return
-        self._send(("observe", step.step, d, f))
+        self._send(("observe", step.session, step.step, d, f))
+        if not self.twins_active():  # nobody can ask for it later than now: learn it now
+            self._ahead += 1
+            if self._ahead >= LEARN_AHEAD and self.state == "live":
+                self._ahead = 0
+                self._learn_ahead((step.session, step.step))
+        self._maybe_checkpoint()
 
-    async def trial(self, twin: str, d: float, *, same_step: bool = False
+    def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
+        """The source's events: a session that opens is the session its twins learn up to."""
+        if notice.kind == "session-open":
+            self.source_session = notice.session
+
+    def through(self, step: int, *, same_step: bool) -> tuple[int, int]:
+        """How far a twin's trial at its ``step`` may learn: the source's steps of earlier
+        sessions, and of its current session those before ``step`` (with ``same_step``,
+        ``step`` too)."""
+        return (self.source_session, step if same_step else step - 1)
+
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
                     ) -> tuple[float, float, int, float, float | None]:
-        """The twin's (force, tangent) at ``d``, the source step it learned through, the
-        update time and the source's one-step error of the twin's current step
+        """The twin's (force, tangent) at ``d`` (its ``step``), the source step it learned
+        through, the update time and the source's one-step error of the twin's current step
         (``LearnerState``); with ``same_step`` including the source step sent by
         ``observe_same_step`` just before."""
+        through = self.through(step, same_step=same_step)
         if self.state != "live":
-            return self._frozen_trial(twin, d, same_step)
-        self._last_trial[twin] = (d, same_step)
+            return self._frozen_trial(twin, d, through)
+        self._last_trial[twin] = (d, through)
         self._answered_locally.discard(twin)
         try:
-            force, tangent, through, seconds, error = await self._request(
-                ("trial", twin, d, same_step), self.deadline)
+            await self._caught_up()
+            force, tangent, trained, seconds, error = await self._request(
+                ("trial", twin, d, through), self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
-            return self._frozen_trial(twin, d, same_step)
-        if int(through) > self._through.get(twin, 0) and self.update_observer is not None:
+            return self._frozen_trial(twin, d, through)
+        if int(trained) > self._through.get(twin, 0) and self.update_observer is not None:
             self.update_observer(float(seconds))  # each twin's newly learned step(s), once
-        self._through[twin] = self.trained_through = int(through)
+        self._through[twin] = self.trained_through = int(trained)
         return float(force), float(tangent), self.trained_through, float(seconds), error
 
-    def observe_same_step(self, step: int, d: float, f: float) -> None:
+    def observe_same_step(self, step: int, d: float, f: float, *, committed: bool = False
+                          ) -> None:
         """The source's measurement of the trial of ``step``, for a same-step twin (sent once
-        per step; its commit then sends nothing more)."""
-        if step in self._same_step_sent:
+        per step; its commit then sends nothing more). ``committed``: the source's commit of
+        that step came first and already sent it."""
+        key = (self.source_session, step)
+        if committed or key in self._same_step_sent:
             return
-        self._same_step_sent[step] = (d, f)
-        self._send(("observe", step, d, f))
+        self._same_step_sent[key] = (d, f)
+        self._send(("observe", *key, d, f))
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -459,12 +546,12 @@ class Learner:
                                + (f" ({self.reason})" if self.reason else ""))
         return self._local
 
-    def _frozen_trial(self, twin: str, d: float, same_step: bool
+    def _frozen_trial(self, twin: str, d: float, through: tuple[int, int]
                       ) -> tuple[float, float, int, float, float | None]:
         local = self._frozen(twin)
-        self._last_trial[twin] = (d, same_step)
+        self._last_trial[twin] = (d, through)
         self._answered_locally.add(twin)
-        reply = local.handle(("trial", 0, twin, d, same_step))
+        reply = local.handle(("trial", 0, twin, d, through))
         assert reply is not None
         if reply[0] == "error":
             raise LearnerError(reply[2])
@@ -472,7 +559,7 @@ class Learner:
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, False)))
+        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, (0, 0))))
         if self.state == "live" and twin not in self._answered_locally:
             self.log.append(trial)  # the live worker has it; a replay needs it before the commit
         else:
@@ -481,8 +568,11 @@ class Learner:
             self._send(trial)  # answered locally: the worker has not seen this trial
         self._send(("commit", twin))
         self._commits += 1
-        if self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0 and self.state == "live":
+        if self._freezes and self.state == "live" \
+                and self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0:
             self._ask_snapshot()
+        else:
+            self._maybe_checkpoint()
 
     async def initial(self, twin: str) -> float:
         if self.state != "live":
@@ -492,13 +582,18 @@ class Learner:
         (tangent,) = await self._request(("initial", twin), self.deadline)
         return float(tangent)
 
-    def status(self, twin: str) -> dict[str, object]:
-        """Twin ``twin``'s view of its learner (``ctl status``)."""
-        behind = self.source_step - self.trained_through - 1
-        shown = self.state if self.state != "live" or behind <= 0 else f"behind {behind}"
+    def status(self, twin: str, *, active: bool = True) -> dict[str, object]:
+        """Twin ``twin``'s view of its learner (``ctl status``). ``behind`` only while the
+        twin's session is ``active`` (after a run the last source steps wait, unlearned, for a
+        trial that never comes); a frozen twin says the step its snapshot was trained through."""
+        trained = self.trained_through
+        behind = self.source_step - trained - 1
+        shown = self.state if self.state != "live" or behind <= 0 or not active \
+            else f"behind {behind}"
         if self.state != "live" and twin in self._freezes and self._local is not None:
             shown = "frozen"
+            trained = self._local.twins[twin].trained_through
         return {"learner": shown, "learner_reason": self.reason or None,
-                "steps_trained": self.trained_through, "source_step": self.source_step,
+                "steps_trained": trained, "source_step": self.source_step,
                 "not_trained": self.not_trained, "learner_losses": self.losses,
                 "worker_pid": self.pid}

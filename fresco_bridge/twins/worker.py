@@ -2,11 +2,13 @@
 for the twins' forces, strictly in the order the bridge saw the messages.
 
 ``LearnerState.handle`` is the whole behaviour (tested in process); ``worker_main`` only moves
-messages between the queues. Causality ``previous-step`` is made exact here, whatever order the
-client commits its elements in: a source step is queued when it arrives and learned only by
-the first trial of a later twin step (the twin's step k answers from the source's steps
-through k − 1), so a twin commit is never preceded by the learning of its own step. A trial
-marked ``same_step`` also learns the source's step k, which the bridge sent just before it.
+messages between the queues. Source steps are keyed by ``(source session, step)`` and each
+twin trial says how far it may learn (``through``, inclusive), so causality is exact whatever
+order the client commits its elements in and whatever session it is: a source step is queued
+when it arrives and learned only by a twin trial allowed to (``previous-step``: the twin's step
+k of the source's session S answers from ``(S, k − 1)``; ``same-step`` from ``(S, k)``, the
+bridge having sent it just before). Source-only sessions are learned from: every step of an
+earlier source session lies before ``(S, ·)``, so the twin's next trial learns them.
 
 Each twin has its own updater, fed the same observations: a twin cloned from another's updater
 would not follow every updater's parameter changes (a UKF's retargeted Bilinear, an ANN's new
@@ -19,10 +21,12 @@ import contextlib
 import logging
 import math
 import multiprocessing
+import multiprocessing.connection
 import multiprocessing.queues
 import os
 import pickle
 import queue
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,13 +43,15 @@ NICE = 10
 """How much lower than the bridge the worker runs (``os.nice``)."""
 
 Message = tuple[Any, ...]
-"""``("observe", step, d, f)``, ``("trial", id, twin, d, same_step)``, ``("commit", twin)``,
-``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``; ``None`` ends the worker."""
+"""``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step))``,
+``("commit", twin)``,
+``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
+step))``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through, update_seconds,
 one_step_error)``, ``("initial", id, tangent)``,
-``("sync", id, trained_through)``, ``("snapshot", id, pickled LearnerState)``, ``("error", id,
-reason)``, ``("ready",)``, ``("fatal", reason)``."""
+``("sync", id, trained_through)``, ``("learned", id)``, ``("snapshot", id, pickled
+LearnerState)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +98,8 @@ class LearnerState:
 
     spec: LearnerSpec
     twins: dict[str, _Twin] = field(default_factory=dict)
-    observations: list[tuple[int, float, float]] = field(default_factory=list)
+    observations: list[tuple[int, int, float, float]] = field(default_factory=list)
+    """``(source session, step, d, F)`` in the order the source committed them."""
     rejected: int = 0
 
     def __post_init__(self) -> None:
@@ -102,8 +109,8 @@ class LearnerState:
     def handle(self, msg: Message) -> Reply | None:
         kind = msg[0]
         if kind == "observe":
-            _, step, d, f = msg
-            self.observations.append((int(step), float(d), float(f)))
+            _, session, step, d, f = msg
+            self.observations.append((int(session), int(step), float(d), float(f)))
             return None
         if kind == "commit":
             twin = self.twins[msg[1]]
@@ -111,8 +118,8 @@ class LearnerState:
             twin.commits += 1
             return None
         if kind == "trial":
-            _, rid, name, d, same_step = msg
-            twin = self._learned(name, same_step)
+            _, rid, name, d, through = msg
+            twin = self._learned(name, (int(through[0]), int(through[1])))
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -130,21 +137,25 @@ class LearnerState:
                 return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
             except (pickle.PicklingError, AttributeError, TypeError) as exc:
                 return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
+        if kind == "learn":  # steps no twin can ask for later: learned now, in the background
+            _, rid, (session, step) = msg
+            for name in self.twins:
+                self._learned(name, (int(session), int(step)), timed=False)
+            return ("learned", rid)
         if kind == "sync":
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str, same_step: bool) -> _Twin:
-        """Twin ``name`` with every source step before its current one learned, and with
-        ``same_step`` its current one too."""
+    def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True) -> _Twin:
+        """Twin ``name`` with every source step up to ``through`` ((session, step),
+        inclusive) learned (``timed``: for a trial, whose update time it is)."""
         twin = self.twins[name]
         obs = self.observations
-        last = twin.commits + (1 if same_step else 0)
-        if twin.timed_step != twin.commits:  # a new twin step: its own update time
+        if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
-        while twin.applied < len(obs) and obs[twin.applied][0] <= last:
-            step, d, f = obs[twin.applied]
+        while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
+            _, step, d, f = obs[twin.applied]
             twin.applied += 1
             try:
                 twin.updater.observe(d, f)
@@ -153,8 +164,9 @@ class LearnerState:
                 log.warning("learner: source step %d not learned: %s", step, exc)
                 continue
             twin.trained_through = step
-            twin.update_seconds += twin.updater.last_update_seconds
-            twin.one_step_error = twin.updater.last_one_step_error
+            if timed:
+                twin.update_seconds += twin.updater.last_update_seconds
+                twin.one_step_error = twin.updater.last_one_step_error
         learned = min(t.applied for t in self.twins.values())
         if learned >= TRIM:  # what every twin has learned is not needed any more
             del obs[:learned]
@@ -164,17 +176,19 @@ class LearnerState:
 
 
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
-                outbox: multiprocessing.queues.Queue[Reply]) -> None:
-    """The worker process: build, say ready, then answer batches of messages in order until
-    ``None`` (or until the bridge process is gone). It runs at a lower priority and with one
-    BLAS thread, so training takes the CPU the bridge's step loop leaves."""
+                outbox: multiprocessing.queues.Queue[Reply], start: bytes | None = None) -> None:
+    """The worker process: build (or start from the snapshot ``start``), say ready, then
+    answer batches of messages in order until ``None`` (or until the bridge process is gone).
+    It runs at a lower priority and with one BLAS thread, so training takes the CPU the
+    bridge's step loop leaves."""
     forward_output(outbox.put)  # its warnings and stderr: lines of the bridge's log
+    _end_with_the_bridge()
     with contextlib.suppress(OSError):
         os.nice(NICE)
     limits = _one_blas_thread()
     try:
-        state = LearnerState(spec)
-    except (UpdaterError, OSError, ValueError) as exc:
+        state = LearnerState(spec) if start is None else pickle.loads(start)
+    except (UpdaterError, OSError, ValueError, pickle.UnpicklingError) as exc:
         outbox.put(("fatal", f"the learner of {spec.source} could not build its updaters: "
                     f"{exc}"))
         return
@@ -196,11 +210,27 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
     del limits
 
 
+def _end_with_the_bridge() -> None:
+    """A thread that ends this process the moment the bridge's process is gone, however it
+    ended (``kill -9`` included) and whatever the worker is doing (a long refit, a backlog of
+    batches): it waits on the parent's sentinel, which the kernel closes at the parent's
+    death. Nothing of the worker's state outlives its bridge (the record is the bridge's)."""
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(0)
+
+    threading.Thread(target=watch, name="bridge-watch", daemon=True).start()
+
+
 def _handled(state: LearnerState, msg: Message) -> Reply | None:
     try:
         return state.handle(msg)
     except Exception as exc:  # an updater bug must not kill the twin silently
-        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot") else None
+        rid = msg[1] if msg[0] in ("trial", "initial", "sync", "snapshot", "learn") else None
         return ("error", rid, f"{type(exc).__name__}: {exc}")
 
 

@@ -1,6 +1,7 @@
 """Replay an updater on recorded histories: the tested element's (d, F), the twin's d.
 
-Pure: arrays in, arrays out (the CSV side is :mod:`.cli`). Step ``i``:
+Pure: arrays in, arrays out (the CSV side is :mod:`.cli`). ``lag`` is the causality's
+(``fresco_bridge.causality.lags``: ``previous-step`` lags, ``same-step`` does not). Step ``i``:
 
 * ``lag=False`` (the paper's order): ``observe(source_d[i], source_f[i])``, then the twin is
   set to ``twin_d[i]`` and committed, so its step ``i`` uses what was learned through step ``i``;

@@ -11,7 +11,8 @@ import pytest
 
 from fresco_bridge.config import parse_config
 from fresco_bridge.logs import RateLimitFilter
-from fresco_bridge.sites import ExperimentalSite, SiteState
+from fresco_bridge.sites import SiteState
+from fresco_bridge.sites.experimental import ExperimentalSite
 from protocol import Signals
 from tests.bridge.sites.test_guard import Scripted
 

@@ -124,7 +124,7 @@ def test_a_learners_worker_warning_reaches_the_log_under_its_sites_name(
         try:
             for n in (1, 2, 3):
                 with contextlib.suppress(LearnerError):  # the twin's answer is not finite
-                    await learner.trial("t", 1e300)
+                    await learner.trial("t", 1e300, step=n)
                 learner.commit("t")
                 learner.step_committed(CommittedStep("damper", 1, n, 0.01 * n, (1e300,),
                                                      (1e300,), (1e300,), (1e308,), "RUNNING"))

@@ -167,3 +167,6 @@ def test_kill_9_is_reported_and_the_run_resumes_from_the_last_committed_step(
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
     assert (run / "record.jsonl.torn").read_bytes().startswith(b'{"seq":99999')
     assert oct(os.stat(run / "record.jsonl").st_mode & 0o777) == oct(0o600)
+    # the sessions cut by the kills were continued: no stale "never closed" note
+    final = _cli("export", str(run), "-o", str(tmp_path / "final.csv"), cwd=tmp_path)
+    assert final.returncode == 0 and "never closed" not in final.stdout + final.stderr

@@ -25,6 +25,7 @@ from tests.support.bridge import RunningBridge, run_opensees
 from tests.support.controller import sim_actuator
 from tests.support.net import free_ports
 from tests.support.opensees_frame import BILINEAR, frame_params, rel_diff
+from tests.support.twins import learners_of
 
 pytest.importorskip("openseespy")
 
@@ -51,6 +52,12 @@ def run_frame(toml: str, tmp_path: Path, **extra: Any) -> tuple[dict[str, Any], 
     with RunningBridge(toml, tmp_path) as bridge:
         ports = [bridge.ports["story1"], bridge.ports["story2"]]
         result = run_opensees("frame2", **frame_params(ports=ports, nsteps=NSTEPS, **extra))
+        # OpenSees' last commit and DIE need no reply: let the bridge handle them before it
+        # stops (a twin's last step may still be with its learner)
+        end = time.monotonic() + 30
+        while bridge.call(lambda: any(s.busy for s in bridge.bridge.sites.values())):
+            assert time.monotonic() < end, "the sessions did not end after the client's DIE"
+            time.sleep(0.02)
         run_dir = bridge.run_dir
     return result["runs"][0], run_dir
 
@@ -136,7 +143,7 @@ def test_worker_killed_mid_run_holds_the_twin_and_spares_the_source(tmp_path: Pa
                       f'[sites.updater_options]\nmodel = "bilinear"\nparams = {_params(STORY2)}\n')
     with RunningBridge(toml, tmp_path) as bridge:
         sites = bridge.bridge.sites
-        learner = bridge.bridge.learners["story1"]
+        learner = learners_of(bridge)["story1"]
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 40)))
         ports = [bridge.ports["story1"], bridge.ports["story2"]]
         failure: list[BaseException] = []
@@ -192,7 +199,7 @@ def test_worker_killed_mid_run_freezes_the_twin_and_the_run_goes_on(tmp_path: Pa
     toml = frame_toml('updater = "online_ukf"\non_learner_loss = "freeze"\n')
     with RunningBridge(toml, tmp_path) as bridge:
         sites = bridge.bridge.sites
-        learner = bridge.bridge.learners["story1"]
+        learner = learners_of(bridge)["story1"]
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 60)))
         bridge.call(lambda: sites["story1"].add_listener(PauseAt(sites["story1"], 80)))
         ports = [bridge.ports["story1"], bridge.ports["story2"]]

@@ -21,7 +21,6 @@ from fresco_bridge.config import (
     BridgeConfig,
     ConfigError,
     RecordConfig,
-    SiteConfig,
     TelemetryConfig,
     load_config,
     parse_config,
@@ -31,6 +30,7 @@ from fresco_bridge.controls.modbus import ModbusControllerConfig
 from fresco_bridge.controls.mts import MtsControllerConfig
 from fresco_bridge.controls.rig import RigControllerConfig
 from fresco_bridge.safety import ControlPointLimitsConfig
+from fresco_bridge.sites.experimental_kind import ExperimentalSiteConfig
 
 SITE = '[[sites]]\nname = "s"\nport = 0\n'
 
@@ -61,7 +61,7 @@ TABLES: list[tuple[type[BaseModel], str, str]] = [
     (BridgeConfig, "[bridge]", ""),
     (RecordConfig, "[record]", ""),
     (TelemetryConfig, "[telemetry]", ""),
-    (SiteConfig, "", ""),
+    (ExperimentalSiteConfig, "", ""),
     (ControlPointLimitsConfig, "[[sites.limits]]", "disp_max = 10.0\nvelocity = 5.0\n"),
     (ModbusControllerConfig, "[sites.controller]", 'kind = "modbus"\n'),
     (MtsControllerConfig, "[sites.controller]", 'kind = "mts"\n'),
@@ -75,7 +75,7 @@ CASES = [(model, header, base, name, t) for model, header, base in TABLES
 def _config(model: type[BaseModel], header: str, base: str, key: str, value: Any) -> str:
     line = f"{key} = {_toml(value)}\n"
     base = "".join(b + "\n" for b in base.splitlines() if b.split(" = ")[0] != key)
-    if model is SiteConfig:
+    if model is ExperimentalSiteConfig:
         return SITE.replace("port = 0\n", "") + ("port = 0\n" if key != "port" else "") + line
     if "sites" in header:
         return SITE + header + "\n" + base + line

@@ -11,7 +11,7 @@ from fresco_bridge.controls.registry import (
     controller_kind,
     controller_kinds_markdown,
 )
-from fresco_bridge.daemon import make_controller
+from fresco_bridge.sites.experimental_kind import site_controller as make_controller
 from sim_actuator.models import MODEL_KINDS, model_kinds_markdown
 from tests.support.paths import REPO
 

@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 
 from fresco_bridge.config import parse_config
 from fresco_bridge.controls.base import InlineController
-from fresco_bridge.daemon import make_controller
 from fresco_bridge.eager import Suspended, start_eager
-from fresco_bridge.sites import ExperimentalSite, SiteError, SiteState
+from fresco_bridge.sites import SiteError, SiteState
+from fresco_bridge.sites.experimental import ExperimentalSite
+from fresco_bridge.sites.experimental_kind import site_controller as make_controller
 from protocol import Signals, SignalSizes
 
 SIZES = SignalSizes(disp=0, vel=0, accel=0, force=1, time=0)

@@ -20,8 +20,8 @@ from fresco_bridge.controls.sim import SimController
 from fresco_bridge.eager import start_eager
 from fresco_bridge.record import RunRecord, read_record
 from fresco_bridge.server.connection import SessionPump, SiteListener
-from fresco_bridge.sites import ExperimentalSite
 from fresco_bridge.sites.access import Allowlist
+from fresco_bridge.sites.experimental import ExperimentalSite
 from protocol import SizeID
 
 DOFS = 2

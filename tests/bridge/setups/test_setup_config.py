@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from fresco_bridge.config import ConfigError, load_config
-from fresco_bridge.daemon import make_controller
 from fresco_bridge.setups import make_setup
+from fresco_bridge.sites.experimental_kind import site_controller as make_controller
 
 SITE = '[[sites]]\nname = "column"\nport = 1\n'
 COLUMN = ('[sites.setup]\nkind = "ThreeActuators2d"\nLa1 = 1000.0\nLa2 = 900.0\nLa3 = 900.0\n'
@@ -46,8 +46,8 @@ def test_an_actuator_count_the_controller_cannot_drive(tmp_path: Path) -> None:
     message = error(tmp_path, SITE + "dofs = 3\n" + COLUMN
                     + '[sites.controller]\nkind = "rig"\n'
                     + '[[sites.controller.channels]]\npreset = "ideal-elastic"\n' * 2)
-    assert ("sites[0]: controller rig has 2 [[sites.controller.channels]] table(s); this site "
-            "needs one per actuator: 3") in message
+    assert ("site column: sites[0]: controller rig has 2 [[sites.controller.channels]] "
+            "table(s); this site needs one per actuator: 3") in message
 
 
 def test_limits_for_an_actuator_the_setup_does_not_have(tmp_path: Path) -> None:

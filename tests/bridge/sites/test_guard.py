@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import asyncio
 import math
+from typing import Any
 
 import pytest
 
 from fresco_bridge.config import parse_config
 from fresco_bridge.controls.base import Controller, ControllerError, ControllerLinkError, Daq
 from fresco_bridge.site_output import SiteNotice
-from fresco_bridge.sites import ExperimentalSite, SiteState
+from fresco_bridge.sites import SiteState
+from fresco_bridge.sites.experimental import ExperimentalSite
 from fresco_bridge.telemetry.schema import SiteStatus
 from protocol import Signals, SignalSizes
 
@@ -144,20 +146,36 @@ class Counting(Scripted):
         return await super().get_daq()
 
 
+class Trials:
+    """A trial listener: what the site publishes of each forwarded trial."""
+
+    def __init__(self) -> None:
+        self.trials: list[Any] = []
+
+    def trial_forwarded(self, trial: Any) -> None:
+        self.trials.append(trial)
+
+
 def test_concurrent_reads_of_one_trial_share_one_controller_read() -> None:
-    """A same-step twin and the source's own force request ask at once: one read, one
-    measurement for both; a new trial reads again."""
+    """A same-step twin (reading the published trial) and the source's own force request ask
+    at once: one read, one measurement for both; a new trial reads again, and a trial that is
+    not the site's current one any more reads nothing."""
     async def main() -> None:
         controller = Counting()
         site, _ = _site(controller, recovery=0.0)
+        listener = Trials()
+        site.add_listener(listener)
         await site.set_trial(_trial(0.5))
-        assert site.trial_forwarded
+        (first_trial,) = listener.trials
+        assert (first_trial.step, first_trial.ctrl) == (1, (0.5,))
         first, second = await asyncio.wait_for(
-            asyncio.gather(site.acquire(), site.acquire()), 5.0)
-        assert first is second and first.disp == (0.5,) and controller.reads == 1
+            asyncio.gather(first_trial.read(), site.out_signals(SIZES)), 5.0)
+        assert first is not None and first.disp == (0.5,) and second.force == first.force
+        assert controller.reads == 1
         await site.set_trial(_trial(0.7))
-        assert (await asyncio.wait_for(site.acquire(), 5.0)).disp == (0.7,)
-        assert controller.reads == 2
+        assert await first_trial.read() is None  # superseded
+        daq = await asyncio.wait_for(listener.trials[-1].read(), 5.0)
+        assert daq is not None and daq.disp == (0.7,) and controller.reads == 2
 
     asyncio.run(main())
 
@@ -167,14 +185,17 @@ def test_a_waiting_reader_reads_again_when_the_shared_read_is_abandoned() -> Non
         controller = Counting()
         controller.hang = 0.1  # within the site's 0.2 s controller deadline
         site, _ = _site(controller, recovery=0.0)
+        listener = Trials()
+        site.add_listener(listener)
         await site.set_trial(_trial(0.5))
-        first = asyncio.ensure_future(site.acquire())
+        (trial,) = listener.trials
+        first = asyncio.ensure_future(trial.read())
         await asyncio.sleep(0.01)
-        second = asyncio.ensure_future(site.acquire())
+        second = asyncio.ensure_future(trial.read())
         await asyncio.sleep(0.01)
         first.cancel()
         daq = await asyncio.wait_for(second, 5.0)
-        assert daq.disp == (0.5,) and controller.reads == 2
+        assert daq is not None and daq.disp == (0.5,) and controller.reads == 2
         with pytest.raises(asyncio.CancelledError):
             await first
 

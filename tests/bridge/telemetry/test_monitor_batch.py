@@ -190,7 +190,7 @@ def test_the_bridge_batches_only_for_the_record_alone(
         bridge = Bridge(parse_config(text), text, run_dir=tmp_path / "runs")
         await bridge.start()
         try:
-            return [type(x).__name__ for x in bridge.sites["spring"]._step_listeners]
+            return [type(x).__name__ for x in bridge.sites["spring"].listeners.steps]
         finally:
             await bridge.close()
 

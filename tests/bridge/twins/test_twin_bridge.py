@@ -16,6 +16,7 @@ from fresco_bridge.telemetry.taps import SiteTaps
 from protocol import Action
 from tests.bridge.telemetry.test_metrics_bridge import scrape
 from tests.support.bridge import RunningBridge
+from tests.support.twins import learners_of
 
 TOML = '''
 [telemetry]
@@ -133,7 +134,7 @@ def test_two_twins_of_one_source_share_a_learner_each_with_its_own_state(
         'updater = "none"\n[sites.updater_options]\nmodel = "elastic"\nparams = { k = 7.0 }\n')
     steps = 25
     with RunningBridge(toml, tmp_path) as bridge:
-        assert list(bridge.bridge.learners) == ["damper"]
+        assert list(learners_of(bridge)) == ["damper"]
         links = [GenericClientLink("127.0.0.1", bridge.ports[s], 1).connect()
                  for s in ("damper", "twin1", "twin2")]
         for i in range(1, steps + 1):

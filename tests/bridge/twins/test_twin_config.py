@@ -44,10 +44,12 @@ def error_of(tmp_path: Path, text: str) -> str:
      "unknown option(s) wobble"),
     (SOURCE + twin(learner_deadline="9.0"), "sites[1].learner_deadline",
      "shorter than bridge.controller_timeout"),
-    (SOURCE + twin() + '[sites.controller]\nmodel = "bilinear"\n', "sites[1]",
-     "no [sites.controller] table"),
-    (SOURCE.replace("port = 0\n", 'port = 0\nupdater = "none"\n'), "sites[0]",
-     "keys of kind = \"updatable\" sites"),
+    (SOURCE + twin() + '[sites.controller]\nmodel = "bilinear"\n', "sites[1].controller",
+     "a key of kind = \"experimental\" sites (this site is updatable"),
+    (SOURCE.replace("port = 0\n", 'port = 0\nupdater = "none"\n'), "sites[0].updater",
+     "a key of kind = \"updatable\" sites (this site is experimental"),
+    (SOURCE + twin().replace('"updatable"', '"updateable"'), "sites[1]",
+     "unknown site kind 'updateable'; expected experimental or updatable"),
 ])
 def test_bad_updatable_site(tmp_path: Path, text: str, key: str, reason: str) -> None:
     message = error_of(tmp_path, text)

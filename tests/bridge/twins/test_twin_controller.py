@@ -22,7 +22,7 @@ class FakeLearner:
         self.lost = False
         self.commits: list[str] = []
 
-    async def trial(self, twin: str, d: float, *, same_step: bool = False
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
                     ) -> tuple[float, float, int, float, float | None]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
@@ -36,7 +36,7 @@ class FakeLearner:
     async def initial(self, twin: str) -> float:
         return 12.0
 
-    def status(self, twin: str) -> dict[str, object]:
+    def status(self, twin: str, *, active: bool = True) -> dict[str, object]:
         return {"learner": "live", "steps_trained": 7}
 
 
@@ -80,7 +80,7 @@ def test_non_finite_source_data_is_never_sent_for_training() -> None:
     learner.step_committed(step(2, 0.6, math.nan))
     learner.step_committed(step(3, math.inf, 1.0))
     learner.step_committed(step(4, 0.7, 2.5))
-    assert learner.log == [("observe", 1, 0.5, 2.0), ("observe", 4, 0.7, 2.5)]
+    assert learner.log == [("observe", 1, 1, 0.5, 2.0), ("observe", 1, 4, 0.7, 2.5)]
     assert learner.not_trained == 2 and learner.source_step == 4
     assert [(k, x["source_step"]) for k, _, x in events] == [("not-trained", 2),
                                                              ("not-trained", 3)]
@@ -99,3 +99,18 @@ def test_ctl_status_says_what_the_twin_is() -> None:
     text = format_answer({"sites": [site]})
     assert ("updatable: learns from damper  updater online_ukf  causality previous-step  "
             "learner live  trained through source step 7 (source at 12)") in text
+
+
+def test_status_says_behind_only_while_the_twin_runs_and_frozen_says_the_snapshots_step() -> None:
+    spec = LearnerSpec("damper", (TwinSpec("t", "none", {}, on_loss="freeze"),))
+    learner = Learner("damper", spec, deadline=1.0)
+    learner.state, learner.source_step, learner.trained_through = "live", 775, 0
+    assert learner.status("t", active=True)["learner"] == "behind 774"
+    assert learner.status("t", active=False)["learner"] == "live"  # the run has ended
+    from fresco_bridge.twins.worker import LearnerState
+
+    local = LearnerState(spec)
+    local.twins["t"].trained_through = 700
+    learner.state, learner._local, learner.trained_through = "lost", local, 724
+    status = learner.status("t")
+    assert status["learner"] == "frozen" and status["steps_trained"] == 700

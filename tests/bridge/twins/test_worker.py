@@ -39,9 +39,9 @@ def test_previous_step_equals_the_in_process_replay(source_first: bool) -> None:
     worker = state("twin")
     answers = []
     for i in range(sd.size):
-        observe = ("observe", i + 1, float(sd[i]), float(sf[i]))
+        observe = ("observe", 1, i + 1, float(sd[i]), float(sf[i]))
         for k, d in enumerate((td[i] * 0.5, td[i])):  # Newton: the last trial is committed
-            reply = worker.handle(("trial", 10 * i + k, "twin", float(d), False))
+            reply = worker.handle(("trial", 10 * i + k, "twin", float(d), (1, i)))
             assert reply is not None and reply[0] == "trial" and reply[4] == i  # through i-1
             assert reply[5] >= 0.0  # the update time of the step(s) just learned
         answers.append(reply[2])
@@ -61,24 +61,24 @@ def test_each_twin_follows_the_learned_parameters() -> None:
     sd, sf, td = histories(30)
     worker = state("a", "b")
     for i in range(sd.size):
-        fa = worker.handle(("trial", 1, "a", float(td[i]), False))
-        fb = worker.handle(("trial", 2, "b", float(td[i]), False))
+        fa = worker.handle(("trial", 1, "a", float(td[i]), (1, i)))
+        fb = worker.handle(("trial", 2, "b", float(td[i]), (1, i)))
         assert fa is not None and fb is not None and fa[2:5] == fb[2:5]
         worker.handle(("commit", "a"))
         worker.handle(("commit", "b"))
-        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
     fixed = make_updater("online_ukf", **UKF).twin.set_trial(float(td[-1]))[0]
     assert fa[2] != fixed  # the parameters moved: the twins answer from what they learned
 
 
 def test_a_non_finite_observation_is_not_learned_and_a_bad_trial_is_an_error() -> None:
     worker = state("twin")
-    worker.handle(("observe", 1, math.nan, 3.0))
+    worker.handle(("observe", 1, 1, math.nan, 3.0))
     worker.handle(("commit", "twin"))
-    reply = worker.handle(("trial", 1, "twin", 0.5, False))
+    reply = worker.handle(("trial", 1, "twin", 0.5, (1, 1)))
     assert reply is not None and reply[0] == "trial" and reply[4] == 0
     assert worker.rejected == 1
-    bad = worker.handle(("trial", 2, "twin", math.inf, False))
+    bad = worker.handle(("trial", 2, "twin", math.inf, (1, 1)))
     assert bad is not None and bad[0] == "error" and bad[1] == 2
     initial = worker.handle(("initial", 3, "twin"))
     assert initial == ("initial", 3, UKF["k0"])
@@ -89,8 +89,8 @@ def test_same_step_equals_the_in_process_replay_in_the_papers_order() -> None:
     worker = state("twin")
     answers = []
     for i in range(sd.size):
-        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))  # the source's trial
-        reply = worker.handle(("trial", i, "twin", float(td[i]), True))
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))  # the source's trial
+        reply = worker.handle(("trial", i, "twin", float(td[i]), (1, i + 1)))
         assert reply is not None and reply[4] == i + 1  # learned through this very step
         answers.append(reply[2])
         worker.handle(("commit", "twin"))
@@ -107,11 +107,51 @@ def test_learned_observations_are_dropped_and_learning_goes_on(
     worker = state("twin")
     answers = []
     for i in range(sd.size):
-        reply = worker.handle(("trial", i, "twin", float(td[i]), False))
+        reply = worker.handle(("trial", i, "twin", float(td[i]), (1, i)))
         assert reply is not None
         answers.append(reply[2])
         worker.handle(("commit", "twin"))
-        worker.handle(("observe", i + 1, float(sd[i]), float(sf[i])))
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
     assert len(worker.observations) < 20
     expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=True).force_pred
+    assert np.array_equal(np.array(answers), expected)
+
+
+def _session(worker: LearnerState, session: int, sd: np.ndarray, sf: np.ndarray,
+             td: np.ndarray | None) -> list[float]:
+    """One session of the source (and of the twin, unless ``td`` is None), previous-step,
+    the client committing the twin's element first."""
+    answers = []
+    for i in range(sd.size):
+        if td is not None:
+            reply = worker.handle(("trial", i, "twin", float(td[i]), (session, i)))
+            assert reply is not None and reply[0] == "trial"
+            answers.append(reply[2])
+            worker.handle(("commit", "twin"))
+        worker.handle(("observe", session, i + 1, float(sd[i]), float(sf[i])))
+    return answers
+
+
+def test_a_second_session_learns_exactly_what_one_long_session_would() -> None:
+    """Steps restart at 1 in each session; keyed by (session, step), the second session's
+    step k answers from all of the first and its own steps before k."""
+    sd, sf, td = histories(80)
+    worker = state("twin")
+    answers = _session(worker, 1, sd[:40], sf[:40], td[:40])
+    answers += _session(worker, 2, sd[40:], sf[40:], td[40:])
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=True).force_pred
+    assert np.array_equal(np.array(answers), expected)
+
+
+def test_a_source_only_session_is_learned_from_by_the_next_pair() -> None:
+    """The stated rule: every step of an earlier source session precedes the twin's next
+    trial, so a source-only session is learned at the pair's first step."""
+    sd, sf, td = histories(80)
+    worker = state("twin")
+    _session(worker, 1, sd[:30], sf[:30], None)  # the source alone
+    answers = _session(worker, 2, sd[30:], sf[30:], td[30:])
+    updater = make_updater("online_ukf", **UKF)
+    for d, f in zip(sd[:30], sf[:30], strict=True):
+        updater.observe(float(d), float(f))
+    expected = replay(updater, sd[30:], sf[30:], td[30:], lag=True).force_pred
     assert np.array_equal(np.array(answers), expected)

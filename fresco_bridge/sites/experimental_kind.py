@@ -1,0 +1,181 @@
+"""The ``experimental`` site kind: a controller (``controls/``) behind a setup and the limits.
+
+Its config adds the ``[sites.controller]`` table (a discriminated union of the controller
+kinds of ``controls/registry.py``; ``sim`` when omitted); its group builds one
+``ExperimentalSite`` per entry, connects the controllers at start (an unreachable one is
+logged: the site HOLDs at its first command) and closes them at the end.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
+
+from pydantic import Discriminator, Field, Tag
+
+from ..config_model import ConfigError
+from ..controls.base import Controller, ControllerError, InlineController
+from ..controls.kind import ControllerConfigBase
+from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controller
+from ..controls.sim import SimControllerConfig
+from ..record import RecordError
+from ..record.export import read_record
+from ..setups import make_setup
+from ..tangent import TangentMethod
+from .base import Site
+from .experimental import ExperimentalSite
+from .kind import SiteConfigBase, SiteContext, SiteKind
+
+if TYPE_CHECKING:
+    from ..telemetry.metrics import Metrics
+
+__all__ = ["KIND", "ExperimentalSiteConfig", "controlled_site", "site_controller"]
+
+log = logging.getLogger("fresco_bridge")
+
+
+def _controller_kind(v: Any) -> str:
+    """``kind`` may be omitted for the default in-process simulated controller."""
+    kind = v.get("kind", "sim") if isinstance(v, dict) else getattr(v, "kind", "sim")
+    return str(kind)
+
+
+if TYPE_CHECKING:
+    ControllerConfig = ControllerConfigBase
+else:  # the discriminated union of every registered kind's config model
+    ControllerConfig = Annotated[
+        Union[tuple(Annotated[k.config, Tag(k.name)] for k in CONTROLLER_KINDS.values())],  # noqa: UP007
+        Discriminator(_controller_kind),
+    ]
+
+
+class ExperimentalSiteConfig(SiteConfigBase):
+    """A site whose force is measured: a controller behind the setup and the limits."""
+
+    kind: Literal["experimental"] = "experimental"
+    controller: ControllerConfig = Field(default_factory=SimControllerConfig)
+    """A kind of ``controls/registry.py``: ``sim`` (in-process specimen, the default), ``rig``,
+    ``modbus``, ``mts``."""
+    tangent: TangentMethod = "controller"
+    """The tangent answered to action 13: the controller's (``controller``), its first answer
+    kept (``initial``), or estimated from the committed steps (``broyden``, ``bfgs``,
+    ``transpose``; docs/openfresco-setups.md)."""
+
+    def actuators_fit(self, n_actuators: int) -> None:
+        geometry = make_setup(self.setup, self.dofs).specimen_geometry()
+        problem = controller_kind(self.controller.kind).actuators_problem(
+            self.controller, n_actuators, geometry)
+        if problem is not None:
+            raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
+
+
+def site_controller(cfg: ExperimentalSiteConfig) -> Controller:
+    """The controller adapter a site's config asks for (its kind's factory, ``controls/``)."""
+    setup = make_setup(cfg.setup, cfg.dofs)  # setups/ owns the count and the geometry
+    return make_controller(cfg.controller, setup.n_actuators, setup.specimen_geometry())
+
+
+def controlled_site(cfg: SiteConfigBase, controller: Controller, context: SiteContext) -> Site:
+    """A site answering through ``controller`` behind ``cfg``'s setup and limits, with the
+    shared site core (sessions, states, operator, NaN stop, listeners, record, status): how a
+    kind whose force comes from a model in the bridge (a twin) serves it."""
+    return ExperimentalSite(cfg, controller, context.record,
+                            controller_timeout=context.controller_timeout)
+
+
+class ExperimentalGroup:
+    """The experimental sites of one bridge: each with its controller."""
+
+    def __init__(self, configs: Sequence[ExperimentalSiteConfig], context: SiteContext) -> None:
+        self._sites = {cfg.name: ExperimentalSite(
+            cfg, site_controller(cfg), context.record,
+            controller_timeout=context.controller_timeout,
+            controller_recovery=context.controller_recovery) for cfg in configs}
+        self._timeout = context.controller_timeout
+        self._resume = context.resume
+
+    @property
+    def sites(self) -> Mapping[str, Site]:
+        return self._sites
+
+    async def start(self) -> None:
+        if self._resume is not None:
+            restore_specimens(self._sites, self._resume)
+        for site in self._sites.values():
+            try:
+                await asyncio.wait_for(site.controller.connect(), self._timeout)
+            except (ControllerError, TimeoutError) as exc:
+                # Not fatal: the site serves anyway and HOLDs at the first command if the
+                # controller is still unreachable (adapters reconnect on reads).
+                log.error("site %s: controller not reachable at start: %s", site.name,
+                          exc or "timeout")
+
+    def wire(self, sites: Mapping[str, Site]) -> None:
+        """Nothing: an experimental site needs no other site."""
+
+    def attach_metrics(self, metrics: Metrics) -> None:
+        """Nothing beyond the per-site metrics the bridge sets."""
+
+    async def close(self) -> None:
+        for site in self._sites.values():
+            try:
+                await asyncio.wait_for(site.controller.close(), self._timeout)
+            except Exception as exc:  # closing must go on for the other sites
+                log.warning("site %s: controller close failed: %s", site.name, exc)
+
+
+def restore_specimens(sites: Mapping[str, ExperimentalSite], run_dir: Path) -> None:
+    """``serve --resume``: every in-process specimen (``sim``, ``rig``) gets back the state
+    the interrupted run left it in, by replaying the record's commands in their order: each
+    trial that went to the controller, each commit, a fresh specimen at each new session
+    where the controller resets then. A controller outside the bridge (a real specimen) is
+    where the test left it: resume assumes the lab kept it there (``docs/architecture.md``,
+    "Crash and resume")."""
+    inline = {name: site for name, site in sites.items()
+              if isinstance(site.controller, InlineController)}
+    if not inline:
+        return
+    session: dict[str, int] = {}
+    sent: dict[str, tuple[float, ...] | None] = {}
+    counts = dict.fromkeys(inline, 0)
+    try:
+        for rec in read_record(run_dir):
+            name = rec.get("site")
+            site = inline.get(name) if isinstance(name, str) else None
+            if site is None or rec["kind"] not in ("trial", "commit"):
+                continue
+            controller = site.controller
+            assert isinstance(controller, InlineController)
+            number = int(rec.get("session", 0))
+            if session.get(site.name) != number:
+                if site.name in session and site.resets_on_new_session:
+                    reset = getattr(controller, "reset", None)
+                    if reset is not None:
+                        reset()
+                session[site.name], sent[site.name] = number, None
+            if rec["kind"] == "trial":
+                command = tuple(float(v) for v in rec["ctrl"])
+                if command != sent[site.name]:  # the site sends a command once
+                    controller.set_ctrl_now(command)
+                    sent[site.name] = command
+            else:
+                controller.commit_now()
+                counts[site.name] += 1
+    except (OSError, RecordError, KeyError, ValueError, ControllerError) as exc:
+        raise ConfigError(f"resuming {run_dir}: the in-process specimens could not be "
+                          f"restored from the record: {exc}") from exc
+    for name, steps in counts.items():
+        log.warning("site %s: in-process specimen restored from the record (%d committed "
+                    "step(s) replayed)", name, steps)
+
+
+KIND = SiteKind(
+    name="experimental",
+    config=ExperimentalSiteConfig,
+    factory=ExperimentalGroup,
+    summary="a controller (`[sites.controller]`) behind the setup and the limits; its force "
+            "is measured",
+)
