@@ -65,7 +65,8 @@ def add_study_parser(sub: Any) -> None:
                         f"record, {SYNTHETIC_DURATION_S:g} s, one per --seed)")  # fmt: skip
     p.add_argument("--specimen", choices=SPECIMENS, action="append", default=None,
                    help="tested damper law: bwbn (rig preset damper-bwbn, default) or "
-                        "menegotto-pinto (outside every updater's family); repeatable")
+                        "menegotto-pinto (outside every updater's family); bilinear or "
+                        "bouc-wen (inside it: updating must do no harm); repeatable")
     p.add_argument("--noise", type=_noise, action="append", default=None, metavar="PCT",
                    help="load-cell noise, std in %% of the tested damper's peak force in a "
                         "noise-free reference run (default 0); repeatable")
