@@ -9,7 +9,8 @@ another state; this law can be exactly right, and ``law_trust`` then gives it al
 (``lawfit.calibrate_bilinear``, the offline start), bounds a decade either side.
 
 The law is ``sim_actuator.models.Bilinear`` (a closed-form return mapping, so the compressed
-history gives exactly the state of the whole one).
+history gives exactly the state of the whole one); the fit drives it through the JIT kernel of
+``sim_actuator.models.paths`` (the same algorithm).
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ from fresco_bridge.updating.base import UpdaterError
 from fresco_bridge.updating.degrading import REFIT_SCHEDULE
 from fresco_bridge.updating.refit import RefitUpdater
 from sim_actuator.models import Bilinear
-from sim_actuator.models.base import HysteresisModel
+from sim_actuator.models.base import HysteresisModel, ModelState
+from sim_actuator.models.paths import LAW_BILINEAR, STATE_SIZE, drive, drive_from
 
 __all__ = ["BILINEAR", "bilinear_refit"]
 
@@ -34,6 +36,19 @@ FloatArray = npt.NDArray[np.float64]
 
 def _build(params: Mapping[str, float]) -> HysteresisModel:
     return Bilinear(**params)
+
+
+def _forces(params: Mapping[str, float], disp: FloatArray) -> FloatArray:
+    return drive(LAW_BILINEAR, np.array([params["k0"], params["fy"], params["alpha"]]), disp)
+
+
+def _forces_from(params: Mapping[str, float], disp: FloatArray, state: ModelState
+                 ) -> FloatArray:
+    """``_forces`` from a committed ``BilinearState`` (d, f, k) instead of the virgin one."""
+    start = np.zeros(STATE_SIZE)
+    start[:2] = state[:2]  # BilinearState (d, f, k): the kernel's [d, f]
+    return drive_from(LAW_BILINEAR, np.array([params["k0"], params["fy"], params["alpha"]]),
+                      disp, start)
 
 
 def _space(disp: FloatArray, force: FloatArray) -> FitSpace:
@@ -47,7 +62,7 @@ def _space(disp: FloatArray, force: FloatArray) -> FitSpace:
                     scale=(k0, fy, max(alpha, 0.01)))  # fmt: skip
 
 
-BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space)
+BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space, forces=_forces)
 """The Bilinear (k0, fy, alpha): the offline calibration's family."""
 
 
@@ -55,4 +70,5 @@ def bilinear_refit(offline: tuple[npt.ArrayLike, npt.ArrayLike], *,
                    name: str = "online_improved", **schedule: Any) -> RefitUpdater:
     """The Bilinear refitted online (the Baber-Wen law's ``REFIT_SCHEDULE`` unless
     overridden)."""
-    return RefitUpdater(BILINEAR, offline=offline, name=name, **{**REFIT_SCHEDULE, **schedule})
+    return RefitUpdater(BILINEAR, offline=offline, name=name, forces_from=_forces_from,
+                        **{**REFIT_SCHEDULE, **schedule})

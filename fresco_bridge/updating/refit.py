@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import cast
 
 import numpy as np
@@ -56,19 +56,26 @@ from sim_actuator.models.base import (
     HysteresisModel,
     ModelInputError,
     ModelParameterError,
+    ModelState,
     ParametricModel,
     trial_input_error,
 )
 
 __all__ = ["WINDOW", "LawWindow", "RefitUpdater", "compress"]
 
-WINDOW = 3000
-"""Default window of a refit (steps of the element's history replayed from the law's state at
-its start): ten refits of the default schedule, longer than the study's records, so a study
-fits as on the whole history; a longer run costs no more per refit."""
-
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+
+WINDOW = 1500
+"""Default window of a refit (steps of the element's history replayed from the law's state at
+its start): five refits of the default schedule. A longer run costs no more per refit; a longer
+window costs in proportion (BENCHMARKS.md, "Online updating")."""
+
+ForcesFrom = Callable[[Mapping[str, float], FloatArray, ModelState], FloatArray]
+"""``forces_from(params, disp, state)``: a fast form of ``law_forces`` of the law with
+``params`` started from the committed ``state`` (e.g. ``sim_actuator.models.paths.drive_from``,
+the same algorithm); NaN where the law refuses."""
+
 
 
 def compress(disp: FloatArray, stride: int) -> IntArray:
@@ -241,11 +248,13 @@ class RefitUpdater(OwnsTwin):
     def __init__(self, family: LawFamily, *, offline: tuple[npt.ArrayLike, npt.ArrayLike],
                  every: int = 200, stride: int = 5, max_nfev: int = 8,
                  offline_weight: float = 1.0, offline_nfev: int = 40, warmup: int = 50,
-                 window: int = WINDOW, name: str = "online_refit") -> None:  # fmt: skip
+                 window: int = WINDOW, forces_from: ForcesFrom | None = None,
+                 name: str = "online_refit") -> None:  # fmt: skip
         """``offline``: (d, F) from the virgin state, fitted first (``offline_nfev``) and kept
         in every refit with weight ``offline_weight`` (0 drops it); ``every``: steps between
         refits, the first after ``warmup`` steps; ``stride``: compression of the histories;
-        ``window``: the steps of each element's history a refit replays (>= ``every``)."""
+        ``window``: the steps of each element's history a refit replays (>= ``every``);
+        ``forces_from``: the fit's fast form of the law from a state (default: the objects)."""
         disp, force = offline_data(offline, name)
         if every < 1 or stride < 1 or max_nfev < 1 or offline_nfev < 1 or warmup < 1:
             raise UpdaterError(f"{name}: every, stride, max_nfev, offline_nfev, warmup must be "
@@ -260,6 +269,7 @@ class RefitUpdater(OwnsTwin):
         self.family = family
         self.every, self.stride, self.max_nfev, self.warmup = every, stride, max_nfev, warmup
         self.window = window
+        self._forces_from = forces_from
         self.space = family.space(disp, force)
         keep = compress(disp, stride)
         self._offline = (disp[keep], force[keep], float(offline_weight))
@@ -332,7 +342,9 @@ class RefitUpdater(OwnsTwin):
                 params = family.params(x)
                 parts = []
                 for i, ((d, f, _), r) in enumerate(zip(histories, roots, strict=True)):
-                    if i == 0:
+                    if i == 0 and self._forces_from is not None:
+                        pred = self._forces_from(params, d, state)
+                    elif i == 0:
                         pred = law_forces(_parametric(family, family.build(params))
                                           .with_params({}, state), d)  # fmt: skip
                     elif family.forces is not None:
