@@ -93,8 +93,8 @@ def add_study_parser(sub: Any) -> None:
                         "recorded in study.json)")
     p.add_argument("--ann-option", type=parse_option, action="append", default=[],
                    metavar="KEY=VALUE",
-                   help="an online_ann option (JSON value), repeatable, e.g. divide=dividerand "
-                        "(MATLAB train's validation stop) or single_precision_hessian=false "
+                   help="an online_ann option (JSON value), repeatable, e.g. rtol=0.01 (a "
+                        "relative-decrease stop) or single_precision_hessian=false "
                         "(with --ann-iterations 50: the paper's exact fit); recorded in "
                         "study.json")
     p.add_argument("--pretrain-iterations", type=_positive_int, default=1000, metavar="N",
