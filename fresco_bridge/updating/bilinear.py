@@ -6,7 +6,7 @@ specimen is a Bilinear, every other expert only approximates it (the Baber-Wen l
 sharpness, the bases' saturating branches) and transfers that approximation to a twin in
 another state; this law can be exactly right, and ``law_trust`` then gives it all the weight
 (its misfit is the smallest). The fit starts from the calibrated Bilinear
-(``lawfit.calibrate_bilinear``, the offline start), bounds a decade either side.
+(``lawfit.calibrate_bilinear``, the offline start) within bounds from the data's scales.
 
 The law is ``sim_actuator.models.Bilinear`` (a closed-form return mapping, so the compressed
 history gives exactly the state of the whole one); the fit drives it through the JIT kernel of
@@ -24,6 +24,7 @@ import numpy.typing as npt
 from fresco_bridge.lawfit import FitSpace, LawFamily, calibrate_bilinear
 from fresco_bridge.updating.base import UpdaterError
 from fresco_bridge.updating.degrading import REFIT_SCHEDULE
+from fresco_bridge.updating.physics import data_scales
 from fresco_bridge.updating.refit import RefitUpdater
 from sim_actuator.models import Bilinear
 from sim_actuator.models.base import HysteresisModel, ModelState
@@ -52,14 +53,18 @@ def _forces_from(params: Mapping[str, float], disp: FloatArray, state: ModelStat
 
 
 def _space(disp: FloatArray, force: FloatArray) -> FitSpace:
+    """Bounds from the data's scales (first-loading stiffness, peak force), as every online law's;
+    the start is the calibrated Bilinear, clipped into them by the fit (a calibration that
+    degenerates on poorly excited data, k0 -> 0, cannot trap the refits)."""
+    k_init, f_peak = data_scales(disp, force, "Bilinear")
     try:
         start = calibrate_bilinear(disp, force)
     except ValueError as exc:
         raise UpdaterError(f"online_improved: offline: {exc}") from exc
-    k0, fy, alpha = start["k0"], start["fy"], start["alpha"]
-    return FitSpace(start=(k0, fy, alpha), lower=(0.1 * k0, 0.1 * fy, 0.0),
-                    upper=(10.0 * k0, 10.0 * fy, 0.5),
-                    scale=(k0, fy, max(alpha, 0.01)))  # fmt: skip
+    return FitSpace(start=(start["k0"], start["fy"], start["alpha"]),
+                    lower=(0.1 * k_init, 0.05 * f_peak, 0.0),
+                    upper=(10.0 * k_init, 5.0 * f_peak, 0.5),
+                    scale=(k_init, f_peak, 0.01))  # fmt: skip
 
 
 BILINEAR = LawFamily("bilinear", ("k0", "fy", "alpha"), _build, _space, forces=_forces)
