@@ -48,20 +48,18 @@ from fresco_bridge.updating.registry import PAPER_BILINEAR
 from fresco_bridge.updating.updaters import FixedModelUpdater
 from sim_actuator.models import Bilinear
 
-_PAPER: dict[str, Any] = {"divide": "none", "max_iterations": 50,
+_PAPER: dict[str, Any] = {"max_iterations": 50,
                           "single_precision_hessian": False}
 """The paper's exact fit (``PAPER_ONLINE_LM``); ``online_ann``'s default is "8 it f32"."""
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "faithful (50 it)": _PAPER,
     "faithful seed 2": {**_PAPER, "seed": 2},  # other random offline rows: the spread
-    "dividerand": {**_PAPER, "divide": "dividerand"},
-    "dividerand f32": {**_PAPER, "divide": "dividerand", "single_precision_hessian": True},
     "50 it f32": {**_PAPER, "single_precision_hessian": True},
     "rtol 1e-2": {**_PAPER, "rtol": 0.01},
     "rtol 3e-2": {**_PAPER, "rtol": 0.03},
     "10 it": {**_PAPER, "max_iterations": 10},
-    "8 it f32": {"divide": "none", "max_iterations": 8, "single_precision_hessian": True},
+    "8 it f32": {"max_iterations": 8, "single_precision_hessian": True},
     "default": {},  # whatever online_ann does without options (now "8 it f32")
     "5 it": {**_PAPER, "max_iterations": 5},
 }
@@ -310,8 +308,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--layouts", default="paper,generalisation")
     p.add_argument("--variants", default=",".join(VARIANTS),
                    help=f"comma-separated subset of: {', '.join(VARIANTS)}")
-    p.add_argument("--timing-variants", default="faithful (50 it),50 it f32,dividerand,"
-                                                "dividerand f32,5 it",
+    p.add_argument("--timing-variants", default="faithful (50 it),50 it f32,5 it",
                    help="comma-separated variants alternated in the timing section")
     p.add_argument("--skip-accuracy", action="store_true")
     p.add_argument("--skip-timing", action="store_true")

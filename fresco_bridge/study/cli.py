@@ -65,7 +65,8 @@ def add_study_parser(sub: Any) -> None:
                         f"record, {SYNTHETIC_DURATION_S:g} s, one per --seed)")  # fmt: skip
     p.add_argument("--specimen", choices=SPECIMENS, action="append", default=None,
                    help="tested damper law: bwbn (rig preset damper-bwbn, default) or "
-                        "menegotto-pinto (outside every updater's family); repeatable")
+                        "menegotto-pinto (outside every updater's family); bilinear or "
+                        "bouc-wen (inside it: updating must do no harm); repeatable")
     p.add_argument("--noise", type=_noise, action="append", default=None, metavar="PCT",
                    help="load-cell noise, std in %% of the tested damper's peak force in a "
                         "noise-free reference run (default 0); repeatable")
@@ -92,8 +93,8 @@ def add_study_parser(sub: Any) -> None:
                         "recorded in study.json)")
     p.add_argument("--ann-option", type=parse_option, action="append", default=[],
                    metavar="KEY=VALUE",
-                   help="an online_ann option (JSON value), repeatable, e.g. divide=dividerand "
-                        "(MATLAB train's validation stop) or single_precision_hessian=false "
+                   help="an online_ann option (JSON value), repeatable, e.g. rtol=0.01 (a "
+                        "relative-decrease stop) or single_precision_hessian=false "
                         "(with --ann-iterations 50: the paper's exact fit); recorded in "
                         "study.json")
     p.add_argument("--pretrain-iterations", type=_positive_int, default=1000, metavar="N",

@@ -80,7 +80,7 @@ class RunSpec:
     pretrain_iterations: int = 1000
     """LM iterations of the offline pre-training (MATLAB ``trainlm``'s default epochs)."""
     ann_options: tuple[tuple[str, Any], ...] = ()
-    """Further ``online_ann`` options (``divide``, ``rtol``, …); none: its defaults."""
+    """Further ``online_ann`` options (``rtol``, …); none: its defaults."""
     causality: Causality = "same-step"
     """What the twin's step i may learn from: the tested damper's step i (``same-step``, the
     paper's order) or only through step i - 1 (``previous-step``, a twin served live)."""

@@ -258,7 +258,7 @@ def summary_table(documents: Sequence[Mapping[str, Any]]) -> str:
         if TARGET_SUBJECT in gen and TARGET_BASELINE in gen:
             reduction = pct(_reduction(gen, "maeth"), 1)
             rms_reduction = pct(_reduction(gen, "rmseth"), 1)
-        covering = [s for s in TARGETS if s.kind == "reduction" and _applies(s, doc)]
+        covering = [s for s in TARGETS if _covers(s, doc)]
         target = _run_mark([_check_run(s, doc) for s in covering]) if covering else "no target"
         beats = _run_mark([_check_run(s, doc) for s in TARGETS if s.kind == "below"])
         learning = [c for c in paper if c != "reference"]
@@ -292,15 +292,28 @@ def _reduction(gen: Mapping[str, Any], metric: str) -> float:
     return 100.0 * (1.0 - float(gen[TARGET_SUBJECT][metric]) / base) if base > 0 else math.nan
 
 
+def _specimens(spec: TargetSpec) -> tuple[str, ...] | None:
+    """The specimens ``spec`` applies to (None: every one)."""
+    return (spec.specimen,) if isinstance(spec.specimen, str) else spec.specimen
+
+
 def _applies(spec: TargetSpec, doc: Mapping[str, Any]) -> bool:
-    return (spec.specimen in (None, doc["specimen"])
+    specimens = _specimens(spec)
+    return ((specimens is None or doc["specimen"] in specimens)
             and spec.noise_pct in (None, float(doc["noise_pct"])))  # fmt: skip
+
+
+def _covers(spec: TargetSpec, doc: Mapping[str, Any]) -> bool:
+    """Whether ``spec`` is the accuracy target of ``doc``'s (specimen, noise): a ``reduction``
+    (out of family) or ``no-harm`` (in family) target that applies to it."""
+    return spec.kind in ("reduction", "no-harm") and _applies(spec, doc)
 
 
 def _check_run(spec: TargetSpec, doc: Mapping[str, Any]) -> RunCheck | None:
     """``spec`` on one run it applies to; None when the run lacks a case the target needs."""
     gen = doc["layouts"][TARGET_LAYOUT]["cases"]
-    needs = {"reduction": TARGET_BASELINE, "below": spec.rival, "bounded": TARGET_SUBJECT}
+    needs = {"reduction": TARGET_BASELINE, "below": spec.rival, "no-harm": TARGET_BASELINE,
+             "bounded": TARGET_SUBJECT}
     if TARGET_SUBJECT not in gen or needs[spec.kind] not in gen:
         return None
     mine = gen[TARGET_SUBJECT]
@@ -308,6 +321,12 @@ def _check_run(spec: TargetSpec, doc: Mapping[str, Any]) -> RunCheck | None:
         values = [(metric, goal, _reduction(gen, metric)) for metric, goal in spec.reductions]
         figure = ", ".join(f"{metric.upper()} {value:.1f} % below" for metric, _, value in values)
         return RunCheck(all(value >= goal for _, goal, value in values), figure, values[0][2])
+    if spec.kind == "no-harm" and spec.max_ratio is not None:
+        base = float(gen[TARGET_BASELINE]["maeth"])
+        ratio = float(mine["maeth"]) / base if base > 0.0 else math.inf
+        return RunCheck(float(mine["maeth"]) <= spec.max_ratio * base,
+                        f"MAETH {mine['maeth']:.4f} kN, {TARGET_BASELINE} {base:.4f} kN "
+                        f"(×{ratio:.3f})")
     if spec.kind == "below" and spec.rival is not None:
         theirs = gen[spec.rival]["maeth"]
         return RunCheck(mine["maeth"] < theirs,
@@ -321,12 +340,15 @@ def _check_run(spec: TargetSpec, doc: Mapping[str, Any]) -> RunCheck | None:
 
 def describe_target(spec: TargetSpec) -> str:
     """The target in words, from its spec."""
+    specimens = _specimens(spec)
+    where = "every specimen" if specimens is None else ", ".join(specimens)
     if spec.kind == "below":
-        return f"MAETH below {spec.rival} on every run"
+        return f"{where}: MAETH below {spec.rival} on every run"
+    if spec.kind == "no-harm":
+        return f"{where} (in family): MAETH ≤ {spec.max_ratio:g}× {TARGET_BASELINE}'s on every run"
     if spec.kind == "bounded":
         return (f"bounded on every run (finite, peak |twin force| ≤ {BOUNDED_PEAK_RATIO:g}× the "
                 "peak true force)")
-    where = spec.specimen or "every specimen"
     if spec.noise_pct is not None:
         where += f", {spec.noise_pct:g} % noise"
     text = f"{where}: " + " and ".join(f"{m.upper()} ≥ {goal:g} %" for m, goal in spec.reductions)
@@ -369,7 +391,7 @@ def score_targets(documents: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         runs = [doc for doc in documents if doc["causality"] == causality]
         uncovered = Counter(
             (doc["specimen"], float(doc["noise_pct"])) for doc in runs
-            if not any(s.kind == "reduction" and _applies(s, doc) for s in TARGETS)
+            if not any(_covers(s, doc) for s in TARGETS)
         )  # fmt: skip
         by_causality[causality] = {
             "runs": len(runs),

@@ -43,7 +43,12 @@ from fresco_bridge.integrator import (
     run_coupled,
 )
 from fresco_bridge.lawfit import law_forces
-from fresco_bridge.study.constants import MENEGOTTO_PINTO_DAMPER, SPECIMEN_PRESET
+from fresco_bridge.study.constants import (
+    IN_FAMILY_SPECIMENS,
+    MENEGOTTO_PINTO_DAMPER,
+    SPECIMEN_PRESET,
+    SPECIMENS,
+)
 from fresco_bridge.updating.base import Updater
 from sim_actuator.effects import Sensor
 from sim_actuator.models import HysteresisModel, make_model
@@ -54,7 +59,8 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def specimen_params(specimen: str) -> tuple[str, dict[str, float]]:
-    """(model kind, parameters) of a study specimen: ``bwbn`` (the rig preset) or GMP."""
+    """(model kind, parameters) of a study specimen: ``bwbn`` (the rig preset), GMP, or an
+    in-family law (``constants.IN_FAMILY_SPECIMENS``)."""
     if specimen == "bwbn":
         from sim_actuator.config import preset
 
@@ -62,7 +68,10 @@ def specimen_params(specimen: str) -> tuple[str, dict[str, float]]:
         return config.kind, dict(config.params)
     if specimen == "menegotto-pinto":
         return "menegotto-pinto", dict(MENEGOTTO_PINTO_DAMPER)
-    raise ValueError(f"unknown specimen {specimen!r}; known: bwbn, menegotto-pinto")
+    if specimen in IN_FAMILY_SPECIMENS:
+        kind, params = IN_FAMILY_SPECIMENS[specimen]
+        return kind, dict(params)
+    raise ValueError(f"unknown specimen {specimen!r}; known: {', '.join(SPECIMENS)}")
 
 
 def specimen_model(specimen: str) -> HysteresisModel:

@@ -2,11 +2,12 @@
 
 No I/O and no asyncio here: the serving side (a site whose forces come from an updater) lives in
 ``fresco_bridge/`` and only calls the :class:`~fresco_bridge.updating.base.Updater` interface.
-Build updaters by name with :func:`make_updater` (the registry is :data:`UPDATERS`). Importing
+Build updaters by name with :func:`make_updater` (the registry is :data:`UPDATERS`); checkpoint
+one mid-run with :func:`snapshot` and bring it back with :func:`restore`. Importing
 this package is cheap: numpy-heavy modules, filterpy and torch load when an updater needs them.
 """
 
-from .base import Updater, UpdaterError, UpdaterInputError
+from .base import Updater, UpdaterError, UpdaterInputError, restore, snapshot
 from .registry import UPDATERS, make_updater, updater_options
 
 __all__ = [
@@ -15,5 +16,7 @@ __all__ = [
     "UpdaterError",
     "UpdaterInputError",
     "make_updater",
+    "restore",
+    "snapshot",
     "updater_options",
 ]

@@ -22,12 +22,6 @@ branch's length ``L``, ``exp(-P/p_k)`` of its plastic part ``P = |Δd - ΔF/k_in
 from the first loading of the offline data) and the distance from the reversal to the element's
 envelope (max excursion so far) in the direction of motion.
 
-``hinge_stiffness`` (k_init) adds force hinges: how far the branch's elastic trial force
-``s·F_r + k·u`` has gone past each of a grid of force levels since the reversal (a series-Iwan /
-multi-surface picture: an element yields at a *force*, so a branch that starts from a small
-reversal force stays elastic longer; the fixed saturation lengths of ``psi`` cannot move that
-knee).
-
 Learning: the weights are shared by the tested element and its twin (same law, different
 histories). They start from a ridge fit to the offline database and are updated every step by
 exponentially weighted least squares regularised towards the current estimate (no covariance
@@ -57,7 +51,6 @@ __all__ = [
     "ReversalBasis",
     "TwinBasis",
     "WeightedRls",
-    "force_hinges",
     "initial_stiffness",
     "offline_arrays",
 ]
@@ -202,13 +195,10 @@ class ReversalBasis:
     TRAVEL_SCALE = 50.0
     PREVIOUS_LENGTH_SCALES = (0.1, 0.4)
     PREVIOUS_PLASTIC_SCALES = (0.02, 0.1)
-    FORCE_LEVELS = tuple(-0.5 + 0.125 * i for i in range(15))
-    """Force levels of the hinges, in multiples of ``force_scale`` (``hinge_stiffness``)."""
 
     def __init__(self, disp_scale: float, force_scale: float, *,
-                 stiffness: float | None = None, hinge_stiffness: float | None = None) -> None:
-        """``stiffness`` (k_init) switches the memory terms on, ``hinge_stiffness`` the force
-        hinges (module docstring)."""
+                 stiffness: float | None = None) -> None:
+        """``stiffness`` (k_init) switches the memory terms on (module docstring)."""
         if not (disp_scale > 0.0 and force_scale > 0.0):
             raise UpdaterError(
                 f"online_improved: the offline data must move and carry force (displacement "
@@ -227,14 +217,6 @@ class ReversalBasis:
         memory = 0 if stiffness is None else self._lengths.size + self._plastic.size + 1
         self._n_g = 4 + self._ranges.size + memory
         self.size = (1 + len(self.SATURATIONS)) * self._n_g
-        if hinge_stiffness is not None and not (math.isfinite(hinge_stiffness)
-                                                and hinge_stiffness > 0.0):  # fmt: skip
-            raise UpdaterError(f"online_improved: force hinges need a positive stiffness "
-                               f"(got {hinge_stiffness!r})")
-        self.hinge_stiffness = hinge_stiffness
-        self._levels = self.force_scale * np.array(self.FORCE_LEVELS)
-        if hinge_stiffness is not None:
-            self.size += self._levels.size
 
     def virgin(self) -> BranchMemory:
         return BranchMemory()
@@ -265,21 +247,7 @@ class ReversalBasis:
             g[end + 1 + n_l:-1] = np.exp(-plastic / self._plastic)
             envelope = memory.d_max if direction > 0.0 else -memory.d_min
             g[-1] = (envelope - direction * d_r) / self.disp_scale
-        phi = np.outer(psi, g).ravel()
-        if self.hinge_stiffness is None:
-            return direction, f_r, phi
-        return direction, f_r, np.concatenate((phi, force_hinges(
-            direction * f_r, u, self._levels, self.hinge_stiffness)))  # fmt: skip
-
-
-def force_hinges(trial_r: float, u: float, levels: FloatArray, stiffness: float) -> FloatArray:
-    """How far (in displacement) the elastic trial force ``trial_r + stiffness * u`` of a branch
-    has gone past each force level since its reversal (``trial_r`` = direction * F_r): zero until
-    the level is reached, then the excess ``u``; a level already passed at the reversal gives
-    ``u`` itself."""
-    now = (trial_r + stiffness * u - levels) / stiffness
-    at_reversal = (trial_r - levels) / stiffness
-    return np.asarray(np.maximum(0.0, now) - np.maximum(0.0, at_reversal), dtype=np.float64)
+        return direction, f_r, np.outer(psi, g).ravel()
 
 
 class _Memory(Protocol):
@@ -358,7 +326,7 @@ class BasisTwin(Generic[M]):
 
     def advance(self, d: float) -> float:
         """``set_trial(d)`` and ``commit()`` in one, the force only (no tangent probe): half the
-        cost, for the shadow scorer's free runs (``shadow``)."""
+        cost, for the free runs that score the experts (``improved``)."""
         c = self._committed
         if d == c.d:
             self._trial = c
@@ -404,21 +372,18 @@ class BranchRls(OwnsTwin):
         force_scale: float | None = None,
         stiffness: float | None = None,
         shrink: bool = False,
-        hinges: bool = False,
     ) -> None:
         """``force_scale``/``stiffness`` (k_init of the memory terms) default to the offline
         data's; a residual expert passes those of the whole force instead. ``shrink``: the
         ridge pulls the weights towards zero (a residual that is not supported by recent data
-        fades) instead of towards their current value. ``hinges``: the force hinges (with
-        k_init as their stiffness) are added to the basis."""
+        fades) instead of towards their current value."""
         disp, force = offline_arrays(offline, forgetting, ridge, gate)
-        if (memory_terms or hinges) and stiffness is None:
+        if memory_terms and stiffness is None:
             stiffness = initial_stiffness(disp, force)
         self.basis = ReversalBasis(
             float(np.max(np.abs(disp))),
             float(np.max(np.abs(force))) if force_scale is None else force_scale,
             stiffness=stiffness if memory_terms else None,
-            hinge_stiffness=stiffness if hinges else None,
         )  # fmt: skip
         rows, targets = self._offline_rows(disp, force)
         self.rls = WeightedRls(rows, targets, forgetting=forgetting, ridge=ridge, gate=gate,
@@ -442,10 +407,6 @@ class BranchRls(OwnsTwin):
                 targets.append(direction * (f - f_r))
             memory = memory.advanced(d, f)
         return np.array(rows), np.array(targets)
-
-    def source_twin(self) -> HysteresisModel:
-        """A twin on this expert's memory of the tested element now (shadow scoring)."""
-        return BasisTwin(self.basis, self.rls, self._source)
 
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""

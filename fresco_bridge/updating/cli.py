@@ -22,6 +22,7 @@ import sys
 import time
 import types
 import typing
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ import numpy as np
 from ..numbers import fmt
 from ..progress import status
 from .base import UpdaterError
-from .histories import History, HistoryError, Units, read_history
+from .histories import History, HistoryError, Units, read_history, updatable_site
 from .registry import UPDATERS, make_updater, updater_options
 
 __all__ = ["add_updater_parser", "updater_command"]
@@ -258,6 +259,17 @@ def _replay(args: argparse.Namespace) -> int:
     twin = read_history(args.twin, need_force=False, site=args.twin_site or args.site,
                         session=args.session, actuator=args.actuator, units=args.units)
     assert src.force is not None  # need_force
+    served = updatable_site(args.source, args.site)
+    if served is not None:
+        raise HistoryError(f"{args.source}: site {served!r} is an updatable site: its forces are "
+                           "its updater's predictions, not measurements; give the tested "
+                           "element it learns from (its learns_from site) as --source")
+    served = updatable_site(args.twin, args.twin_site or args.site)
+    if served is not None and twin.force is not None:
+        print(f"twin: site {served!r} is an updatable site: its forces are the predictions "
+              "served to the integrator, not a truth; not scored against (give --twin a "
+              "history with measured or true forces to score)", file=sys.stderr)
+        twin = replace(twin, force=None)
     n_src, n_twin = len(src.disp), len(twin.disp)
     if n_twin > n_src:
         raise HistoryError(f"{twin.source}: {n_twin} steps, but {src.source} has only {n_src}: "

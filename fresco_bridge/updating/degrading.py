@@ -35,8 +35,8 @@ import numpy.typing as npt
 from fresco_bridge.lawfit import FitSpace, LawFamily
 from fresco_bridge.updating.physics import data_scales
 from fresco_bridge.updating.refit import RefitUpdater
-from sim_actuator.models.base import HysteresisModel
-from sim_actuator.models.paths import LAW_BWBN, bwbn_vector, drive
+from sim_actuator.models.base import HysteresisModel, ModelState
+from sim_actuator.models.paths import LAW_BWBN, STATE_SIZE, bwbn_vector, drive, drive_from
 from sim_actuator.models.stepped import SteppedBaberNoori
 
 __all__ = ["BABER_WEN", "BABER_WEN_DZ_MAX", "N_MAX", "REFIT_SCHEDULE", "baber_wen_refit"]
@@ -82,6 +82,15 @@ def _forces(params: Mapping[str, float], disp: FloatArray) -> FloatArray:
     return drive(LAW_BWBN, bwbn_vector(_law(params)), disp, 0.0, BABER_WEN_DZ_MAX)
 
 
+def _forces_from(params: Mapping[str, float], disp: FloatArray, state: ModelState
+                 ) -> FloatArray:
+    """``_forces`` from a committed ``BwbnState`` (d, f, k, z, e) instead of the virgin one."""
+    start = np.zeros(STATE_SIZE)
+    d, f, _k, z, e = state  # BwbnState
+    start[:4] = (d, f, z, e)  # the kernel's [d, f, z, e]
+    return drive_from(LAW_BWBN, bwbn_vector(_law(params)), disp, start, BABER_WEN_DZ_MAX)
+
+
 def _space(disp: FloatArray, force: FloatArray) -> FitSpace:
     k_init, f_peak = data_scales(disp, force, "Baber-Wen")
     return FitSpace(start=(k_init, f_peak, 0.05, 2.0, 0.5, 1e-3, 1e-3),
@@ -97,4 +106,5 @@ BABER_WEN = LawFamily("baber-wen", _FREE, _build, _space, forces=_forces)
 def baber_wen_refit(offline: tuple[npt.ArrayLike, npt.ArrayLike], *,
                     name: str = "online_improved", **schedule: Any) -> RefitUpdater:
     """The Baber-Wen law refitted online (``REFIT_SCHEDULE`` unless overridden)."""
-    return RefitUpdater(BABER_WEN, offline=offline, name=name, **{**REFIT_SCHEDULE, **schedule})
+    return RefitUpdater(BABER_WEN, offline=offline, name=name, forces_from=_forces_from,
+                        **{**REFIT_SCHEDULE, **schedule})

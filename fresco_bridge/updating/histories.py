@@ -24,7 +24,8 @@ from .base import UpdaterError
 
 FloatArray = npt.NDArray[np.float64]
 
-__all__ = ["DISP_UNITS", "FORCE_UNITS", "History", "HistoryError", "Units", "read_history"]
+__all__ = ["DISP_UNITS", "FORCE_UNITS", "History", "HistoryError", "Units", "read_history",
+           "updatable_site"]
 
 DISP_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 """Displacement unit -> mm."""
@@ -101,3 +102,26 @@ def read_history(path: Path, *, need_force: bool = True, site: str | None = None
     force = cols.get("meas_force")
     return History(cols["meas_disp"] * units.to_mm,
                    None if force is None else force * units.to_kn, history.source, history.notes)
+
+
+def updatable_site(path: Path, site: str | None) -> str | None:
+    """The name of the site ``path`` holds for ``site`` (given, or the run's only one) when
+    it is an *updatable* site of a run directory, else None.
+
+    Why: an updatable site's forces are its updater's predictions, served to the integrator;
+    they are no measurement to learn from and no truth to score against. A run directory says
+    which sites are updatable (its config snapshot, and the ``update`` line after each of their
+    committed steps); a CSV cannot, so it is taken as measured.
+    """
+    if not path.is_dir():
+        return None
+    from fresco_bridge.runs import RunDirError, load_run
+
+    try:
+        run = load_run(path)
+    except RunDirError as exc:
+        raise HistoryError(str(exc)) from None
+    updatable = set(run.sources()) | {str(u["site"]) for u in run.updates}
+    sites = run.sites
+    chosen = site if site is not None else (sites[0] if len(sites) == 1 else None)
+    return chosen if chosen is not None and chosen in updatable else None

@@ -15,9 +15,8 @@ twin. Which one is better can be seen online, on the tested element alone (no tw
 one-step error is flattered by the measured reversal force, the free-run error lets an old
 drift linger. ``S_k`` is their exponentially weighted mean (factor ``mixing``, each step clipped
 at ``gate**2 * S_k`` so one load-cell spike cannot flip the choice); expert k weighs
-``1 / S_k**2`` (normalised), or ``1 / (S_k * H_k)`` with ``shadow=True``, ``H_k`` its error on a
-stretch of the tested element's history whose state matches the twin's (``shadow``). The twin's
-force is the weighted sum of the experts' twins, each on its own memory.
+``1 / S_k**2`` (normalised). The mixture's force is the weighted sum of the experts' twins, each
+on its own memory.
 
 *Law trust* (``law_trust``): a law expert whose rms misfit over the whole history it was fitted
 to is at most ``law_trust`` × that history's peak |force| takes all the weight. Why: the scores
@@ -25,15 +24,32 @@ rank experts on the *recent* past, where a forgetting basis fits as well as a la
 worse to a twin in another state; one parameter set explaining two whole histories is evidence
 the law generalises. ``law_trust=0`` is the plain mixture. The switch changes only at a refit.
 
+*Do no harm* (the offline start kept as a candidate): the twin serves either the mixture or the
+*offline start*, the Bilinear calibrated to the offline database (``none --offline``, what the
+lab would run without updating), whichever has the smaller **prequential free-run error** on
+the tested element so far: the sum over every observed step of the squared error of a free-run
+copy of each (driven by the tested element's displacement alone, never its force, the twin's
+own situation) against the measured force, each made *before* the step is learned. Why this
+and no threshold: the offline start learns nothing, so its error is out of sample by
+construction, and the mixture's is too (it predicts before it learns), so neither is
+flattered; on the tested element the served law is never the worse of the two over the run.
+Both keep their own state on the twin at every commit, so a switch is to a model that has
+followed the twin's whole history. Where the specimen is in the Bilinear family the updater
+ends where its start was; where it is not, the mixture takes over as soon as its accumulated
+error is the smaller.
+
 Experts (``experts=``; :data:`EXPERTS` by default, :data:`OPTIONAL_EXPERTS` on request):
 ``reversal`` (the basis alone), ``reversal+memory`` (plus previous-branch and envelope terms),
 ``bouc-wen+memory`` (a fitted Bouc-Wen law plus the memory basis on its residual, ``physics``),
 ``reversal+stops`` (plus stop operators scheduled on the element's own plastic deformation,
-``play``), ``baber-wen`` (a degrading law refitted on the tested element's whole history,
-``degrading``), ``reversal+memory+hinges`` (force hinges, ``branch``). The bases learn by
+``play``), ``baber-wen`` (a degrading law refitted on the tested element's recent history,
+``degrading``, from the law's state at the window's start), ``bilinear`` (the offline
+start's family refitted the same way, ``bilinear``: the law the lab calibrates offline, which
+the mixture must be able to represent exactly). The bases learn by
 exponentially weighted ridge least squares with Huber gating (``forgetting``, ``ridge``,
-``gate``); ``baber-wen`` by periodic refits, which cost far more than an ordinary step and grow
-with the history: served live, the updater belongs beside the event loop. Figures, the choice
+``gate``); the laws by periodic refits on a window of bounded length, which cost far more
+than an ordinary step but do not grow with the run: served live, the updater belongs beside the
+event loop. Figures, the choice
 of the defaults and what fails: ``BENCHMARKS.md``, "Online updating".
 """
 
@@ -46,24 +62,26 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from fresco_bridge.lawfit import calibrate_bilinear
 from fresco_bridge.updating.base import OwnsTwin, UpdaterError, check_measurement
 from fresco_bridge.updating.branch import BranchMemory, BranchRls, ReversalBasis
-from fresco_bridge.updating.shadow import ShadowScorer, stepper
+from sim_actuator.models import make_model
 from sim_actuator.models.base import HysteresisModel, trial_input_error
 
 __all__ = ["EXPERTS", "LAW_TRUST", "SCORES", "BranchMemory", "OnlineImproved", "ReversalBasis"]
 
 FloatArray = npt.NDArray[np.float64]
 
-EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops", "baber-wen")
+EXPERTS = ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops", "baber-wen",
+           "bilinear")
 """The experts ``online_improved`` combines by default."""
 
-OPTIONAL_EXPERTS = ("reversal+memory+stops", "reversal+memory+hinges")
+OPTIONAL_EXPERTS = ("reversal+memory+stops",)
 """Experts that can be asked for by name but are not in the default mixture."""
 
-LAW_EXPERTS = ("baber-wen",)
-"""Experts that are a law refitted on the whole history (``refit.RefitUpdater``): ``law_trust``
-applies to them."""
+LAW_EXPERTS = ("baber-wen", "bilinear")
+"""Experts that are a law refitted on the tested element's history (``refit.RefitUpdater``):
+``law_trust`` applies to them."""
 
 LAW_TRUST = 0.02
 """Default ``law_trust``: a law expert whose rms misfit over the whole history it was fitted to
@@ -78,30 +96,27 @@ SCORES = ("both", "free-run", "one-step")
 class _Expert(Protocol):
     def predict(self, d: float) -> float: ...
     def observe(self, d: float, force: float) -> None: ...
-    def source_twin(self) -> HysteresisModel: ...
     @property
     def twin(self) -> HysteresisModel: ...
 
 
 class _MixtureTwin:
-    """The weighted sum of the experts' twins (material semantics: each keeps its own)."""
+    """The served twin: the weighted sum of the experts' twins and the offline start's twin
+    (weight 1 on the start while it is served, ``OnlineImproved.served_weights``). Material
+    semantics: each part keeps its own state, every part commits at every commit."""
 
     name = "online_improved"
 
-    def __init__(self, owner: OnlineImproved, parts: list[HysteresisModel],
-                 record: bool = True) -> None:
-        """``record``: tell the owner each commit (the twin's history for shadow scoring);
-        clones do not."""
+    def __init__(self, owner: OnlineImproved, parts: list[HysteresisModel]) -> None:
         self._owner = owner
         self._parts = parts
-        self._record = record
         self._committed = (0.0, 0.0)
         self._trial = self._committed
 
     def set_trial(self, d: float) -> tuple[float, float]:
         if not math.isfinite(d):
             raise trial_input_error(self.name, d)
-        w = self._owner.mixture_weights()
+        w = self._owner.served_weights()
         force = tangent = 0.0
         for weight, part in zip(w.tolist(), self._parts, strict=True):
             f, k = part.set_trial(d)
@@ -114,8 +129,6 @@ class _MixtureTwin:
         for part in self._parts:
             part.commit()
         self._committed = self._trial
-        if self._record and self._owner.shadow is not None:
-            self._owner.shadow.twin_committed(self._committed[0])
 
     def revert_to_last_commit(self) -> None:
         for part in self._parts:
@@ -126,12 +139,10 @@ class _MixtureTwin:
         for part in self._parts:
             part.revert_to_start()
         self._committed = self._trial = (0.0, 0.0)
-        if self._record and self._owner.shadow is not None:
-            self._owner.shadow.twin_reset()
 
     @property
     def initial_tangent(self) -> float:
-        w = self._owner.mixture_weights()
+        w = self._owner.served_weights()
         return float(sum(weight * part.initial_tangent
                          for weight, part in zip(w.tolist(), self._parts, strict=True)))
 
@@ -140,9 +151,19 @@ class _MixtureTwin:
         return self._committed
 
     def clone(self) -> HysteresisModel:
-        twin = _MixtureTwin(self._owner, [part.clone() for part in self._parts], record=False)
+        twin = _MixtureTwin(self._owner, [part.clone() for part in self._parts])
         twin._committed, twin._trial = self._committed, self._trial
         return twin
+
+
+def _free_run(model: HysteresisModel, d: float) -> float:
+    """Move ``model`` to ``d`` and commit: its force (a free-run copy on the tested element)."""
+    advance = getattr(model, "advance", None)
+    if advance is not None:
+        return float(advance(d))
+    force = model.set_trial(d)[0]
+    model.commit()
+    return force
 
 
 class OnlineImproved(OwnsTwin):
@@ -162,7 +183,6 @@ class OnlineImproved(OwnsTwin):
         gate: float = 4.0,
         mixing: float = 0.99,
         score: str = "both",
-        shadow: bool = False,
         law_trust: float = LAW_TRUST,
     ) -> None:
         names = tuple(e.strip() for e in experts.split(",")) if isinstance(experts, str) else (
@@ -190,14 +210,17 @@ class OnlineImproved(OwnsTwin):
                 from fresco_bridge.updating.degrading import baber_wen_refit
 
                 built.append(baber_wen_refit(offline))
+            elif name == "bilinear":
+                from fresco_bridge.updating.bilinear import bilinear_refit
+
+                built.append(bilinear_refit(offline))
             elif name in ("reversal+stops", "reversal+memory+stops"):
                 from fresco_bridge.updating.play import BranchStopRls
 
                 built.append(BranchStopRls(offline=offline, memory_terms="memory" in name,
                                            **rls))
             else:
-                built.append(BranchRls(offline=offline, memory_terms=name != "reversal",
-                                       hinges=name.endswith("hinges"), **rls))
+                built.append(BranchRls(offline=offline, memory_terms=name != "reversal", **rls))
         self.expert_names = names
         self.experts: list[_Expert] = built
         self.mixing = mixing
@@ -206,15 +229,21 @@ class OnlineImproved(OwnsTwin):
         self.scores: FloatArray = np.full(len(built), 1e-4 * force_scale**2)
         """Exponentially weighted mean squared error of each expert on the tested element."""
         self.score = score
-        self._shadows = [stepper(e.twin.clone()) for e in built]
-        self.shadow = ShadowScorer(len(built)) if shadow else None
-        """Shadow scoring (``shadow.py``), or None."""
+        self._free = [e.twin.clone() for e in built]
+        """Each expert's free-run copy on the tested element (the free-run score)."""
+        self.start_params = calibrate_bilinear(offline[0], offline[1])
+        """The offline start: the Bilinear calibrated to the offline database."""
+        start = make_model("bilinear", **self.start_params)
+        self._start_free = start.clone()
+        self.harm = np.zeros(2)
+        """Prequential free-run squared error on the tested element so far: [mixture, offline
+        start] (module docstring, *do no harm*)."""
         self.law_trust = law_trust
         self.trusted: int | None = None
         """Index of the law expert the mixture trusts alone now (``law_trust``), or None."""
         self._laws = [k for k, name in enumerate(names) if name in LAW_EXPERTS]
         self._update_trust()
-        self._twin = _MixtureTwin(self, [e.twin for e in built])
+        self._twin = _MixtureTwin(self, [*(e.twin for e in built), start])
         self._last_update = 0.0
 
     def _update_trust(self) -> None:
@@ -228,40 +257,51 @@ class OnlineImproved(OwnsTwin):
                 best, self.trusted = misfit / peak, k
 
     def mixture_weights(self) -> FloatArray:
-        """Current weight of each expert (sums to 1)."""
+        """Current weight of each expert in the mixture (sums to 1)."""
         if self.trusted is not None:
             w = np.zeros(len(self.experts))
             w[self.trusted] = 1.0
             return w
-        scores = np.maximum(self.scores, 1e-300)
-        shadow = None if self.shadow is None else self.shadow.scores
-        w = 1.0 / scores**2 if shadow is None else 1.0 / (scores * np.maximum(shadow, 1e-300))
+        w = 1.0 / np.maximum(self.scores, 1e-300) ** 2
         return np.asarray(w / w.sum(), dtype=np.float64)
+
+    @property
+    def serving_start(self) -> bool:
+        """Whether the twin serves the offline start now: its prequential free-run error on the
+        tested element is not larger than the mixture's (module docstring)."""
+        return bool(self.harm[1] <= self.harm[0])
+
+    def served_weights(self) -> FloatArray:
+        """Weights of the twin's parts: the experts', then the offline start's."""
+        if self.serving_start:
+            w = np.zeros(len(self.experts) + 1)
+            w[-1] = 1.0
+            return w
+        return np.append(self.mixture_weights(), 0.0)
 
     def observe(self, d: float, force: float) -> None:
         d, force = check_measurement(self.name, d, force)
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
-        weights = self.mixture_weights() if self.score != "free-run" else None
-        predicted = 0.0
-        if self.shadow is not None:
-            self.shadow.before_step([expert.source_twin() for expert in self.experts])
+        weights = self.mixture_weights()
+        mixture_free = mixture_ahead = 0.0
         for k, expert in enumerate(self.experts):
+            free_force = _free_run(self._free[k], d)
+            mixture_free += float(weights[k]) * free_force
             squared = 0.0
             if self.score != "one-step":
-                free = force - self._shadows[k](d)
-                squared += free * free
-            if weights is not None:
-                one_step = expert.predict(d)
-                predicted += float(weights[k]) * one_step
-                one = force - one_step
-                squared += one * one
+                squared += (force - free_force) ** 2
+            one_step = expert.predict(d)
+            mixture_ahead += float(weights[k]) * one_step
+            if self.score != "free-run":
+                squared += (force - one_step) ** 2
             score = float(self.scores[k])
             self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
             expert.observe(d, force)
+        start_free = _free_run(self._start_free, d)
+        serving_start = self.serving_start
+        self.harm += ((force - mixture_free) ** 2, (force - start_free) ** 2)
         if self._laws:
             self._update_trust()
-        if self.shadow is not None:
-            self.shadow.after_step(d, force)
-        self._last_one_step = None if weights is None else abs(force - predicted)
+        self._last_one_step = abs(force - (start_free if serving_start else mixture_ahead))
         self._last_update = time.perf_counter() - start

@@ -10,14 +10,11 @@ step``; accept it if the cost decreases (then ``mu *= mu_decrease``), else ``mu 
 drop the momentum term and solve again, until accepted or ``mu > mu_max``.
 
 Stopping rule, first that holds: ``max_iterations`` accepted iterations; gradient norm
-``|J^T W r| < min_gradient``; ``mu > mu_max`` (no decrease found); with a validation set,
-``max_fail`` iterations in a row whose validation cost is above the best so far (MATLAB's
-"validation stop"; the fit returned is then the one of the best validation cost, as ``train``
-returns it); and, only when ``rtol > 0``, an accepted iteration that lowered the cost by less
-than ``rtol`` (relative). ``rtol = 0`` is ``trainlm`` with its defaults (epochs, min_grad 1e-7,
-mu_max 1e10, max_fail 6). ``mu`` restarts at ``mu`` on every call, as every ``train`` call
-does in MATLAB. :func:`divide_rand` is MATLAB's ``dividerand`` (the default data division of
-``train``: 70 % training, 15 % validation, 15 % test, at random).
+``|J^T W r| < min_gradient``; ``mu > mu_max`` (no decrease found); and, only when
+``rtol > 0``, an accepted iteration that lowered the cost by less than ``rtol`` (relative).
+``rtol = 0`` is ``trainlm`` with its defaults (epochs, min_grad 1e-7, mu_max 1e10) and no data
+division (MATLAB's validation stop lost on the twin: ``BENCHMARKS.md``, "Online updating").
+``mu`` restarts at ``mu`` on every call, as every ``train`` call does in MATLAB.
 
 BLAS runs on one thread inside a fit: numpy's and scipy's OpenBLAS pools each spin 2 threads,
 and alternating gemm (numpy) with Cholesky (scipy) on 2 cores makes one fit several times
@@ -42,10 +39,7 @@ from .mlp import Mlp
 
 FloatArray = npt.NDArray[np.float64]
 
-__all__ = ["DIVIDERAND_RATIOS", "LmOptions", "LmResult", "divide_rand", "levenberg_marquardt"]
-
-DIVIDERAND_RATIOS = (0.70, 0.15, 0.15)
-"""MATLAB ``dividerand``'s default training / validation / test ratios."""
+__all__ = ["LmOptions", "LmResult", "levenberg_marquardt"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,9 +54,6 @@ class LmOptions:
     momentum: float = 0.1
     min_gradient: float = 1e-7
     rtol: float = 0.0
-    max_fail: int = 6
-    """Validation stop after this many iterations above the best validation cost (needs a
-    validation set; ``trainlm``'s default)."""
     single_precision_hessian: bool = False
     """J and J^T W J in float32 (BLAS ssyrk, faster); gradient, Cholesky, costs and parameters
     stay float64. Not exact: ``BENCHMARKS.md``, "Online updating", measures what it changes."""
@@ -77,7 +68,6 @@ class LmOptions:
             "momentum": 0.0 <= self.momentum < 1.0,
             "min_gradient": self.min_gradient >= 0.0,
             "rtol": 0.0 <= self.rtol < 1.0,
-            "max_fail": self.max_fail >= 1,
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
@@ -94,37 +84,10 @@ class LmResult:
     iterations: int
     jacobians: int
     stop: str
-    """``max_iterations``, ``gradient``, ``mu_max``, ``validation``, ``rtol`` or ``cost_zero``."""
+    """``max_iterations``, ``gradient``, ``mu_max``, ``rtol`` or ``cost_zero``."""
     costs: list[float] = field(default_factory=list)
     factorisations: int = 0
     """Cholesky factorisations (one per damping tried: accepted steps plus rejected trials)."""
-    best_iteration: int = -1
-    """With a validation set: the iteration whose parameters are returned (0: the start)."""
-    validation_costs: list[float] = field(default_factory=list)
-    """With a validation set: its weighted cost at the start and after every iteration."""
-
-
-def divide_rand(n: int, rng: np.random.Generator,
-                ratios: tuple[float, float, float] = DIVIDERAND_RATIOS,
-                ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """MATLAB ``dividerand``: (training, validation, test) indices of ``n`` samples, each sorted.
-
-    A random permutation split by the ratios (normalised to sum 1): ``round(n * val)``
-    validation and ``round(n * test)`` test samples (MATLAB's round: halves away from zero),
-    the rest for training.
-    """
-    if n < 0 or len(ratios) != 3 or any(not (math.isfinite(r) and r >= 0.0) for r in ratios) \
-            or ratios[0] <= 0.0:
-        raise UpdaterError(f"divide_rand: need n >= 0 and 3 finite ratios >= 0 with a positive "
-                           f"training ratio, got n={n}, ratios={ratios!r}")
-    total = sum(ratios)
-    n_val = math.floor(n * ratios[1] / total + 0.5)
-    n_test = math.floor(n * ratios[2] / total + 0.5)
-    perm = rng.permutation(n)
-    val = np.sort(perm[:n_val])
-    test = np.sort(perm[n_val:n_val + n_test])
-    train = np.sort(perm[n_val + n_test:])
-    return train, val, test
 
 
 _CONTROLLER: ThreadpoolController | None = None
@@ -156,43 +119,13 @@ def levenberg_marquardt(
     w: FloatArray | None = None,
     options: LmOptions = LmOptions(),
     progress: Callable[[int, int], None] | None = None,
-    validation: tuple[FloatArray, FloatArray, FloatArray | None] | None = None,
 ) -> LmResult:
     """Minimise the weighted squared error of ``net`` on (x, y) from ``theta0`` (not modified).
 
     ``progress(iteration, max_iterations)`` is called after every accepted iteration.
-    ``validation`` = (x, y, w or None): held-out samples for MATLAB's validation stop.
     """
     with one_blas_thread():
-        return _levenberg_marquardt(net, theta0, x, y, w, options, progress, validation)
-
-
-class _Validation:
-    """MATLAB ``train``'s validation check: best cost so far, its parameters, failures in a row."""
-
-    __slots__ = ("best", "best_iteration", "best_theta", "fails", "net", "w", "x", "y")
-
-    def __init__(self, net: Mlp, data: tuple[FloatArray, FloatArray, FloatArray | None]) -> None:
-        x, y, w = data
-        if x.ndim != 2 or y.shape != (x.shape[0],) or y.size == 0:
-            raise UpdaterError(f"LM: the validation set needs n >= 1 samples with one target "
-                               f"each, got {x.shape}, {y.shape}")
-        self.net, self.x, self.y, self.w = net, x, y, _weights(w, y.size)
-        self.best = math.inf
-        self.best_theta = np.empty(0)
-        self.best_iteration = -1
-        self.fails = 0
-
-    def failed(self, theta: FloatArray, iteration: int, result: LmResult, max_fail: int) -> bool:
-        """Score ``theta``; True when the validation cost has stayed above its best long enough."""
-        r = self.net.forward(theta, self.x) - self.y
-        cost = float(self.w @ (r * r))
-        result.validation_costs.append(cost)
-        if cost < self.best:
-            self.best, self.best_theta, self.best_iteration, self.fails = cost, theta, iteration, 0
-        elif cost > self.best:
-            self.fails += 1
-        return self.fails >= max_fail
+        return _levenberg_marquardt(net, theta0, x, y, w, options, progress)
 
 
 def _levenberg_marquardt(
@@ -203,7 +136,6 @@ def _levenberg_marquardt(
     w: FloatArray | None,
     options: LmOptions,
     progress: Callable[[int, int], None] | None,
-    validation: tuple[FloatArray, FloatArray, FloatArray | None] | None,
 ) -> LmResult:
     n = x.shape[0]
     if y.shape != (n,) or n == 0:
@@ -229,9 +161,6 @@ def _levenberg_marquardt(
     r = acts[-1][:, 0] - y
     cost = float(weights @ (r * r))
     result = LmResult(theta, cost, cost, 0, 0, "max_iterations", [cost])
-    check = None if validation is None else _Validation(net, validation)
-    if check is not None:
-        check.failed(theta, 0, result, options.max_fail)
     mu = options.mu
     step_prev = np.zeros(n_params)
     while result.iterations < options.max_iterations:
@@ -276,20 +205,9 @@ def _levenberg_marquardt(
         result.costs.append(cost)
         if progress is not None:
             progress(result.iterations, options.max_iterations)
-        if check is not None and check.failed(theta, result.iterations, result,
-                                              options.max_fail):
-            result.stop = "validation"
-            break
         if options.rtol > 0.0 and decrease < options.rtol:
             result.stop = "rtol"
             break
-    if check is not None and check.best_iteration != result.iterations:
-        # MATLAB returns the network of the best validation cost, whatever stopped the fit.
-        theta = check.best_theta
-        r = net.forward(theta, x) - y
-        cost = float(weights @ (r * r))
     result.theta = theta
     result.cost = cost
-    if check is not None:
-        result.best_iteration = check.best_iteration
     return result

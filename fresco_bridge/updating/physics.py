@@ -125,7 +125,8 @@ class _PhysicsTwin:
         self._residual.commit()
 
     def advance(self, d: float) -> float:
-        """``set_trial(d)`` and ``commit()`` in one, the force only (shadow scoring)."""
+        """``set_trial(d)`` and ``commit()`` in one, the force only (the free runs that score
+        the experts)."""
         force = self._law.set_trial(d)[0]
         self._law.commit()
         residual = self._residual
@@ -181,11 +182,6 @@ class PhysicsResidual(OwnsTwin):
         self._twin = _PhysicsTwin(SteppedBoucWen(**self.law, dz_max=BOUC_WEN_DZ_MAX),
                                   self.residual.twin)  # fmt: skip
         self._last_update = 0.0
-
-    def source_twin(self) -> HysteresisModel:
-        """A twin on this expert's memory of the tested element now (shadow scoring): the
-        law's state and the residual's memory, both of the tested element."""
-        return _PhysicsTwin(self._source.clone(), self.residual.source_twin())
 
     def predict(self, d: float) -> float:
         """One-step-ahead force of the tested element at ``d`` (nothing committed)."""

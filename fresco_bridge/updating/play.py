@@ -219,10 +219,6 @@ class BranchStopRls(OwnsTwin):
     def weights(self) -> FloatArray:
         return self.rls.weights
 
-    def source_twin(self) -> BasisTwin[DualMemory]:
-        """A twin on this expert's memory of the tested element now (shadow scoring)."""
-        return BasisTwin(self.basis, self.rls, self._source)
-
     def predict(self, d: float) -> float:
         """One-step-ahead force of the *tested* element at ``d`` (before observing it)."""
         memory = self._source

@@ -225,25 +225,23 @@ def make_online_ann(*, model: Any = None, model_file: str | Path | None = None,
                     offline: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
                     offline_samples: int = 500, window: int = 200, forgetting: float = 0.1,
                     window_share: float | None = None, max_iterations: int | None = None,
-                    rtol: float | None = None, divide: str | None = None,
-                    max_fail: int | None = None, single_precision_hessian: bool | None = None,
+                    rtol: float | None = None, single_precision_hessian: bool | None = None,
                     seed: int = 0, pretrain_iterations: int = 1000) -> Updater:
     """The paper's online ANN: LM every step, by default 8 iterations with a float32 J^T W J
     (``ONLINE_ANN_LM``: equal in accuracy to the paper's 50 in float64, BENCHMARKS.md, "Online
     updating"); ``max_iterations=50, single_precision_hessian=False`` is the paper's exact fit.
 
-    ``rtol`` adds a relative-decrease stop, ``divide``/``max_fail`` MATLAB's validation stop
-    (BENCHMARKS.md, "Online updating", measures what they change). ``seed`` drives both the
-    pre-training start (with ``offline``) and the random choice of offline samples.
+    ``rtol`` adds a relative-decrease stop. ``seed`` drives both the pre-training start (with
+    ``offline``) and the random choice of offline samples.
     """
-    from .updaters import ONLINE_ANN_DIVIDE, ONLINE_ANN_LM, OnlineAnnUpdater, online_lm_options
+    from .updaters import ONLINE_ANN_LM, OnlineAnnUpdater, online_lm_options
 
     ann = _ann_model("online_ann", model, model_file, offline, seed, pretrain_iterations)
     return OnlineAnnUpdater(ann, offline_samples=offline_samples, window=window,
                             forgetting=forgetting, window_share=window_share,
-                            lm=online_lm_options(max_iterations, rtol, ONLINE_ANN_LM, max_fail,
+                            lm=online_lm_options(max_iterations, rtol, ONLINE_ANN_LM,
                                                  single_precision_hessian),
-                            divide=ONLINE_ANN_DIVIDE if divide is None else divide, seed=seed)
+                            seed=seed)
 
 
 def make_online_ukf(*, k0: float | None = None, alpha: float | None = None,

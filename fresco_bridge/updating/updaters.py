@@ -23,10 +23,9 @@ measurement ``(d_i, F_i)`` of the tested element:
    the twin under its own loading found it equal at a fraction of the time (beside the tested
    damper it re-fits the newest samples less tightly). ``max_iterations=50,
    single_precision_hessian=false`` is the paper's exact fit (``PAPER_ONLINE_LM``). A
-   relative-decrease stop (``rtol``) and MATLAB ``train``'s default data division with its
-   validation stop (``divide="dividerand"``: every step 70 % of the rows train, 15 % validate,
-   15 % are held out, the best-validation network is kept) are options. Figures, and why the
-   paper's reading is "all 700 rows train": ``BENCHMARKS.md``, "Online updating";
+   relative-decrease stop (``rtol``) is an option. Every one of the 700 rows trains (MATLAB
+   ``train``'s random data division with its validation stop withheld the newest sample and
+   lost on the twin: ``BENCHMARKS.md``, "Online updating");
 5. the twin (an :class:`~.ann.AnnTwin` with its own committed recurrence) uses the new network
    from its next trial on.
 """
@@ -44,14 +43,12 @@ from sim_actuator.models.base import HysteresisModel
 from .ann import AnnModel, AnnTwin
 from .base import OwnsTwin, UpdaterError, UpdaterInputError, check_measurement
 from .features import feature_row, next_energy
-from .lm import DIVIDERAND_RATIOS, LmOptions, LmResult, divide_rand, levenberg_marquardt
+from .lm import LmOptions, LmResult, levenberg_marquardt
 from .window import SampleWindow
 
 FloatArray = npt.NDArray[np.float64]
 
 __all__ = [
-    "DIVIDE_FUNCTIONS",
-    "ONLINE_ANN_DIVIDE",
     "ONLINE_ANN_LM",
     "PAPER_ONLINE_LM",
     "FixedModelUpdater",
@@ -60,13 +57,6 @@ __all__ = [
 ]
 
 _EPS = float(np.finfo(np.float64).eps)
-
-DIVIDE_FUNCTIONS = ("none", "dividerand")
-"""``online_ann``'s data division: ``none`` (every sample trains, no validation stop) or
-``dividerand`` (MATLAB ``train``'s default: 70/15/15 % at random every step, validation stop)."""
-
-ONLINE_ANN_DIVIDE = "none"
-"""``online_ann``'s default division (``BENCHMARKS.md``, "Online updating", argues the choice)."""
 
 PAPER_ONLINE_LM = LmOptions(max_iterations=50, mu=1e-5, momentum=0.1)
 """The paper's online LM: damping 1e-5, at most 50 iterations, momentum 0.1, ``trainlm``'s
@@ -121,7 +111,6 @@ class OnlineAnnUpdater(OwnsTwin):
         forgetting: float = 0.1,
         window_share: float | None = None,
         lm: LmOptions = ONLINE_ANN_LM,
-        divide: str = ONLINE_ANN_DIVIDE,
         seed: int = 0,
     ) -> None:
         self.model = model
@@ -135,12 +124,6 @@ class OnlineAnnUpdater(OwnsTwin):
                                f"got {window_share!r}")
         if window_share is not None and window_share < 1.0 and offline_samples == 0:
             raise UpdaterError(f"{self.name}: window_share < 1 needs offline_samples > 0")
-        if divide not in DIVIDE_FUNCTIONS:
-            raise UpdaterError(f"{self.name}: divide must be one of {', '.join(DIVIDE_FUNCTIONS)},"
-                               f" got {divide!r}")
-        self.divide = divide
-        # Its own stream, so the offline draws are the same with and without the division.
-        self._divide_rng = np.random.default_rng([seed, 1])
         self.offline_samples = offline_samples
         self.window_share = window_share
         self.lm = lm
@@ -158,7 +141,7 @@ class OnlineAnnUpdater(OwnsTwin):
     def __repr__(self) -> str:
         return (f"OnlineAnnUpdater({self.model.net!r}, offline_samples={self.offline_samples}, "
                 f"window={self._window.length}, forgetting={self._window.mu}, "
-                f"window_share={self.window_share}, lm={self.lm}, divide={self.divide!r})")
+                f"window_share={self.window_share}, lm={self.lm})")
 
     @property
     def theta(self) -> FloatArray:
@@ -196,13 +179,7 @@ class OnlineAnnUpdater(OwnsTwin):
         self._d_prev, self._f_prev = d, force
         self._e_prev = next_energy(self._e_prev, d, force)
         x, y, w = self.training_set()
-        validation = None
-        if self.divide == "dividerand":
-            train, val, _test = divide_rand(len(y), self._divide_rng, DIVIDERAND_RATIOS)
-            validation = (x[val], y[val], w[val]) if val.size else None
-            x, y, w = x[train], y[train], w[train]
-        fit = levenberg_marquardt(self.model.net, self._theta, x, y, w, self.lm,
-                                  validation=validation)
+        fit = levenberg_marquardt(self.model.net, self._theta, x, y, w, self.lm)
         self._theta = fit.theta
         self._twin.set_params(fit.theta)
         self.last_fit = fit
@@ -211,10 +188,10 @@ class OnlineAnnUpdater(OwnsTwin):
 
 
 def online_lm_options(max_iterations: int | None = None, rtol: float | None = None,
-                      base: LmOptions = ONLINE_ANN_LM, max_fail: int | None = None,
+                      base: LmOptions = ONLINE_ANN_LM,
                       single_precision_hessian: bool | None = None) -> LmOptions:
-    """``base`` with the iteration cap, early-stopping tolerance, validation patience and
-    J^T W J precision overridden."""
+    """``base`` with the iteration cap, early-stopping tolerance and J^T W J precision
+    overridden."""
     changes: dict[str, float | int | bool] = {}
     if single_precision_hessian is not None:
         changes["single_precision_hessian"] = single_precision_hessian
@@ -222,6 +199,4 @@ def online_lm_options(max_iterations: int | None = None, rtol: float | None = No
         changes["max_iterations"] = max_iterations
     if rtol is not None:
         changes["rtol"] = rtol
-    if max_fail is not None:
-        changes["max_fail"] = max_fail
     return replace(base, **changes) if changes else base  # type: ignore[arg-type]

@@ -51,6 +51,7 @@ __all__ = [
     "bwbn_advance",
     "bwbn_vector",
     "drive",
+    "drive_from",
     "drive_many",
     "law_vector",
 ]
@@ -539,6 +540,35 @@ def drive(law: int, params: FloatArray, d: FloatArray, gap: float = 0.0,
     prm = np.ascontiguousarray(params, dtype=np.float64)
     path = np.ascontiguousarray(d, dtype=np.float64)
     result: FloatArray = _drive(int(law), prm, path, float(gap), float(dz_max))
+    return result
+
+
+@njit(cache=True)
+def _drive_from(law: int, prm: FloatArray, d: FloatArray, start: FloatArray,
+                dz_max: float) -> FloatArray:
+    out = np.empty(d.size)
+    state = start.copy()
+    trial = np.empty(STATE_SIZE)
+    for k in range(d.size):
+        if not _trial(law, prm, state, d[k], dz_max, trial):
+            out[k:] = math.nan
+            return out
+        state[:] = trial
+        out[k] = trial[1]
+    return out
+
+
+def drive_from(law: int, params: FloatArray, d: FloatArray, start: FloatArray,
+               dz_max: float = DEFAULT_DZ_MAX) -> FloatArray:
+    """``drive`` (no gap) from the committed kernel state ``start`` (``STATE_SIZE`` values:
+    [d, f, z, e, …]) instead of the virgin one: an online refit's window, which starts where the
+    element's history before it left the law."""
+    prm = np.ascontiguousarray(params, dtype=np.float64)
+    path = np.ascontiguousarray(d, dtype=np.float64)
+    state = np.ascontiguousarray(start, dtype=np.float64)
+    if state.shape != (STATE_SIZE,):
+        raise ValueError(f"drive_from: start must hold {STATE_SIZE} values, got {state.shape}")
+    result: FloatArray = _drive_from(int(law), prm, path, state, float(dz_max))
     return result
 
 

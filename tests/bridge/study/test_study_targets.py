@@ -41,17 +41,20 @@ def test_every_target_met() -> None:
     runs = [_run("bwbn", 0.0, _case(1.0, 0.1)),  # 90 % MAETH, 95 % RMSETH
             _run("bwbn", 1.0, _case(1.5)),  # 85 %
             _run("menegotto-pinto", 0.0, _case(4.0), ann=8.0),  # 60 %
-            _run("menegotto-pinto", 1.0, _case(5.0), seed=2, ann=8.0)]  # 50 %  # fmt: skip
+            _run("menegotto-pinto", 1.0, _case(5.0), seed=2, ann=8.0),  # 50 %
+            _run("bilinear", 0.0, _case(11.0)),  # 1.1x the calibrated Bilinear: no harm
+            _run("bouc-wen", 1.0, _case(2.0), ukf=1.0)]  # in family the UKF may win  # fmt: skip
     got = _targets(runs)
     for spec in TARGETS:
         assert got[spec.name]["verdict"] == "met", spec.name
         assert got[spec.name]["bad"] == []
     assert got["bwbn_noise0"]["runs"] == got["bwbn_noise0"]["meeting"] == 1
-    assert got["below_online_ukf"]["meeting"] == 4
+    assert got["below_online_ukf"]["meeting"] == 4  # out of family only
+    assert got["in_family_no_harm"]["runs"] == 2
     assert got["below_online_ann"]["runs"] == 2  # scored where online_ann ran
     assert got["menegotto_pinto"]["median_pct"] == 55.0
     text = targets_markdown(score_targets(runs))
-    assert "### causality same-step (4 run(s))" in text and "**missed**" not in text
+    assert "### causality same-step (6 run(s))" in text and "**missed**" not in text
     assert "- bwbn, 0 % noise: MAETH ≥ 85 % and RMSETH ≥ 90 % below: met, 1 of 1 run(s)" in text
 
 
@@ -99,8 +102,22 @@ def test_below_rivals_missed_and_not_run() -> None:
     assert got["below_online_ukf"]["bad"][0]["figure"] == "MAETH 1.000 kN, online_ukf 0.500 kN"
     assert got["below_online_ann"]["verdict"] == "not run"
     assert got["below_online_ann"]["runs"] == 0
-    assert "- MAETH below online_ann on every run: not run\n" in targets_markdown(
-        score_targets(runs))
+    assert "- bwbn, menegotto-pinto: MAETH below online_ann on every run: not run\n" in (
+        targets_markdown(score_targets(runs)))
+
+
+def test_in_family_no_harm_names_the_run_that_did_harm() -> None:
+    runs = [_run("bilinear", 0.0, _case(10.9)),
+            _run("bouc-wen", 0.0, _case(11.2), seed=4)]  # 1.12x the calibrated Bilinear
+    entry = _targets(runs)["in_family_no_harm"]
+    assert (entry["verdict"], entry["meeting"], entry["runs"]) == ("missed", 1, 2)
+    assert entry["bad"][0]["seed"] == 4
+    assert entry["bad"][0]["figure"] == ("MAETH 11.2000 kN, conventional_calibrated 10.0000 kN "
+                                         "(×1.120)")
+    text = targets_markdown(score_targets(runs))
+    assert ("- bilinear, bouc-wen (in family): MAETH ≤ 1.1× conventional_calibrated's on every "
+            "run: **missed**, 1 of 2 run(s)") in text
+    assert "no target" not in text and "| no target |" not in summary_table(runs)
 
 
 def test_bounded_missed_when_the_twin_overshoots_or_is_not_finite() -> None:

@@ -120,8 +120,7 @@ def test_the_mixture_weights_the_expert_that_predicts_the_tested_element_better(
     """A basis without memory terms against one with them, on a law whose branches depend on
     the previous excursion: weights sum to 1 and follow the one-step innovations."""
     d = cyclic(1500, 10.0, 1)
-    updater = OnlineImproved(offline=(d, drive(d)), experts="reversal,reversal+memory",
-                             shadow=False)
+    updater = OnlineImproved(offline=(d, drive(d)), experts="reversal,reversal+memory")
     w0 = updater.mixture_weights()
     assert w0.sum() == pytest.approx(1.0) and np.allclose(w0, 0.5)
     tested = cyclic(1500, 12.0, 2)
@@ -135,17 +134,26 @@ def test_the_mixture_weights_the_expert_that_predicts_the_tested_element_better(
     np.testing.assert_allclose(w, expected)
 
 
-def test_a_single_expert_mixture_is_that_expert() -> None:
+def test_a_single_expert_mixture_is_that_expert_or_the_offline_start() -> None:
+    """The twin serves the one expert, or the offline start (the calibrated Bilinear) while
+    the expert's accumulated free-run error is the larger (do no harm), each on the twin's
+    whole history."""
     d = cyclic(600, 10.0, 1)
     mixture = OnlineImproved(offline=(d, drive(d)), experts="reversal")
     alone = BranchRls(offline=(d, drive(d)))
+    start = make_model("bilinear", **mixture.start_params)
     tested = cyclic(400, 12.0, 2)
+    served = []
     for x, f in zip(tested.tolist(), drive(tested).tolist(), strict=True):
         mixture.observe(x, f)
         alone.observe(x, f)
-        assert mixture.twin.set_trial(0.5 * x)[0] == pytest.approx(alone.twin.set_trial(0.5 * x)[0])
-        mixture.twin.commit()
-        alone.twin.commit()
+        expected = (start if mixture.serving_start else alone.twin).set_trial(0.5 * x)[0]
+        (alone.twin if mixture.serving_start else start).set_trial(0.5 * x)
+        assert mixture.twin.set_trial(0.5 * x)[0] == pytest.approx(expected)
+        served.append(mixture.serving_start)
+        for twin in (mixture.twin, alone.twin, start):
+            twin.commit()
+    assert not served[-1]  # the expert learned this law far better than a Bilinear
 
 
 def test_branch_memory_remembers_the_previous_branch() -> None:
@@ -168,7 +176,7 @@ def test_initial_stiffness_is_the_first_loading_slope() -> None:
 
 def test_every_expert_is_available() -> None:
     assert EXPERTS == ("reversal", "reversal+memory", "bouc-wen+memory", "reversal+stops",
-                       "baber-wen")
+                       "baber-wen", "bilinear")
     d = cyclic(300, 10.0, 1)
     optional = OnlineImproved(offline=(d, drive(d)), experts="reversal+memory+stops")
     assert optional.expert_names == ("reversal+memory+stops",)

@@ -120,6 +120,7 @@ def test_non_finite_measurements_are_refused_and_change_nothing(
         ((np.full(30, math.nan), np.zeros(30)), {}, "NaN"),
         ((np.zeros(30), np.zeros(30)), {"every": 0}, ">= 1"),
         ((np.zeros(30), np.zeros(30)), {"offline_weight": -1.0}, "offline_weight"),
+        ((np.zeros(30), np.zeros(30)), {"every": 300, "window": 200}, "window must be >= every"),
     ],
 )
 def test_bad_construction_is_a_clear_error(offline: tuple[np.ndarray, np.ndarray],
@@ -127,3 +128,47 @@ def test_bad_construction_is_a_clear_error(offline: tuple[np.ndarray, np.ndarray
     with pytest.raises(UpdaterError, match=match):
         RefitUpdater(BILINEAR, offline=offline, **options)  # type: ignore[arg-type]
 
+
+
+def test_a_windowed_refit_learns_from_the_window_start_state_and_keeps_bounded_memory() -> None:
+    """A window shorter than the run: each refit replays only the last ``window`` steps, from
+    the law's state before them (not from rest), so it still identifies the law after yield;
+    the windows hold at most ``window`` samples; shorter than the window, the run is fitted
+    exactly as with an unbounded one."""
+    d = path(1200, 8.0, 5)
+    f = law_forces(Bilinear(**LAW), d)
+    off = path(300, 8.0, 1)
+    offline = (off, law_forces(Bilinear(k0=5.0, fy=8.0, alpha=0.1), off))
+    options = {"every": 100, "warmup": 100, "max_nfev": 30, "offline_weight": 0.0}
+    short = RefitUpdater(BILINEAR, offline=offline, window=200, **options)  # type: ignore[arg-type]
+    unbounded = RefitUpdater(BILINEAR, offline=offline, window=10**6, **options)  # type: ignore[arg-type]
+    for i in range(d.size):
+        short.observe(float(d[i]), float(f[i]))
+        unbounded.observe(float(d[i]), float(f[i]))
+        short.twin.set_trial(0.7 * float(d[i]))
+        short.twin.commit()
+        if i == 150:  # before the window fills: the same fit as on the whole history
+            assert short.parameters == unbounded.parameters
+    assert short.parameters == pytest.approx(LAW, rel=1e-3)
+    assert len(short._history) == 200 and len(short._twin._window) == 200  # type: ignore[attr-defined]
+    truth = law_forces(Bilinear(**LAW), 0.7 * d)
+    assert short.twin.committed[1] == pytest.approx(truth[-1], abs=1e-6)
+
+
+def test_the_fast_window_forces_are_the_laws_own() -> None:
+    """``forces_from`` (the JIT kernel from a committed state) gives the objects' forces to the
+    bit, for both online laws, from a state after yield."""
+    from fresco_bridge.updating.bilinear import _build as bilinear_law
+    from fresco_bridge.updating.bilinear import _forces_from as bilinear_from
+    from fresco_bridge.updating.degrading import _build as baber_wen_law
+    from fresco_bridge.updating.degrading import _forces_from as baber_wen_from
+
+    d = path(1500, 10.0, 6)
+    baber_wen = {"k0": 8.0, "fy": 12.0, "alpha": 0.05, "n": 2.0, "beta": 0.5,
+                 "delta_nu": 1e-3, "delta_eta": 1e-3}  # fmt: skip
+    for build, fast, params in ((bilinear_law, bilinear_from, LAW),
+                                (baber_wen_law, baber_wen_from, baber_wen)):
+        model = build(params)
+        law_forces(model, d[:700])
+        state = model.state()  # type: ignore[attr-defined]
+        np.testing.assert_array_equal(fast(params, d[700:], state), law_forces(model, d[700:]))

@@ -169,7 +169,7 @@ def test_an_updater_without_what_it_is_built_from_names_the_option(
                              "for k0"),
     ("none", "params=3", "--option params=3: updater 'none' takes an object of numbers or null "
                          "for params"),
-    ("online_improved", "shadow=\"yes\"", "takes true or false for shadow"),
+    ("online_improved", "law_trust=\"yes\"", "takes a number for law_trust"),
     ("online_improved", "experts=3", "takes a string or a list of strings for experts"),
     ("online_ukf", "offline=1", "--option offline: give it as --offline DATA"),
     ("online_ann", "model_file=\"m.pt\"", "--option model_file: give it as --model F"),

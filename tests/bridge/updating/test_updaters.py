@@ -241,27 +241,3 @@ def test_online_ann_default_is_the_papers_method_at_8_iterations(small_ann: AnnM
     assert fit.stop != "rtol"
     fit = paper.last_fit  # type: ignore[attr-defined]
     assert fit.iterations == 50 or fit.stop in ("gradient", "mu_max", "cost_zero")
-
-
-def test_online_ann_dividerand_is_reproducible_and_keeps_the_offline_draws(
-        small_ann: AnnModel) -> None:
-    """divide="dividerand": MATLAB train's random 70/15/15 split every step, validation stop;
-    the same seed gives the same fits, and the offline draws do not depend on the division."""
-    opts: dict[str, Any] = {"model": small_ann, "offline_samples": 60, "window": 20, "seed": 4}
-    runs = [make_updater("online_ann", divide="dividerand", **opts) for _ in range(2)]
-    plain = make_updater("online_ann", max_iterations=2, **opts)
-    preds: list[list[float]] = [[], []]
-    for di, fi in zip(D[:12], F[:12], strict=True):
-        for k, u in enumerate(runs):
-            u.observe(float(di), float(fi))
-            preds[k].append(u.twin.set_trial(float(di))[0])
-            u.twin.commit()
-        plain.observe(float(di), float(fi))
-    assert preds[0] == preds[1]
-    fit = runs[0].last_fit  # type: ignore[attr-defined]
-    assert fit.stop in ("validation", "max_iterations", "gradient", "mu_max", "cost_zero")
-    assert len(fit.validation_costs) == fit.iterations + 1 and fit.best_iteration >= 0
-    for a, b in zip(runs[0].training_set(), plain.training_set(), strict=True):  # type: ignore[attr-defined]
-        np.testing.assert_array_equal(a, b)
-    with pytest.raises(UpdaterError, match="divide"):
-        make_updater("online_ann", divide="divideblock", **opts)

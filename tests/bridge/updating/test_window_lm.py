@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fresco_bridge.updating import UpdaterError
-from fresco_bridge.updating.lm import LmOptions, divide_rand, levenberg_marquardt
+from fresco_bridge.updating.lm import LmOptions, levenberg_marquardt
 from fresco_bridge.updating.mlp import PAPER_LAYERS, Mlp
 from fresco_bridge.updating.window import SampleWindow, forgetting_weights
 
@@ -153,59 +153,3 @@ def test_lm_counts_its_factorisations() -> None:
     net, _, x, y, start = _realisable_problem()
     res = levenberg_marquardt(net, start, x, y, options=LmOptions(max_iterations=10))
     assert res.factorisations >= res.iterations == res.jacobians
-
-
-def test_divide_rand_is_matlabs_split_and_reproducible() -> None:
-    train, val, test = divide_rand(700, np.random.default_rng(3))
-    assert (train.size, val.size, test.size) == (490, 105, 105)  # round(0.15 n) each, rest trains
-    np.testing.assert_array_equal(np.sort(np.concatenate((train, val, test))), np.arange(700))
-    assert all(np.all(np.diff(part) > 0) for part in (train, val, test))  # sorted, disjoint
-    again = divide_rand(700, np.random.default_rng(3))
-    for a, b in zip((train, val, test), again, strict=True):
-        np.testing.assert_array_equal(a, b)
-    other = divide_rand(700, np.random.default_rng(4))[1]
-    assert not np.array_equal(val, other)
-    assert [p.size for p in divide_rand(5, np.random.default_rng(0), (1.0, 1.0, 0.0))] == [2, 3, 0]
-    with pytest.raises(UpdaterError, match="ratios"):
-        divide_rand(10, np.random.default_rng(0), (0.0, 0.5, 0.5))
-
-
-def test_validation_stop_keeps_the_start_when_training_only_overfits() -> None:
-    """Training targets corrupted, validation clean and already fitted at the start: every
-    iteration raises the validation cost, so the fit stops after max_fail and returns theta0."""
-    net, theta_true, x, y, _ = _realisable_problem()
-    noisy = y + 0.3 * np.random.default_rng(9).standard_normal(y.size)
-    res = levenberg_marquardt(net, theta_true, x[:60], noisy[:60],
-                              options=LmOptions(max_iterations=50, max_fail=4),
-                              validation=(x[60:], y[60:], None))
-    assert res.stop == "validation" and res.iterations == 4 and res.best_iteration == 0
-    assert res.validation_costs[0] < 1e-20 and min(res.validation_costs[1:]) > 0.0
-    np.testing.assert_array_equal(res.theta, theta_true)
-    assert res.cost == pytest.approx(res.initial_cost)  # the cost of what is returned
-
-
-def test_validation_stop_fires_max_fail_iterations_after_the_best() -> None:
-    net, _, x, y, start = _realisable_problem()
-    noisy = y + 0.05 * np.random.default_rng(10).standard_normal(y.size)
-    res = levenberg_marquardt(net, start, x[:30], noisy[:30],
-                              options=LmOptions(max_iterations=200, max_fail=6),
-                              validation=(x[30:], y[30:], np.ones(50)))
-    vc = np.array(res.validation_costs)
-    assert len(vc) == res.iterations + 1
-    best = int(np.argmin(vc))
-    assert res.best_iteration == best > 0 and vc[best] < vc[0]
-    assert res.stop == "validation" and res.iterations == best + 6
-    assert np.all(vc[best + 1:] > vc[best])  # six rises above the best, not necessarily in a row
-    r = net.forward(res.theta, x[30:]) - y[30:]
-    assert float(r @ r) == pytest.approx(vc[best], rel=1e-12)  # the best-validation network
-
-
-def test_validation_that_keeps_improving_never_stops_the_fit() -> None:
-    net, _, x, y, start = _realisable_problem()
-    res = levenberg_marquardt(net, start, x[::2], y[::2], options=LmOptions(max_iterations=15),
-                              validation=(x[1::2], y[1::2], None))
-    assert res.stop == "max_iterations" and res.best_iteration == res.iterations == 15
-    with pytest.raises(UpdaterError, match="validation"):
-        levenberg_marquardt(net, start, x, y, validation=(x, y[:3], None))
-    with pytest.raises(UpdaterError, match="max_fail"):
-        LmOptions(max_fail=0)
