@@ -11,6 +11,7 @@ import logging
 import shutil
 import ssl
 import threading
+import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -301,6 +302,10 @@ class Bridge:
             await self.close()
 
 
+DRAIN_SECONDS = 10.0
+"""How long ``BridgeThread.drain`` waits for the sessions' DIE by default."""
+
+
 class BridgeThread:
     """A bridge on its own event loop in a background thread (demo, benchmarks, tests).
 
@@ -351,6 +356,22 @@ class BridgeThread:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+    def drain(self, timeout: float = DRAIN_SECONDS) -> bool:
+        """Wait until no site serves a session, at most ``timeout`` s; True if none does.
+
+        Why: a client's last commit and DIE need no reply, so they may still be in flight when
+        its owner is done; a twin's last step may still be with its learner. Stopping then
+        would end those sessions as if the client had vanished (the demo drains before it
+        stops)."""
+        if self._loop is None or not self._thread.is_alive():
+            return True
+        end = time.monotonic() + timeout
+        while self.call(lambda: any(site.busy for site in self.bridge.sites.values())):
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.01)
+        return True
 
     def stop(self) -> None:
         if self._loop is not None and self._stop is not None and self._thread.is_alive():

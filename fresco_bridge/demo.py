@@ -120,6 +120,7 @@ def bridge_act(cfg: LabConfig, text: str, runs: Path, act: str) -> Iterator[Brid
         with thread as bridge:
             run_log.open(bridge.run_dir / BRIDGE_LOG)
             yield bridge
+            bridge.drain()  # the act's clients have sent DIE: let their sessions end
     except KeyboardInterrupt as exc:  # in the act, or while its bridge was starting
         if isinstance(exc, Interrupted):
             raise

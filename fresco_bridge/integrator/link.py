@@ -7,6 +7,7 @@ deadline on every receive and raises ``LinkError`` instead of spinning on a dead
 from __future__ import annotations
 
 import contextlib
+import math
 import socket
 
 from protocol import (
@@ -29,11 +30,13 @@ class LinkError(ConnectionError):
 
 
 class SessionRefused(LinkError):
-    """The bridge ended the connection before its first answer: it refused the session.
+    """The bridge refused the session: it closed the connection, or answered NaN, before any
+    measurement.
 
-    A bridge closes the connection of a client whose size ID does not fit the site (another
-    number of DOFs), of an address it does not allow, or while the site is busy; it sends no
-    reason (the protocol has no message for one), so the reason is in the bridge's log."""
+    A bridge refuses a client whose size ID does not fit the site (another number of DOFs), an
+    address it does not allow, or a client while the site is busy: it answers NaN (what makes
+    OpenSees stop) or closes; the protocol has no message for a reason, so the reason is in the
+    bridge's log."""
 
 
 class GenericClientLink:
@@ -55,6 +58,7 @@ class GenericClientLink:
         self.timeout = timeout
         self.sock: socket.socket | None = None
         self._answered = False  # any reply received: a close before one is a refusal
+        self._measured = False  # a finite answer received: NaN before one is a refusal
 
     # -- connection --------------------------------------------------------------------------
     def connect(self) -> GenericClientLink:
@@ -144,7 +148,23 @@ class GenericClientLink:
 
     def request(self, action: Action) -> ReplyReceived:
         self._send(self.session.send_request(action))
-        return self._reply()
+        reply = self._reply()
+        if not self._measured:
+            if reply.values and all(math.isnan(v) for v in reply.values):
+                raise self._told_to_stop()
+            self._measured = True
+        return reply
+
+    def _told_to_stop(self) -> SessionRefused:
+        """NaN before any measurement: the bridge's way to tell an integrator to stop."""
+        host, port = self.address
+        sid = self.size_id
+        return SessionRefused(
+            f"the bridge at {host}:{port} refused the session: it answered NaN (its way to tell "
+            f"an integrator to stop) before any measurement ({self.n}-DOF genericClient, sizes "
+            f"ctrl={sid.ctrl.as_tuple()} daq={sid.daq.as_tuple()} dataSize={sid.data_size}); "
+            "its log says why (a site serving another number of DOFs, an address not in "
+            "allowed_clients, a site busy with another client, a HOLD at the first command)")
 
     def force(self) -> tuple[float, ...]:
         return self.request(Action.GET_FORCE).values[: self.n]

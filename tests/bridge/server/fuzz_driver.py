@@ -103,7 +103,7 @@ class FuzzTarget:
     def close(self) -> None:
         while self.held:
             self.held.popleft().close()
-        self.bridge.__exit__()
+        self.bridge.stop()
 
     @property
     def run_dir(self) -> Path:
