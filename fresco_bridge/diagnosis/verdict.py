@@ -219,9 +219,10 @@ def diagnose(record: Record, options: Options | None = None,
         if (decided["effect"] in ("unexplained", "baseline_misfit") and noise_single is not None
                 and noise_pct > policy.ordinary_noise_pct
                 and decided["better_family"] is None
-                and (noise_single.after["total_pct"] or 0.0) < max(policy.noise_floor_pct,
-                                                                    sys_floor)):
-            # the noise the calibration residual shows (coloured too) accounts for the gap
+                and (noise_single.after["total_pct"] or 0.0)
+                < (decided["gap_after_pct"] or raw_gap)):
+            # the noise the calibration residual shows (coloured too) accounts for more of the
+            # gap than the best candidate does
             decided = nothing_systematic(raw_gap, noise_pct, policy,
                                          "no candidate explains the withheld gap "
                                          f"{raw_gap:.2f} %", noise_named)
