@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..numbers import fmt, pct
-from ..report.diagnosis import BASIS_WORDS, confidence_text, on_basis
+from ..report.diagnosis import BASIS_WORDS, confidence_text, headline, on_basis
 from .result import Diagnosis, json_ready
 
 __all__ = ["summary", "to_json", "write_json", "write_report"]
@@ -53,8 +53,7 @@ def summary(diagnosis: Diagnosis) -> str:
             f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
     stories = verdict.get("stories") or []
-    named = (" or ".join(str(st["effect"]) for st in stories) if len(stories) > 1
-             else verdict["effect"])
+    named = headline(result)["named"]
     lines.append(f"VERDICT   {named} (confidence {confidence_text(verdict)}): "
                  f"{verdict['explanation']}")
     if result.get("hidden"):
