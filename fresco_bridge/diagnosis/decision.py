@@ -21,8 +21,9 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from .model import LIMIT_FORMS
 from .options import Policy
-from .scored import Scored, information
+from .scored import Scored, at_bound, information
 from .scored import finite as _finite
 
 __all__ = ["SEPARATED_BY", "confidence_words", "decide", "nothing_systematic", "pct_text"]
@@ -106,14 +107,27 @@ def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[S
                                f"baseline shrinks the withheld gap from {gap:.2f} % to "
                                f"{after:.2f} % (BIC {bic[id(best)] - base_bic:+.1f} against "
                                f"the {law} baseline), more than any effect on the {law} law"}
+    limit = _limit_form(best, ranked)
+    if limit is not None:
+        # the winner sits where its form is another candidate's (a rate law at its smallest
+        # exponent is Coulomb friction): one story, told by the candidate that states the form
+        # and weighed with the evidence of both
+        limit_text = (f"{best.name} fitted at the bound where it is {limit.name} "
+                      f"({', '.join(sorted(set(best.values) - best.free))}), leaving "
+                      f"{pct_text(best.after['total_pct'])}: named {limit.name}; ")
+        merged = weight(best) + weight(limit)
+        told = [set(best.effects), set(limit.effects)]
+        ranked = [limit, *[s for s in ranked if s is not limit and s is not best]]
+        best = limit
+    else:
+        limit_text, merged, told = "", 0.0, [set(best.effects)]
     rivals = [s for s in ranked[1:] if s.role == "candidate"
-              and not set(s.effects) >= set(best.effects)
-              and not set(s.effects) <= set(best.effects)]
+              and not any(set(s.effects) >= t or set(s.effects) <= t for t in told)]
     runner = rivals[0] if rivals else None
     after = best.after["total_pct"] or 0.0
     flags = best.flags
-    confidence = weight(best) * policy.flag_factor ** len(flags)
-    text = (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} % "
+    confidence = (merged or weight(best)) * policy.flag_factor ** len(flags)
+    text = limit_text + (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} % "
             f"(BIC {bic[id(best)] - base_bic:+.1f} against the baseline, {best.n_free} "
             f"parameter{'s' if best.n_free != 1 else ''} estimated, "
             f"{sum(x for x in n_eff if x):.0f} effective withheld samples)"
@@ -146,6 +160,20 @@ def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[S
         "flags": flags, "better_family": None, "stories": stories,
         "separated_by": separated_by, "explanation": text,
     }
+
+
+def _limit_form(best: Scored, ranked: Sequence[Scored]) -> Scored | None:
+    """The candidate whose form ``best`` takes at a bound it sits at (``model.LIMIT_FORMS``),
+    when that candidate was heard too."""
+    if len(best.effects) != 1:
+        return None
+    params = {p.name: p for p in best.params}
+    for (effect, name, side), form in LIMIT_FORMS.items():
+        p = params.get(name)
+        if effect == best.name and p is not None and name in best.values and at_bound(
+                best.values[name], p.lo, p.hi, side):
+            return next((s for s in ranked if s.name == form), None)
+    return None
 
 
 def _collapsed(pair: Scored, singles: Sequence[Scored]) -> bool:

@@ -28,9 +28,10 @@ Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for us
    ``sensor_noise`` when a channel's noise is above the ordinary level
    (:class:`.options.Policy`), else ``none`` (``decision.nothing_systematic``).
 6. Otherwise the one selection rule (``decision``): the lowest BIC on the withheld part wins
-   if it beats the baseline's; its weight is the confidence; a rival within the policy's
-   ``two_story_delta`` that tells another story is named beside it, with the measurement that
-   would separate them.
+   if it beats the baseline's (a winner at the bound where it is another candidate's form,
+   ``model.LIMIT_FORMS``, is named as that one); its weight is the confidence; a rival within
+   the policy's ``two_story_delta`` that tells another story is named beside it, with the
+   measurement that would separate them.
 """
 
 from __future__ import annotations

@@ -62,10 +62,16 @@ def test_a_rate_law_that_fits_no_better_than_coulomb_friction_is_friction() -> N
     assert verdict["effect"] == "rate_dependence" and not verdict["stories"], verdict
 
 
-def test_a_rate_law_at_its_smallest_exponent_counts_one_parameter() -> None:
+def test_a_rate_law_at_its_smallest_exponent_is_coulomb_friction() -> None:
     rate = candidate("rate_dependence", [VISCOUS, EXPONENT],
-                     {"viscous": 1.0, "rate_exponent": 0.1}, 4.0)
+                     {"viscous": 1.0, "rate_exponent": 0.1}, 3.8)
     assert rate.n_free == 1
+    friction = candidate("friction", [COULOMB, SLIP], {"coulomb": 1.0, "slip": 0.1}, 4.0)
+    gap = candidate("backlash", [GAP], {"gap": 0.5}, 9.0)
+    verdict = decide(BEFORE, [rate, friction, gap], [], [], Policy(), 0.0, "bouc-wen", N_EFF)
+    assert verdict["effect"] == "friction", verdict
+    assert "at the bound where it is friction" in verdict["explanation"]
+    assert not verdict["stories"]  # one story told twice is not two stories
 
 
 def test_a_pinching_indistinguishable_from_a_gap_is_two_stories_with_weights() -> None:
