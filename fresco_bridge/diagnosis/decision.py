@@ -77,10 +77,12 @@ def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[S
     gap = before["total_pct"] or 0.0
     floor = policy.noise_floor_pct
     base_bic = information(before, n_eff, 0)
+    # heard: a candidate that leaves less of the withheld gap than the baseline (better than the
+    # sim) and changes its prediction by at least the floor (big enough to hear)
     heard = [s for s in [*singles, *[p for p in pairs if not _collapsed(p, singles)],
                          *families]
              if s.force is not None and "sensor_noise" not in s.effects
-             and s.after["total_pct"] is not None and math.isfinite(s.after["total_pct"])
+             and s.after["total_pct"] is not None and s.after["total_pct"] < gap
              and (not s.effects or s.size >= floor)]
     bic = {id(s): information(s.after, n_eff, s.n_free) for s in heard}
     ranked = sorted(heard, key=lambda s: bic[id(s)])
