@@ -305,10 +305,12 @@ FormItem = tuple[str, int, int]
 
 def form_items(per_form: int, seed: int, steps: int,
                forms: list[str] | None = None) -> list[FormItem]:
-    """``per_form`` records of every form (or of ``forms``), seeds derived from ``seed``."""
+    """``per_form`` records of every form (or of ``forms``), seeds derived from ``seed`` and the
+    form's place in the matrix (``--only`` draws the same records as the whole matrix)."""
     names = list(FORMS) if forms is None else forms
-    return [(form, seed * 100_003 + 1_000 * i + k, steps)
-            for i, form in enumerate(names) for k in range(per_form)]
+    place = {form: i for i, form in enumerate(FORMS)}
+    return [(form, seed * 100_003 + 1_000 * place[form] + k, steps)
+            for form in names for k in range(per_form)]
 
 
 def form_one(item: FormItem) -> dict[str, Any]:
