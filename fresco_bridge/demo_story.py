@@ -367,7 +367,7 @@ def _diagnosis_line(dg: dict[str, Any]) -> str:
         return f"diagnosis      {dg['effect']}: {dg['explanation']}"
     magnitude = ", ".join(f"{k} {fmt(v['value'], '' if v['unit'] == '1' else v['unit'], 3)}"
                           for k, v in dg["magnitude"].items()) or "–"
-    return (f"diagnosis      {dg['effect']} ({magnitude}; confidence {dg['confidence_text']}) "
+    return (f"diagnosis      {dg['named']} ({magnitude}; confidence {dg['confidence_text']}) "
             f"against a {dg['baseline']} sim: adding it shrinks the withheld gap from "
             f"{pct(dg['gap_before_pct'], 1)} to {pct(dg['gap_after_pct'], 1)} "
             f"({pct(dg['shrink_pct'], 1)})")

@@ -32,14 +32,16 @@ import numpy as np
 
 from fresco_bridge.diagnosis.load import Record
 from fresco_bridge.diagnosis.model import EFFECT_NAMES, rate_force
+from fresco_bridge.diagnosis.result import Verdict
 from fresco_bridge.diagnosis.verdict import diagnose
 from fresco_bridge.numbers import fmt, pct
 
 from .independent import UNDERSHOOT, IndependentRecord, case_label, independent_record
 from .synth import SyntheticRecord, synthetic_record
 
-__all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "credit", "diagnose_one",
-           "effect_magnitude", "format_bench", "generate", "row_credit", "summarise_bench"]
+__all__ = ["CLASSES", "MAGNITUDE_OF", "bench_items", "contains_truth", "credit", "diagnose_one",
+           "effect_magnitude", "format_bench", "generate", "row_credit", "summarise_bench",
+           "verdict_label"]
 
 CLASSES = (*EFFECT_NAMES, "none", "none")
 MAGNITUDE_OF = {
@@ -131,6 +133,7 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
     generated = time.perf_counter()
     result = diagnose(synthetic.record).to_json()
     verdict = result["verdict"]
+    label = verdict_label(verdict)
     also = synthetic.also_present if isinstance(synthetic, SyntheticRecord) else {}
     # the candidate the estimates come from: the verdict's when it is right (the primary named
     # with an effect the rig adds: the pair's fit), else the true effect's
@@ -159,7 +162,7 @@ def diagnose_one(item: BenchItem) -> dict[str, Any]:
             errors["magnitude_normalised"] = abs(plain_found - plain_truth) / abs(plain_truth)
     return {
         "index": index, "effect": effect, "seed": record_seed,
-        "samples": synthetic.record.size, "predicted": verdict["effect"],
+        "samples": synthetic.record.size, "predicted": label,
         "baseline": result["baseline"]["kind"],
         "confidence": verdict["confidence"], "truth": synthetic.truth, "also_present": also,
         "estimates": estimates,
@@ -195,12 +198,30 @@ def credit(truth: str, predicted: str, also_present: Collection[str] = ()) -> fl
     """The bench's one scoring rule. 1 for the right verdict: the truth's effects (a pair in
     any order), or the truth's effects named with some of ``also_present`` (second effects the
     generator really added, which the record lists beside its primary effect); 0.5 when truth
-    or verdict is a pair and they share one member; else 0. Without ``also_present`` (the plain
-    and independent benches, and every strict figure) the truth is its label alone."""
+    or verdict is a pair and they share one member, or when the verdict is two stories
+    (``a|b``: :func:`verdict_label`) one of which is right; else 0. Without ``also_present``
+    (the plain and independent benches, and every strict figure) the truth is its label
+    alone."""
+    if "|" in predicted:  # two stories: half right when one of them is right
+        return 0.5 if any(credit(truth, story, also_present) == 1.0
+                          for story in predicted.split("|")) else 0.0
     t, p = _members(truth), _members(predicted)
     if t == p or (t < p and p - t <= set(also_present)):
         return 1.0
     return 0.5 if (len(t) > 1 or len(p) > 1) and t & p else 0.0
+
+
+def verdict_label(verdict: Mapping[str, Any]) -> str:
+    """The label a bench scores of a verdict's JSON: its effect, or ``a|b`` for two stories
+    (``Verdict.label``)."""
+    return Verdict.from_json(verdict).label
+
+
+def contains_truth(truth: str, predicted: str) -> bool:
+    """Right, or a two-story answer one of whose stories is right (the form matrix's
+    per-effect figure)."""
+    return credit(truth, predicted) == 1.0 or any(
+        credit(truth, story) == 1.0 for story in predicted.split("|") if "|" in predicted)
 
 
 def row_credit(row: Mapping[str, Any], *, strict: bool = False) -> float:

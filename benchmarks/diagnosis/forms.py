@@ -305,17 +305,19 @@ FormItem = tuple[str, int, int]
 
 def form_items(per_form: int, seed: int, steps: int,
                forms: list[str] | None = None) -> list[FormItem]:
-    """``per_form`` records of every form (or of ``forms``), seeds derived from ``seed``."""
+    """``per_form`` records of every form (or of ``forms``), seeds derived from ``seed`` and the
+    form's place in the matrix (``--only`` draws the same records as the whole matrix)."""
     names = list(FORMS) if forms is None else forms
-    return [(form, seed * 100_003 + 1_000 * i + k, steps)
-            for i, form in enumerate(names) for k in range(per_form)]
+    place = {form: i for i, form in enumerate(FORMS)}
+    return [(form, seed * 100_003 + 1_000 * place[form] + k, steps)
+            for form in names for k in range(per_form)]
 
 
 def form_one(item: FormItem) -> dict[str, Any]:
     """Generate record ``item`` and diagnose it blind (a sweep task: top level, picklable)."""
     from fresco_bridge.diagnosis.verdict import diagnose
 
-    from .bench import credit
+    from .bench import contains_truth, credit, verdict_label
 
     form, seed, steps = item
     started = time.perf_counter()
@@ -323,8 +325,9 @@ def form_one(item: FormItem) -> dict[str, Any]:
     result = diagnose(rec.record).to_json()
     verdict = result["verdict"]
     return {"form": form, "effect": rec.effect, "seed": seed, "law": rec.law,
-            "predicted": verdict["effect"], "confidence": verdict["confidence"],
-            "credit": credit(rec.effect, verdict["effect"]),
+            "predicted": verdict_label(verdict), "confidence": verdict["confidence"],
+            "credit": credit(rec.effect, verdict_label(verdict)),
+            "contains": contains_truth(rec.effect, verdict_label(verdict)),
             "gap_before_pct": result["baseline"]["gap_withheld"]["total_pct"],
             "diagnose_seconds": result["seconds"],
             "seconds": time.perf_counter() - started}
@@ -334,20 +337,25 @@ def summarise_forms(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Per form and per effect: records, credit share, and the verdicts given."""
     per_form: dict[str, dict[str, Any]] = {}
     for r in rows:
-        entry = per_form.setdefault(r["form"], {"records": 0, "credit": 0.0, "verdicts": {}})
+        entry = per_form.setdefault(r["form"], {"records": 0, "credit": 0.0, "contains": 0,
+                                                "verdicts": {}})
         entry["records"] += 1
+        entry["contains"] += int(r.get("contains", r["credit"] == 1.0))
         entry["credit"] += r["credit"]
         entry["verdicts"][r["predicted"]] = entry["verdicts"].get(r["predicted"], 0) + 1
     per_effect: dict[str, dict[str, float]] = {}
     for form, entry in per_form.items():
-        e = per_effect.setdefault(FORMS[form].effect, {"records": 0, "credit": 0.0})
+        e = per_effect.setdefault(FORMS[form].effect, {"records": 0, "credit": 0.0,
+                                                       "contains": 0})
         e["records"] += entry["records"]
+        e["contains"] += entry["contains"]
         e["credit"] += entry["credit"]
     seconds = [r["diagnose_seconds"] for r in rows]
     return {
         "records": len(rows),
         "per_form": per_form,
-        "per_effect": {k: {**v, "credit_pct": 100.0 * v["credit"] / v["records"]}
+        "per_effect": {k: {**v, "credit_pct": 100.0 * v["credit"] / v["records"],
+                           "contains_pct": 100.0 * v["contains"] / v["records"]}
                        for k, v in per_effect.items()},
         "overall_credit_pct": 100.0 * sum(r["credit"] for r in rows) / max(len(rows), 1),
         "diagnose_seconds": {"median": float(np.median(seconds)), "max": float(np.max(seconds))}
@@ -359,7 +367,8 @@ def format_forms(summary: dict[str, Any], seed: int, wall: float) -> str:
     lines = [f"form matrix: {summary['records']} records, seed {seed}, {wall:.1f} s wall; "
              f"overall credit {pct(summary['overall_credit_pct'], 1)}"]
     for effect, e in summary["per_effect"].items():
-        lines.append(f"{effect:<20} {pct(e['credit_pct'], 1):>8} of {e['records']:g}")
+        lines.append(f"{effect:<20} {pct(e['credit_pct'], 1):>8} of {e['records']:g}; right "
+                     f"or in two stories {pct(e['contains_pct'], 1)}")
         for form, f in summary["per_form"].items():
             if FORMS[form].effect == effect:
                 verdicts = ", ".join(f"{k} {n}" for k, n in sorted(

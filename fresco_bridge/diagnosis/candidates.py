@@ -182,7 +182,9 @@ def fit_candidate(record: Record, cal: Context, full: Context, opts: Options,
     return Scored("+".join(sorted(effects)), effects, params, result,
                   {p.name: result.values[p.name] for p in params},
                   {p.name: result.std.get(p.name, math.nan) for p in params},
-                  before, after, force, disp, compared_with)
+                  before, after, force, disp, compared_with,
+                  extra_law_params=0 if compared_with is None or reference is None
+                  else reference.extra_law_params)
 
 
 def noise_candidate(record: Record, params: Sequence[Param], claim: tuple[float, float],

@@ -165,10 +165,11 @@ def _diagnose(args: argparse.Namespace) -> int:
         status(f"diagnose: reading {path}" + (f" (site {args.site})" if args.site else ""))
         records.append(load_record(path, site=args.site, units=args.units,
                                    no_command=args.no_command))
+    from .options import Policy
     from .verdict import NOISE_FLOOR_PCT, Options
 
     options = Options(baseline=kind, baseline_params=params, fit_baseline=fit,
-                      noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT)
+                      policy=Policy(noise_floor_pct=args.noise_floor or NOISE_FLOOR_PCT))
     if args.same_device:
         status(f"diagnose: {len(records)} records of one device; one law fitted on all their "
                "calibration parts, then each candidate effect on all of them")

@@ -1,204 +1,246 @@
-"""The decision: which candidate the record names, how sure it is, and what it says.
+"""The decision: which story the record tells, how sure it is, and what it says.
 
-Items 3-7 of the procedure in ``verdict`` (the floor, the shrink a winner needs, pairs, the
-confidence and its flags, white noise as no rival), applied to candidates already fitted and
-scored there; pure, no fitting.
+One selection rule (docs/diagnosis.md, "The selection rule"): every candidate (the baseline
+plus one effect or two, or another law family) is fitted on the calibration part and judged by
+its Bayesian information criterion on the withheld part,
+
+    BIC = Σ_channel n_eff · ln(gap²) + k · ln(Σ_channel n_eff),
+
+with ``gap`` its withheld NRMS gap per channel, ``n_eff`` the withheld samples' effective count
+(:func:`.scored.evidence_samples`) and ``k`` the parameters the record actually estimates
+(:attr:`.scored.Scored.n_free`: a parameter at a bound is not estimated, the form at that bound
+is a simpler candidate's). The lowest BIC wins when it is below the baseline's; the weights
+exp(−ΔBIC/2), normalised, are the confidence. A runner-up within
+:attr:`.options.Policy.two_story_delta` that tells another story is named beside the winner
+(the verdict's ``stories``), with the measurement that would separate them. Pure: no fitting.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
-from .load import Record
-from .scored import (
-    MIN_SHRINK_PCT,
-    both_matter,
-    limit_form,
-    raw_before,
-    without_noise,
-)
-from .scored import Scored as _Scored
+from .model import LIMIT_FORMS
+from .options import Policy
+from .scored import Scored, at_bound, information
 from .scored import finite as _finite
-from .scored import gap as _gap
 
-__all__ = ["FLAG_CONFIDENCE_FACTOR", "HIGH_CONFIDENCE", "LOW_CONFIDENCE", "PAIR_MARGIN_PCT",
-           "confidence_words", "decide", "pct_text", "systematic_verdict"]
+__all__ = ["SEPARATED_BY", "confidence_words", "decide", "nothing_systematic", "pct_text"]
 
-FLAG_CONFIDENCE_FACTOR = 0.5
-"""The confidence is multiplied by this for each flagged parameter of the winning effect."""
-LOW_CONFIDENCE = 0.5
-"""Below this confidence the verdict names the runner-up it could not separate."""
-HIGH_CONFIDENCE = 0.8
-"""From this confidence on the words say "high" (between the two: "moderate")."""
-PAIR_MARGIN_PCT = 5.0
-
-
-def systematic_verdict(record: Record, withheld: slice, noise: tuple[float, float],
-                        sys_before: dict[str, float | None], sys_floor: float,
-                        raw: dict[str, Any], singles: list[_Scored], pairs: list[_Scored],
-                        families: list[_Scored], floor: float, systematic_cal: float,
-                        law: str) -> dict[str, Any]:
-    """The verdict on the systematic gap: every candidate scored with the white noise (std
-    from the calibration residual) removed from its withheld gap.
-
-    White measurement noise is in every record and no systematic candidate predicts it; on the
-    raw gap it dilutes a real effect's shrink (a friction that removes 47 % of the systematic
-    gap removes 6 % of a noisy raw one) while ``sensor_noise`` claims all of it, so on a noisy
-    record the noise won over the effect. Here ``sensor_noise`` is the verdict only when the
-    systematic gap is below what the record resolves (:func:`systematic_floor`), i.e. the noise
-    is all there is above the floor; otherwise the systematic candidates compete alone (pairs
-    with noise are not named: the white noise's level is reported in ``noise_floor``). When no
-    systematic candidate explains the systematic gap and the raw verdict named the noise (noise
-    that is not white, which the white estimate only partly removes), the raw verdict stands."""
-    noise_single = [s for s in singles if s.name == "sensor_noise"]
-    if (sys_before["total_pct"] or 0.0) < sys_floor:
-        verdict = decide(raw_before(noise_single, raw), noise_single, [], [], floor,
-                           systematic_cal, law) if noise_single else raw
-        verdict["explanation"] += (f"; without the white noise the withheld gap is "
-                                   f"{sys_before['total_pct'] or 0.0:.2f} %, below the "
-                                   f"{sys_floor:.2f} % the record resolves: nothing systematic")
-        return verdict
-    refs = {f.name: _gap(record, f.force, f.disp, withheld, noise)
-            for f in families if f.force is not None}
-    sys_families = [without_noise(f, record, withheld, noise, sys_before, {}) for f in families]
-    sys_singles = sorted((without_noise(s, record, withheld, noise, sys_before, refs)
-                          for s in singles if "sensor_noise" not in s.effects),
-                         key=lambda s: s.score, reverse=True)
-    sys_pairs = [without_noise(p, record, withheld, noise, sys_before, refs)
-                 for p in pairs if "sensor_noise" not in p.effects]
-    if not sys_singles:
-        return raw
-    verdict = decide(sys_before, sys_singles, sys_pairs, sys_families, sys_floor,
-                       systematic_cal, law)
-    if verdict["effect"] in ("none", "baseline_misfit", "unexplained") and (
-            "sensor_noise" in raw["effect"].split("+")):
-        return raw
-    verdict["explanation"] = ("scored without the white noise (std from the calibration "
-                              "residual): " + verdict["explanation"])
-    verdict["gap_basis"] = "systematic"
-    return verdict
+SEPARATED_BY: dict[frozenset[str], str] = {
+    frozenset({"friction", "rate_dependence"}):
+        "the record's velocities do not separate them: cycles of one amplitude at two rates "
+        "(friction's force does not change with velocity, a rate law's does)",
+    frozenset({"backlash", "pinching"}):
+        "a gap and a slipping pinch look alike at the loop's centre: the relative travel of the "
+        "connection (a displacement transducer across it) or cycles of small amplitude",
+    frozenset({"actuator_delay", "actuator_amplitude"}):
+        "the command's frequencies do not separate a lag from a gain: a slow cycle and a fast "
+        "one of the same amplitude",
+    frozenset({"actuator_delay", "actuator_undershoot"}):
+        "a lag and a short stop look alike on a smooth command: a stepped command with holds",
+    frozenset({"actuator_amplitude", "actuator_undershoot"}):
+        "a gain and a short stop look alike at one amplitude: cycles at two amplitudes",
+    frozenset({"degradation", "pinching"}):
+        "cycles repeated at one amplitude (degradation grows with them, pinching does not)",
+    frozenset({"sensor_bias", "friction"}):
+        "a record that starts and ends at rest (an offset stays, friction does not)",
+}
+"""What measurement separates two stories the record cannot (by the pair of effects)."""
+GENERIC_SEPARATION = ("a longer record, or a command that visits more amplitudes and rates, "
+                      "would separate them")
 
 
-def decide(before: dict[str, float | None], singles: list[_Scored], pairs: list[_Scored],
-             families: list[_Scored], floor: float, systematic_cal: float,
-             law: str) -> dict[str, Any]:
+def nothing_systematic(gap: float, noise_pct: float, policy: Policy, reason: str,
+                       noise_named: bool = True) -> dict[str, Any]:
+    """The verdict when no systematic gap is heard: ``sensor_noise`` if the channels' noise is
+    above what a lab ordinarily has (:attr:`.options.Policy.ordinary_noise_pct`), else
+    ``none``: noise at the ordinary level is a property of the record, not an effect."""
+    ordinary = policy.ordinary_noise_pct
+    noisy = noise_pct > ordinary and noise_named
+    effect = "sensor_noise" if noisy else "none"
+    confidence = 1.0 - ordinary / noise_pct if noisy else 1.0 - noise_pct / ordinary
+    return {"effect": effect, "confidence": float(min(max(confidence, 0.0), 1.0)),
+            "shrink_pct": 0.0, "gap_before_pct": gap, "gap_after_pct": gap,
+            "runner_up": None, "not_separated_from": None, "flags": {}, "better_family": None,
+            "stories": [], "separated_by": None,
+            "explanation": f"{reason}; the noise is {noise_pct:.2f} % of the channels' peak, "
+                           + ("above" if noisy else "within") + f" the {ordinary:g} % a lab's "
+                           "load cell and LVDT ordinarily carry"}
+
+
+def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[Scored],
+           families: list[Scored], policy: Policy, systematic_cal: float, law: str,
+           n_eff: tuple[float, float | None]) -> dict[str, Any]:
+    """The verdict on a gap above the floor (module doc: the rule)."""
     gap = before["total_pct"] or 0.0
-    if gap < floor:
-        return {"effect": "none", "confidence": max(0.0, 1.0 - gap / floor),
-                "shrink_pct": 0.0, "gap_before_pct": gap, "gap_after_pct": gap,
-                "runner_up": None, "not_separated_from": None, "flags": {},
-                "better_family": None,
-                "explanation": f"withheld gap {gap:.2f} % is below the noise floor {floor:g} %"}
-    ranked = sorted([*singles, *pairs, *families], key=lambda s: s.score, reverse=True)
-    best_single = next((s for s in singles if _nameable(s, gap, floor)), singles[0])
-    best = best_single
-    if pairs:
-        eligible = [p for p in pairs if both_matter(p, singles) and _nameable(p, gap, floor)]
-        best_pair = max(eligible, key=lambda s: s.score) if eligible else None
-        if best_pair is not None and best_pair.score > best_single.score + PAIR_MARGIN_PCT:
-            best = best_pair
-    family = max(families, key=lambda s: s.score) if families else None
-    if family is not None and family.shrink >= MIN_SHRINK_PCT and family.score > best.score:
-        after = family.after["total_pct"] or 0.0
-        left = best.after["total_pct"]
-        return {"effect": "baseline_misfit",
-                "confidence": 0.0 if left is None else float(min(max(
-                    (left - after) / max(gap - after, 1e-12), 0.0), 1.0)),
-                "shrink_pct": _finite(family.shrink), "gap_before_pct": gap,
-                "gap_after_pct": after, "runner_up": best.name, "not_separated_from": None,
-                "flags": {}, "better_family": family.name,
-                "explanation": f"only a change of law family closes the gap: a {family.name} "
+    floor = policy.noise_floor_pct
+    base_bic = information(before, n_eff, 0)
+    # heard: a candidate that leaves less of the withheld gap than the baseline (better than the
+    # sim) and changes its prediction by at least the floor (big enough to hear)
+    heard = [s for s in [*singles, *[p for p in pairs if not _collapsed(p, singles)],
+                         *families]
+             if s.force is not None and "sensor_noise" not in s.effects
+             and s.after["total_pct"] is not None and s.after["total_pct"] < gap
+             and (not s.effects or s.size >= floor)]
+    bic = {id(s): information(s.after, n_eff, s.n_free) for s in heard}
+    ranked = sorted(heard, key=lambda s: bic[id(s)])
+    best = ranked[0] if ranked else None
+    if best is None or bic[id(best)] >= base_bic:
+        return _no_candidate(best, gap, base_bic, bic, systematic_cal, floor, law, n_eff)
+    low = min(base_bic, bic[id(best)])
+    total = math.exp(-(base_bic - low) / 2.0) + sum(math.exp(-(bic[id(s)] - low) / 2.0)
+                                                  for s in ranked)
+
+    def weight(s: Scored) -> float:
+        return math.exp(-(bic[id(s)] - low) / 2.0) / total
+
+    if best.role != "candidate":
+        after = best.after["total_pct"] or 0.0
+        effect_best = next((s for s in ranked if s.role == "candidate"), None)
+        return {"effect": "baseline_misfit", "confidence": weight(best),
+                "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
+                "gap_after_pct": after,
+                "runner_up": None if effect_best is None else effect_best.name,
+                "not_separated_from": None, "flags": {}, "better_family": best.name,
+                "stories": [], "separated_by": None,
+                "explanation": f"only a change of law family closes the gap: a {best.name} "
                                f"baseline shrinks the withheld gap from {gap:.2f} % to "
-                               f"{after:.2f} %; the best effect on the {law} baseline, "
-                               f"{best.name}, leaves {pct_text(left)}"}
-    if best.shrink < MIN_SHRINK_PCT or not _nameable(best, gap, floor):
-        better = family.name if family is not None and family.score > best.score else None
-        none_of_mine = (f"no candidate shrinks it by {MIN_SHRINK_PCT:g} % (best: {best.name}, "
-                        f"{best.shrink:.1f} %)" if best.shrink < MIN_SHRINK_PCT else
-                        f"the best candidate, {best.name}, moves the prediction by "
-                        f"{best.size:.2f} % and leaves {pct_text(best.after['total_pct'])} "
-                        f"(named: at least the floor {floor:.2f} %, less than {gap:.2f} %)")
-        common: dict[str, Any] = {
-            "confidence": 0.0, "shrink_pct": _finite(best.shrink), "gap_before_pct": gap,
-            "gap_after_pct": best.after["total_pct"], "runner_up": best.name,
-            "not_separated_from": None, "flags": {}, "better_family": better}
-        if systematic_cal > floor:
-            return {"effect": "baseline_misfit", **common,
-                    "explanation": f"the {law} baseline misses the calibration part it was "
-                                   f"fitted to by {systematic_cal:.2f} % beyond the white noise "
-                                   f"(withheld gap {gap:.2f} %) and {none_of_mine}: the law "
-                                   "family does not represent this specimen"
-                                   + ("" if better is None else
-                                      f" (a {better} baseline does better)")}
-        return {"effect": "unexplained", **common,
-                "explanation": f"the baseline fits its calibration part to the noise, but the "
-                               f"withheld gap {gap:.2f} % is above the floor and "
-                               + none_of_mine}
-    others = [s for s in ranked if s is not best and not set(s.effects) >= set(best.effects)]
-    runner = others[0] if others else None
-    confidence = _separation(best, runner, gap)
-    if runner is not None and confidence < LOW_CONFIDENCE and limit_form(best, runner):
-        best, runner = runner, best  # the form the winner tends to at its bound: named as such
-        confidence = _separation(best, runner, gap)
+                               f"{after:.2f} % (BIC {bic[id(best)] - base_bic:+.1f} against "
+                               f"the {law} baseline), more than any effect on the {law} law"}
+    limit = _limit_form(best, ranked)
+    if limit is not None:
+        # the winner sits where its form is another candidate's (a rate law at its smallest
+        # exponent is Coulomb friction): one story, told by the candidate that states the form
+        # and weighed with the evidence of both
+        limit_text = (f"{best.name} fitted at the bound where it is {limit.name} "
+                      f"({', '.join(sorted(set(best.values) - best.free))}), leaving "
+                      f"{pct_text(best.after['total_pct'])}: named {limit.name}; ")
+        merged = weight(best) + weight(limit)
+        told = [set(best.effects), set(limit.effects)]
+        ranked = [limit, *[s for s in ranked if s is not limit and s is not best]]
+        best = limit
+    else:
+        limit_text, merged, told = "", 0.0, [set(best.effects)]
+    rivals = [s for s in ranked[1:] if s.role == "candidate"
+              and not any(set(s.effects) >= t or set(s.effects) <= t for t in told)]
+    runner = rivals[0] if rivals else None
     after = best.after["total_pct"] or 0.0
     flags = best.flags
-    confidence *= FLAG_CONFIDENCE_FACTOR ** len(flags)
-    unsure = runner.name if runner is not None and confidence < LOW_CONFIDENCE else None
-    text = (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} %"
+    confidence = (merged or weight(best)) * policy.flag_factor ** len(flags)
+    text = limit_text + (f"{best.name} shrinks the withheld gap from {gap:.2f} % to {after:.2f} % "
+            f"(BIC {bic[id(best)] - base_bic:+.1f} against the baseline, {best.n_free} "
+            f"parameter{'s' if best.n_free != 1 else ''} estimated, "
+            f"{sum(x for x in n_eff if x):.0f} effective withheld samples)"
             + ("" if best.compared_with is None else
                f" (on the {best.fit.spec.law_kind if best.fit else law} law; measured from the "
-               f"{best.compared_with}, which leaves {pct_text(best.before['total_pct'])})")
-            + ("" if runner is None else
-               f"; the runner-up {runner.name} leaves {runner.after['total_pct']:.2f} %"))
+               f"{best.compared_with}, which leaves {pct_text(best.before['total_pct'])})"))
+    stories: list[dict[str, Any]] = []
+    separated_by = None
+    if runner is not None:
+        delta = bic[id(runner)] - bic[id(best)]
+        text += (f"; the runner-up {runner.name} leaves {pct_text(runner.after['total_pct'])} "
+                 f"(ΔBIC {delta:.1f})")
+        if delta <= policy.two_story_delta:
+            pair_total = weight(best) + weight(runner)
+            stories = [{"effect": s.name, "weight": weight(s) / pair_total,
+                        "delta_bic": bic[id(s)] - bic[id(best)]} for s in (best, runner)]
+            separated_by = SEPARATED_BY.get(frozenset((best.name, runner.name)),
+                                            GENERIC_SEPARATION)
+            text += (f"; two stories fit: {best.name} or {runner.name}, "
+                     f"{stories[0]['weight']:.2f} / {stories[1]['weight']:.2f}: "
+                     + separated_by)
     if flags:
         text += "; not measured by the record: " + ", ".join(
             f"{k} {v}" for k, v in flags.items())
-    if unsure is not None:
-        text += f"; low confidence: not separated from {unsure}"
     return {
         "effect": best.name, "confidence": confidence,
         "shrink_pct": _finite(best.shrink), "gap_before_pct": gap, "gap_after_pct": after,
         "runner_up": None if runner is None else runner.name,
-        "not_separated_from": unsure, "flags": flags, "better_family": None,
-        "explanation": text,
+        "not_separated_from": runner.name if stories and runner is not None else None,
+        "flags": flags, "better_family": None, "stories": stories,
+        "separated_by": separated_by, "explanation": text,
     }
 
 
-def _nameable(s: _Scored, gap: float, floor: float) -> bool:
-    """Big enough to hear (it moves the prediction by the floor) and better than the sim."""
-    after = s.after["total_pct"]
-    return s.size >= floor and after is not None and after < gap
+def _limit_form(best: Scored, ranked: Sequence[Scored]) -> Scored | None:
+    """The candidate whose form ``best`` takes at a bound it sits at (``model.LIMIT_FORMS``),
+    when that candidate was heard too."""
+    if len(best.effects) != 1:
+        return None
+    params = {p.name: p for p in best.params}
+    for (effect, name, side), form in LIMIT_FORMS.items():
+        p = params.get(name)
+        if effect == best.name and p is not None and name in best.values and at_bound(
+                best.values[name], p.lo, p.hi, side):
+            return next((s for s in ranked if s.name == form), None)
+    return None
 
 
-def _separation(best: _Scored, runner: _Scored | None, gap: float) -> float:
-    """The share of ``best``'s gap reduction that ``runner`` does not achieve, in [0, 1]."""
-    if runner is None or runner.after["total_pct"] is None:
-        return 1.0
-    after = best.after["total_pct"] or 0.0
-    return float(min(max((runner.after["total_pct"] - after) / max(gap - after, 1e-12), 0.0),
-                     1.0))
+def _collapsed(pair: Scored, singles: Sequence[Scored]) -> bool:
+    """A pair one of whose members has no parameter the record estimates (all at a bound: the
+    gap is zero, the delay is zero) is the other member's model, not a second story."""
+    for member in pair.effects:
+        single = next((s for s in singles if s.effects == (member,)), None)
+        names = set() if single is None else {p.name for p in single.params
+                                              if p.role != "noise"}
+        if names and not names & pair.free:
+            return True
+    return False
+
+
+def _no_candidate(best: Scored | None, gap: float, base_bic: float, bic: dict[int, float],
+                  systematic_cal: float, floor: float, law: str,
+                  n_eff: tuple[float, float | None]) -> dict[str, Any]:
+    """No candidate's evidence beats the baseline's: the law family is the first suspect when
+    the baseline misses its own calibration part beyond the noise, else the gap is
+    unexplained."""
+    none_of_mine = ("no candidate changes the prediction by the floor" if best is None else
+                    f"no candidate's withheld evidence beats the baseline's (best: {best.name}, "
+                    f"BIC {bic[id(best)] - base_bic:+.1f}, leaving "
+                    f"{pct_text(best.after['total_pct'])})")
+    common: dict[str, Any] = {
+        "confidence": 0.0, "shrink_pct": None if best is None else _finite(best.shrink),
+        "gap_before_pct": gap, "gap_after_pct": None if best is None else
+        best.after["total_pct"], "runner_up": None if best is None else best.name,
+        "not_separated_from": None, "flags": {}, "better_family": None, "stories": [],
+        "separated_by": None}
+    if systematic_cal > floor:
+        return {"effect": "baseline_misfit", **common,
+                "explanation": f"the {law} baseline misses the calibration part it was fitted "
+                               f"to by {systematic_cal:.2f} % beyond the white noise (withheld "
+                               f"gap {gap:.2f} %) and {none_of_mine}: the law family does not "
+                               "represent this specimen"}
+    return {"effect": "unexplained", **common,
+            "explanation": f"the baseline fits its calibration part to the noise, but the "
+                           f"withheld gap {gap:.2f} % is above the floor and " + none_of_mine}
 
 
 def pct_text(x: float | None) -> str:
     return "—" if x is None or not math.isfinite(x) else f"{x:.2f} %"
 
 
-def confidence_words(verdict: dict[str, Any]) -> str:
-    """The confidence in words, for a person: its level on the scale (:data:`LOW_CONFIDENCE`,
-    :data:`HIGH_CONFIDENCE`) and, unless high, why — what the record does not separate or
-    measure. Written once into the verdict, so the summary, the report and the demo say the
-    same thing beside the same number."""
+def confidence_words(verdict: dict[str, Any], policy: Policy | None = None) -> str:
+    """The confidence in words, for a person: its level on the policy's scale and, unless high,
+    why — the two stories the record does not separate and the measurement that would, or
+    what it does not measure. Written once into the verdict, so the summary, the report and
+    the demo say the same thing beside the same number."""
+    p = policy or Policy()
     c = float(verdict["confidence"])
-    level = "high" if c >= HIGH_CONFIDENCE else "moderate" if c >= LOW_CONFIDENCE else "low"
+    level = "high" if c >= p.high_confidence else "moderate" if c >= p.low_confidence else "low"
     effect = verdict["effect"]
     if effect == "none":
-        return "high" if level == "high" else f"{level}: the withheld gap is close to the floor"
+        return "high" if level == "high" else (
+            f"{level}: the withheld gap or the noise is close to its floor")
     if effect in ("unexplained", "baseline_misfit"):
         return f"{level}: no candidate effect explains the gap"
     reasons = []
-    if verdict.get("not_separated_from"):
-        reasons.append(f"the record does not separate it from {verdict['not_separated_from']}")
+    stories = verdict.get("stories") or []
+    if len(stories) > 1:
+        reasons.append(" or ".join(str(s["effect"]) for s in stories) + ", "
+                       + " / ".join(f"{s['weight']:.2f}" for s in stories) + ": "
+                       + str(verdict.get("separated_by") or GENERIC_SEPARATION))
     elif verdict.get("runner_up") and level != "high":
         reasons.append(f"the runner-up {verdict['runner_up']} explains much of the gap too")
     if verdict.get("flags"):

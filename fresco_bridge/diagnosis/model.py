@@ -188,9 +188,11 @@ name, which is its own candidate."""
 
 
 LIMIT_FORMS = {("rate_dependence", "rate_exponent", "lower"): "friction"}
-"""(effect, parameter, bound) -> the candidate whose form the effect takes at that bound: a
-rate law at its smallest exponent is Coulomb friction in all but name. When the record cannot
-separate the two (``verdict``'s low confidence), the candidate that states the form is named."""
+"""The nesting of the candidates: (effect, parameter, bound) -> the candidate whose form the
+effect takes at that bound. A rate law at its smallest exponent is Coulomb friction in all but
+name: a single record's rate law fitted there is named ``friction`` (``decision``), the
+withheld evidence of both stories counted for it; ``--same-device`` drops such a joint rate
+law when friction is a candidate too (``multi``)."""
 
 
 def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:

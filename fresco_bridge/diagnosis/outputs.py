@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..numbers import fmt, pct
-from ..report.diagnosis import BASIS_WORDS, confidence_text, on_basis
-from .decision import LOW_CONFIDENCE
+from ..report.diagnosis import BASIS_WORDS, confidence_text, headline, on_basis
 from .result import Diagnosis, json_ready
 
 __all__ = ["summary", "to_json", "write_json", "write_report"]
@@ -53,15 +52,18 @@ def summary(diagnosis: Diagnosis) -> str:
             f"interface NRMS {pct(interface['nrms_pct'])}, FEI amplitude "
             f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
-    lines.append(f"VERDICT   {verdict['effect']} (confidence {confidence_text(verdict)}): "
+    stories = verdict.get("stories") or []
+    named = headline(result)["named"]
+    lines.append(f"VERDICT   {named} (confidence {confidence_text(verdict)}): "
                  f"{verdict['explanation']}")
     if result.get("hidden"):
         lines.append("hidden    no command channel: the measured displacement drives the law, "
                      "so these were not judged:")
         lines.extend(f"          {line}" for line in result["hidden"])
-    if verdict.get("not_separated_from"):
-        lines.append(f"UNSURE    confidence below {LOW_CONFIDENCE:g}: not separated from "
-                     f"{verdict['not_separated_from']}")
+    if len(stories) > 1:
+        lines.append("TWO STORIES " + " / ".join(f"{st['effect']} {st['weight']:.2f}"
+                                               for st in stories)
+                     + f"; to separate them: {verdict.get('separated_by')}")
     if verdict.get("better_family"):
         lines.append(f"          try --baseline {verdict['better_family']}")
     winner = next((e for e in [*result["effects"], *result["pairs"]]

@@ -48,6 +48,18 @@ class Verdict:
     not_separated_from: str | None = None
     flags: dict[str, str] = field(default_factory=dict)
     better_family: str | None = None
+    stories: list[dict[str, Any]] = field(default_factory=list)
+    """Two stories the withheld evidence cannot separate, the winner first, each with its
+    weight (BIC weights of the two, summing to 1) and its ΔBIC; empty for one story."""
+    separated_by: str | None = None
+    """For two stories: the measurement that would separate them."""
+
+    @property
+    def label(self) -> str:
+        """The name a bench scores: the effect, or ``a|b`` for two stories."""
+        if len(self.stories) > 1:
+            return "|".join(str(s["effect"]) for s in self.stories)
+        return self.effect
 
     @property
     def adds_an_effect(self) -> bool:

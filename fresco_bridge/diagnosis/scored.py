@@ -11,7 +11,6 @@ parameter at a bound or with a relative std above :data:`MAX_RELATIVE_STD` is fl
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -20,20 +19,21 @@ import numpy.typing as npt
 
 from .fit import Fit
 from .load import Record
-from .model import LIMIT_FORMS, Param, baseline_report
+from .model import Param, baseline_report
 
 __all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
-           "at_bound", "both_matter", "effect_size", "finite", "gap", "limit_form", "raw_before",
-           "rms", "systematic_floor", "without_noise"]
+           "at_bound", "effect_size", "evidence_samples", "finite", "gap", "information", "rms",
+           "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
 PARSIMONY_PCT = 2.0
+"""Score = shrink % − this per fitted parameter: the table's ranking and ``--same-device``'s
+rule; a single record's verdict is chosen by :func:`information`."""
 MIN_SHRINK_PCT = 20.0
-"""The share of the gap a winning candidate (or each member of a pair) must shrink."""
+"""The share of the gap a device's joint candidate must shrink on average (``multi``)."""
 GAP_ZERO_PCT = 1e-6
 """A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
-"""Score = shrink % − this per fitted parameter (law parameters of another family included)."""
 MAX_RELATIVE_STD = 0.5
 """A fitted effect parameter whose std exceeds this share of its value (of 5 % of its range
 for a value nearer zero than that) is not measured by the record: flagged."""
@@ -77,6 +77,28 @@ class Scored:
     @property
     def score(self) -> float:
         return self.shrink - PARSIMONY_PCT * (len(self.params) + self.extra_law_params)
+
+    @property
+    def free(self) -> frozenset[str]:
+        """The effect parameters (sensor noise's excepted) the record estimates: those not at a
+        bound — at a bound the candidate takes the simpler form there (a rate law at its
+        smallest exponent is Coulomb friction, a slip of zero is a rigid fixture)."""
+        out = set()
+        for p in self.params:
+            value = self.values.get(p.name)
+            if p.role == "noise" or value is None:
+                continue
+            if at_bound(value, p.lo, p.hi, "lower") or (
+                    math.isfinite(p.hi) and at_bound(value, p.lo, p.hi, "upper")):
+                continue
+            out.add(p.name)
+        return frozenset(out)
+
+    @property
+    def n_free(self) -> int:
+        """Parameters the record estimates: :attr:`free`, and the law parameters another
+        family has beyond the baseline's."""
+        return len(self.free) + self.extra_law_params
 
     @property
     def flags(self) -> dict[str, str]:
@@ -204,28 +226,6 @@ def systematic_floor(floor: float, noise_only: float, n_cal: int, n_withheld: in
     return max(floor, math.sqrt(NOISE_SIGMAS * relative) * noise_only)
 
 
-def raw_before(noise_single: list[Scored], raw: dict[str, Any]) -> dict[str, float | None]:
-    """The baseline's raw withheld gap (the noise candidate's ``before``)."""
-    return noise_single[0].before if noise_single else {"total_pct": raw["gap_before_pct"]}
-
-
-def both_matter(pair: Scored, singles: Sequence[Scored]) -> bool:
-    """Each effect of ``pair`` shrinks the withheld gap the other leaves alone by at least
-    :data:`MIN_SHRINK_PCT` (the rule a single passes against the baseline)."""
-    after = pair.after["total_pct"]
-    if after is None or not math.isfinite(after):
-        return False
-    for member in pair.effects:
-        rest = tuple(e for e in pair.effects if e != member)
-        other = next((s for s in singles if s.effects == rest), None)
-        left = None if other is None else other.after["total_pct"]
-        if left is None or not math.isfinite(left) or left <= 0.0:
-            return False
-        if 100.0 * (1.0 - after / left) < MIN_SHRINK_PCT:
-            return False
-    return True
-
-
 def at_bound(value: float, lo: float, hi: float, side: str) -> bool:
     """``value`` within :data:`BOUND_TOLERANCE` of its range (of itself, for an unbounded
     range) from its ``side`` (``lower`` or ``upper``) bound: the one test of "at a bound"."""
@@ -234,13 +234,38 @@ def at_bound(value: float, lo: float, hi: float, side: str) -> bool:
     return value <= lo + tol if side == "lower" else value >= hi - tol
 
 
-def limit_form(best: Scored, runner: Scored | None) -> bool:
-    """``best`` sits at a bound where its form becomes ``runner``'s (:data:`LIMIT_FORMS`): the
-    record measured the runner-up's form, reached from the edge of the winner's."""
-    if runner is None or len(best.effects) != 1:
-        return False
-    params = {p.name: p for p in best.params}
-    return any(effect == best.name and form == runner.name and param in params
-               and param in best.values
-               and at_bound(best.values[param], params[param].lo, params[param].hi, side)
-               for (effect, param, side), form in LIMIT_FORMS.items())
+def evidence_samples(residual: FloatArray) -> float:
+    """The effective number of independent samples in ``residual`` (the baseline's withheld
+    residual of one channel): n / τ, τ = 1 + 2 Σ ρ_k summed while the autocorrelation ρ_k
+    stays positive (Geyer's initial positive sequence). A misfit that follows the loop is
+    correlated over a part of a cycle: its evidence is a few samples a cycle, not every
+    sample; white noise is every sample."""
+    r = np.asarray(residual, dtype=float)
+    r = r - float(np.mean(r)) if r.size else r
+    n = r.size
+    if n < 4 or not np.any(r):
+        return float(max(n, 1))
+    spectrum = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    acf = acf / acf[0]
+    negative = np.nonzero(acf[1:] <= 0.0)[0]
+    m = int(negative[0]) + 1 if negative.size else n
+    tau = 1.0 + 2.0 * float(np.sum(acf[1:m]))
+    return n / max(tau, 1.0)
+
+
+def information(gaps: dict[str, float | None], n_eff: tuple[float, float | None],
+                k: int) -> float:
+    """The Bayesian information criterion of a prediction on the withheld part, up to a
+    constant shared by every candidate: Σ_channel n_eff · ln(gap²) + k · ln(Σ n_eff) (a
+    Gaussian likelihood with its variance the channel's mean squared residual; the gap is that
+    residual's RMS over a fixed scale)."""
+    total = 0.0
+    samples = 0.0
+    for key, n in (("force_pct", n_eff[0]), ("disp_pct", n_eff[1])):
+        g = gaps.get(key)
+        if n is None or g is None or not math.isfinite(g):
+            continue
+        total += n * math.log(max(g, GAP_ZERO_PCT) ** 2)
+        samples += n
+    return total + k * math.log(max(samples, 2.0))

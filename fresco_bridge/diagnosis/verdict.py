@@ -15,43 +15,23 @@ Procedure (docs/diagnosis.md, "Diagnosing the sim-to-real gap", states it for us
 3. Gap on the withheld part, per channel, as NRMS in % of the *whole record's* scale (force:
    measured − predicted over the record's RMS force; displacement: measured − predicted over
    the record's RMS command), and ``total`` = their root sum of squares: a quiet withheld part
-   cannot inflate it. Below :data:`NOISE_FLOOR_PCT` the verdict is ``none``.
+   cannot inflate it.
 4. Each candidate: the baseline plus one effect, all refitted on the calibration part,
-   predicting the withheld part; ``sensor_noise`` claims the white part of the baseline's gap
-   (its std estimated on the calibration residual, never on the withheld one). ``shrink_pct`` =
-   100 (1 − after/before); ``score`` = shrink − :data:`PARSIMONY_PCT` per parameter. A
-   candidate is named only if it moves the baseline's prediction by at least the floor
-   (``scored.effect_size``: a 0.4 % "offset" absorbing a small law misfit is not an effect) and
-   leaves less than the baseline's gap. A candidate that needs another law family (pinching or
-   degradation under a bilinear or Menegotto-Pinto baseline drive BWBN) is compared with the
-   best baseline *of that family* (Bouc-Wen, fitted on the calibration part), never credited
-   with the family change. With a named baseline (not ``auto``) the other families of
-   ``AUTO_FAMILIES`` are fitted too; when a family change alone beats every effect (it shrinks
-   the gap by at least :data:`MIN_SHRINK_PCT` and scores higher, the extra law parameters
-   counted), the verdict is ``baseline_misfit`` naming that family. The best score wins if it
-   shrinks the gap by at least :data:`MIN_SHRINK_PCT`; otherwise the verdict is
-   ``baseline_misfit`` when the baseline misses even its calibration part by more than the
-   floor beyond the white noise (the law family is the first suspect), else ``unexplained``.
-5. Pairs: when the best single by the systematic gap (item 7) leaves more than the systematic
-   floor (and more than the floor), pairs of the top three singles are fitted (and each top
-   single with sensor noise).
-   A pair wins when both of its effects matter by the rule a single passes against the
-   baseline (each shrinks the gap the other leaves alone by :data:`MIN_SHRINK_PCT`) and its
-   score beats the best single's by :data:`PAIR_MARGIN_PCT`. A pair is named in alphabetical
-   order (``friction+sensor_bias``), whatever the ranking of its members.
-6. Confidence: the share of the winner's gap reduction that the runner-up does not achieve,
-   (after_second − after_best) / (before − after_best); for ``none``, 1 − gap/floor. Every
-   parameter of the winning effect at a bound (other than a zero lower bound: "absent") or with
-   a relative std above :data:`MAX_RELATIVE_STD` is flagged and halves it
-   (:data:`FLAG_CONFIDENCE_FACTOR`); below :data:`LOW_CONFIDENCE` the verdict names the
-   runner-up it could not separate (``not_separated_from``). A winner at a bound where its
-   form becomes the runner-up's (``model.LIMIT_FORMS``: a rate law at its smallest exponent
-   is Coulomb friction) that the record cannot separate from it gives way to the runner-up.
-7. White noise is no rival: unless the verdict is ``none``, the candidates are scored again on
-   the *systematic* gap (the white noise estimated on the calibration residual removed from
-   each withheld variance); ``sensor_noise`` wins only when that gap is below what the record
-   resolves (:func:`systematic_floor`). Items 3-7 are applied in :mod:`.decision`
-   (:func:`.decision.systematic_verdict`).
+   predicting the withheld part (``candidates``); a candidate that needs another law family
+   (pinching or degradation under a bilinear or Menegotto-Pinto baseline drive BWBN) carries
+   that family's extra law parameters; with a named baseline the other families of
+   ``AUTO_FAMILIES`` are candidates too. When the best single, scored on the gap with the
+   white noise removed, leaves more than the systematic floor, pairs of the top three singles
+   are fitted.
+5. Nothing systematic: a withheld gap below the policy's floor, or, with the white noise
+   removed, below what the record resolves (:func:`.scored.systematic_floor`), names no effect:
+   ``sensor_noise`` when a channel's noise is above the ordinary level
+   (:class:`.options.Policy`), else ``none`` (``decision.nothing_systematic``).
+6. Otherwise the one selection rule (``decision``): the lowest BIC on the withheld part wins
+   if it beats the baseline's (a winner at the bound where it is another candidate's form,
+   ``model.LIMIT_FORMS``, is named as that one); its weight is the confidence; a rival within
+   the policy's ``two_story_delta`` that tells another story is named beside it, with the
+   measurement that would separate them.
 """
 
 from __future__ import annotations
@@ -60,6 +40,8 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
+
+import numpy as np
 
 from .baseline import choose_baseline, fit_baseline
 from .candidates import (
@@ -70,7 +52,7 @@ from .candidates import (
     noise_candidate,
     with_noise,
 )
-from .decision import confidence_words, decide, systematic_verdict
+from .decision import confidence_words, decide, nothing_systematic
 from .fit import predict
 from .load import DiagnosisInputError, Record
 from .localise import localise
@@ -88,7 +70,15 @@ from .nocommand import hidden_effects, hidden_summary
 from .noise import estimate_noise
 from .options import CALIBRATION_FRACTION, MAX_FIT_SAMPLES, NOISE_FLOOR_PCT, Options
 from .result import SCHEMA, Diagnosis, Series, Verdict
-from .scored import Scored, effect_size, gap, rms, systematic_floor, without_noise
+from .scored import (
+    Scored,
+    effect_size,
+    evidence_samples,
+    gap,
+    rms,
+    systematic_floor,
+    without_noise,
+)
 from .split import split, stop_of
 
 __all__ = ["CALIBRATION_FRACTION", "MAX_FIT_SAMPLES", "NOISE_FLOOR_PCT", "SCHEMA", "Options",
@@ -204,14 +194,41 @@ def diagnose(record: Record, options: Options | None = None,
     gap_cal = gap(record, f0, d0, parts.calibration)
     systematic_cal = math.sqrt(max(gap_cal["total_pct"] ** 2 - noise_only**2, 0.0)) if (
         gap_cal["total_pct"] is not None and math.isfinite(gap_cal["total_pct"])) else math.inf
-    decided = decide(before, singles, pairs, families, opts.noise_floor_pct, systematic_cal,
-                     spec0.baseline)
-    if "sensor_noise" in effects and decided["effect"] != "none":
-        decided = systematic_verdict(record, withheld, white, sys_before, sys_floor, decided,
-                                     singles, pairs, families, opts.noise_floor_pct,
-                                     systematic_cal, spec0.baseline)
+    policy = opts.policy
+    peak_f = float(np.max(np.abs(record.force))) or 1.0
+    peak_d = float(np.max(np.abs(record.cmd))) or 1.0
+    noise_pct = max(100.0 * estimate.claim[0] / peak_f, 100.0 * estimate.claim[1] / peak_d)
+    noise_named = "sensor_noise" in effects
+    raw_gap = before["total_pct"] or 0.0
+    if raw_gap < policy.noise_floor_pct:
+        decided = nothing_systematic(raw_gap, noise_pct, policy,
+                                     f"withheld gap {raw_gap:.2f} % is below the noise floor "
+                                     f"{policy.noise_floor_pct:g} %", noise_named)
+    elif (sys_before["total_pct"] or 0.0) < sys_floor:
+        decided = nothing_systematic(raw_gap, noise_pct, policy,
+                                     f"withheld gap {raw_gap:.2f} %; without the white noise "
+                                     f"{sys_before['total_pct'] or 0.0:.2f} %, below the "
+                                     f"{sys_floor:.2f} % the record resolves: nothing "
+                                     "systematic", noise_named)
+    else:
+        n_eff = (evidence_samples(((record.force - f0) / f_scale)[withheld]),
+                 None if record.meas_disp is None else
+                 evidence_samples(((record.meas_disp - d0) / d_scale)[withheld]))
+        decided = decide(before, singles, pairs, families, policy, systematic_cal,
+                         spec0.baseline, n_eff)
+        noise_single = next((s for s in singles if s.name == "sensor_noise"), None)
+        if (decided["effect"] in ("unexplained", "baseline_misfit") and noise_single is not None
+                and noise_pct > policy.ordinary_noise_pct
+                and decided["better_family"] is None
+                and (noise_single.after["total_pct"] or 0.0)
+                < (decided["gap_after_pct"] or raw_gap)):
+            # the noise the calibration residual shows (coloured too) accounts for more of the
+            # gap than the best candidate does
+            decided = nothing_systematic(raw_gap, noise_pct, policy,
+                                         "no candidate explains the withheld gap "
+                                         f"{raw_gap:.2f} %", noise_named)
     decided.setdefault("gap_basis", "raw")  # the gaps and shrink the verdict quotes
-    decided["confidence_words"] = confidence_words(decided)
+    decided["confidence_words"] = confidence_words(decided, policy)
     verdict = Verdict.from_json(decided)
     if progress is not None:
         progress(total_fits, total_fits)
@@ -258,6 +275,8 @@ def diagnose(record: Record, options: Options | None = None,
             "systematic_calibration_gap_pct": systematic_cal,
             "systematic_withheld_gap_pct": sys_before["total_pct"] or 0.0,
             "systematic_floor_pct": sys_floor,
+            "noise_pct_of_peak": noise_pct,
+            "ordinary_noise_pct": policy.ordinary_noise_pct,
         },
         localization=localise(record, f0, sim_meas, stop),
         effects=[row(s) for s in singles],

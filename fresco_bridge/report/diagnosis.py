@@ -64,6 +64,8 @@ def headline(result: dict[str, Any]) -> dict[str, Any]:
         "record": result["record"]["source"],
         "baseline": result["baseline"]["kind"],
         "effect": verdict["effect"],
+        "named": " or ".join(str(st["effect"]) for st in verdict.get("stories") or [])
+        or verdict["effect"],
         "confidence": verdict["confidence"],
         "confidence_text": confidence_text(verdict),
         "gap_basis": verdict.get("gap_basis", "raw"),
@@ -107,7 +109,7 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
     rows = [
         ("record", h["record"]),
         ("sim (baseline law, fitted on the calibration part)", h["baseline"]),
-        ("verdict", f"{h['effect']} (confidence {h['confidence_text']})"),
+        ("verdict", f"{h['named']} (confidence {h['confidence_text']})"),
         ("magnitude", magnitude),
         ("withheld gap without → with it (force and displacement NRMS, "
          f"{BASIS_WORDS.get(h['gap_basis'], h['gap_basis'])})", _gap_row(h, floor)),

@@ -2,9 +2,8 @@
 
 The verdict, the candidate table of the summary, the overlay figure, the report's section and
 the demo's line quote the same withheld gaps on the same basis (``verdict.gap_basis``: as
-measured, or with the white noise removed), and the confidence comes with its words. A
-degradation record with its white noise: the verdict is scored without the noise, as is every
-table beside it.
+measured — the likelihood the selection rule weighs — or with the white noise removed), and
+the confidence comes with its words.
 """
 
 from __future__ import annotations
@@ -32,14 +31,14 @@ def result() -> Diagnosis:
 def test_the_verdict_quotes_its_winners_row(result: Diagnosis) -> None:
     verdict = result.verdict
     assert verdict.effect == "degradation"
-    assert verdict.gap_basis == "systematic"
+    assert verdict.gap_basis == "raw"
     winner = result.winner()
     assert winner is not None
     after, shrink, _score = on_basis(winner, verdict.gap_basis)
     assert after == pytest.approx(verdict.gap_after_pct, rel=1e-12)
     assert shrink == pytest.approx(verdict.shrink_pct, rel=1e-12)
-    # on this basis the raw figure differs: quoting it would be the second source
-    assert winner["gap_after"]["total_pct"] != pytest.approx(after, rel=1e-6)
+    # the systematic figure differs: quoting it would be the second source
+    assert winner["systematic"]["gap_after_pct"] != pytest.approx(after, rel=1e-6)
 
 
 def test_summary_table_figure_and_report_agree(result: Diagnosis, tmp_path: Path) -> None:
@@ -50,7 +49,7 @@ def test_summary_table_figure_and_report_agree(result: Diagnosis, tmp_path: Path
     assert f"from {before} to {after}" in verdict_line
     row = next(line for line in text.splitlines() if line.strip().startswith("degradation "))
     assert after in row
-    assert "white noise removed" in text
+    assert "as measured" in text
     fig = overlay_figure(result)
     labels = [t.get_text() for t in fig.axes[2].get_legend().get_texts()]
     assert any(f"gap {after}" in label for label in labels)
@@ -73,16 +72,19 @@ def test_the_confidence_comes_with_its_words(result: Diagnosis) -> None:
 
 
 @pytest.mark.parametrize(("verdict", "words"), [
-    ({"effect": "rate_dependence", "confidence": 0.08, "not_separated_from": "friction",
-      "runner_up": "friction", "flags": {}},
-     "low: the record does not separate it from friction"),
+    ({"effect": "rate_dependence", "confidence": 0.3, "not_separated_from": "friction",
+      "runner_up": "friction", "flags": {}, "separated_by": "cycles at two rates",
+      "stories": [{"effect": "rate_dependence", "weight": 0.55},
+                  {"effect": "friction", "weight": 0.45}]},
+     "low: rate_dependence or friction, 0.55 / 0.45: cycles at two rates"),
     ({"effect": "degradation", "confidence": 0.6, "not_separated_from": None,
       "runner_up": "pinching", "flags": {"delta_nu": "at its upper bound 0.5"}},
      "moderate: the runner-up pinching explains much of the gap too; the record does not "
      "measure delta_nu"),
     ({"effect": "backlash", "confidence": 0.95, "not_separated_from": None,
       "runner_up": "friction", "flags": {}}, "high"),
-    ({"effect": "none", "confidence": 0.3}, "low: the withheld gap is close to the floor"),
+    ({"effect": "none", "confidence": 0.3},
+     "low: the withheld gap or the noise is close to its floor"),
     ({"effect": "baseline_misfit", "confidence": 0.0},
      "low: no candidate effect explains the gap"),
 ])
