@@ -11,8 +11,8 @@ bilinear source and its ``online_improved`` twin (previous-step), driven over TC
 * ``catch-up``: ten source-only sessions of 2,500 steps, then a source + twin session: the
   twin answers from step 1, each answer within the learner's deadline (2 s).
 
-The bridge and the client are pinned to CPU 1 and the learner worker to CPU 0 when the machine
-has them.
+Everything (the client, the bridge and its learner worker) runs on CPU 1 when the machine has
+it, as under ``taskset -c 1``.
 
     python -m benchmarks.bench_twin_long [--steps 100000] [--without-checkpoint]
     python -m benchmarks.bench_twin_long catch-up
@@ -57,7 +57,7 @@ name = "twin1"
 port = 0
 kind = "updatable"
 learns_from = "damper"
-updater = "online_improved"
+updater = "{updater}"
 offline = "{offline}"
 """
 
@@ -94,9 +94,11 @@ def disp(i: int) -> float:
 
 
 def drive(ports: tuple[int, int], steps: int, *, twin: bool, sample: int = 0,
-          on_sample: object = None) -> list[float]:
-    """``steps`` source (+ twin) steps; the twin's trial + force round trips (s)."""
+          on_sample: object = None, pace: float = 0.0) -> list[float]:
+    """``steps`` source (+ twin) steps, one every ``pace`` s at most; the twin's trial + force
+    round trips (s)."""
     trips: list[float] = []
+    start = time.perf_counter()
     with GenericClientLink("127.0.0.1", ports[0], 1, data_size=1) as source:
         link = GenericClientLink("127.0.0.1", ports[1], 1, data_size=1).connect() if twin \
             else None
@@ -116,6 +118,8 @@ def drive(ports: tuple[int, int], steps: int, *, twin: bool, sample: int = 0,
                 link.commit()
             if sample and i % sample == 0 and callable(on_sample):
                 on_sample(i)
+            if pace:
+                time.sleep(max(0.0, start + pace * i - time.perf_counter()))
         if link is not None:
             link.request(Action.GET_DISP)
             link.close()
@@ -123,15 +127,14 @@ def drive(ports: tuple[int, int], steps: int, *, twin: bool, sample: int = 0,
 
 
 def long_run(steps: int, without_checkpoint: bool) -> None:
+    updater = "online_improved"
     with tempfile.TemporaryDirectory(prefix="bench-twin-long-") as tmp:
         folder = Path(tmp)
         cfg = folder / "lab.toml"
         cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv")))
+                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
         proc, ports, ready = serve(folder, "--config", str(cfg))
         worker = worker_of(proc.pid)
-        if worker is not None:
-            _pin(0, worker)
         print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step")
         rss: list[tuple[float, float]] = []
 
@@ -140,8 +143,11 @@ def long_run(steps: int, without_checkpoint: bool) -> None:
 
         sample(0)
         t0 = time.perf_counter()
-        trips = np.asarray(drive(ports, steps, twin=True, sample=steps // 10,
-                                 on_sample=sample)) * 1e6
+        try:
+            trips = np.asarray(drive(ports, steps, twin=True, sample=steps // 10,
+                                     on_sample=sample)) * 1e6
+        except RuntimeError as exc:
+            _failed(folder, exc)
         wall = time.perf_counter() - t0
         proc.send_signal(signal.SIGKILL)
         proc.wait(30)
@@ -183,24 +189,31 @@ def long_run(steps: int, without_checkpoint: bool) -> None:
             print(f"ready-after-resume, {name}: {ready:.2f} s (target <= 5)")
 
 
-def catch_up(sessions: int, steps: int) -> None:
+def _failed(folder: Path, exc: Exception) -> None:
+    print(f"FAILED: {exc}; the bridge's log:")
+    for log in folder.glob("serve-*.log"):
+        print("".join(log.read_text().splitlines(keepends=True)[-15:]))
+    raise exc
+
+
+def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
     with tempfile.TemporaryDirectory(prefix="bench-twin-catch-up-") as tmp:
         folder = Path(tmp)
         cfg = folder / "lab.toml"
         cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv")))
+                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
         proc, ports, _ = serve(folder, "--config", str(cfg))
-        worker = worker_of(proc.pid)
-        if worker is not None:
-            _pin(0, worker)
         try:
             for _ in range(sessions):
-                drive(ports, steps, twin=False)
+                drive(ports, steps, twin=False, pace=pace)
             trips = np.asarray(drive(ports, 200, twin=True)) * 1e3
+        except RuntimeError as exc:
+            _failed(folder, exc)
         finally:
             proc.send_signal(signal.SIGTERM)
             proc.wait(60)
-        print(f"{sessions} source-only sessions of {steps} steps, then a pair of 200 steps: "
+        print(f"{updater}: {sessions} source-only sessions of {steps} steps (one every "
+              f"{1e3 * pace:g} ms at most), then a pair of 200 steps: "
               f"the twin answered every step; first answer {trips[0]:.1f} ms, max "
               f"{float(trips.max()):.1f} ms, p50 {float(np.median(trips)):.2f} ms "
               "(deadline 2000 ms)")
@@ -214,13 +227,15 @@ def main(argv: list[str] | None = None) -> None:
                         help="also resume with the checkpoint removed")
     parser.add_argument("--sessions", type=int, default=10)
     parser.add_argument("--session-steps", type=int, default=2500)
+    parser.add_argument("--pace", type=float, default=0.0, help="catch-up: ms per source step")
+    parser.add_argument("--updater", default="online_improved", help="catch-up: the updater")
     args = parser.parse_args(argv)
     _pin(1)
     print(f"load average {os.getloadavg()[0]:.1f}")
     if args.mode == "long":
         long_run(args.steps, args.without_checkpoint)
     else:
-        catch_up(args.sessions, args.session_steps)
+        catch_up(args.sessions, args.session_steps, args.pace / 1e3, args.updater)
 
 
 if __name__ == "__main__":
