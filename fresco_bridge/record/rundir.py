@@ -16,13 +16,14 @@ CONFIG_FILE = "config.toml"
 META_FILE = "run.json"
 
 
-def write_private(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` readable by this user only (0600), atomically."""
+def write_private(path: Path, text: str | bytes) -> None:
+    """Write ``text`` (str: UTF-8) to ``path`` readable by this user only (0600), atomically:
+    a crash leaves the old file or the new one, never a torn one."""
     tmp = path.with_name(f".{path.name}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     try:
         os.fchmod(fd, 0o600)
-        data = text.encode("utf-8")
+        data = text.encode("utf-8") if isinstance(text, str) else text
         view = memoryview(data)
         while view:
             written = os.write(fd, view)  # not inside the slice: mypyc evaluates it twice

@@ -15,6 +15,7 @@ from ..sites import controlled_site
 from ..sites.base import Site
 from ..updating.base import UpdaterError
 from ..updating.histories import read_history
+from .checkpoint import CheckpointWriter, load_checkpoint
 from .controller import TwinController
 from .learner import Learner
 from .source import SourceFeed
@@ -58,6 +59,8 @@ def build_twins(configs: Sequence[UpdatableSiteConfig], context: SiteContext
         spec = LearnerSpec(source, tuple(twin_spec(t) for t in twins))
         learner = learners[source] = Learner(source, spec,
                                              deadline=min(t.learner_deadline for t in twins))
+        if context.record is not None:
+            learner.checkpoints = CheckpointWriter(context.record.directory, spec)
         same_step = [t for t in twins if t.causality == "same-step"]
         feed = feeds[source] = SourceFeed(source) if same_step else None
         for t in twins:
@@ -169,5 +172,6 @@ def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
         for twin in list(replayed.awaiting):
             replayed.twin_committed(twin)
         learner.preload(replayed.log, source_step=replayed.source_step,
-                        commits=replayed.commits)
+                        commits=replayed.commits,
+                        checkpoint=load_checkpoint(run_dir, learner.spec))
         learner.source_session = replayed.source_session

@@ -36,6 +36,7 @@ from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 from ..worker_output import OUTPUT, quiet_tracker, relay_output
+from .checkpoint import Checkpoint, CheckpointWriter, history_counts, resume_point
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
 log = logging.getLogger("fresco_bridge.twins")
@@ -51,7 +52,9 @@ SNAPSHOT_EVERY = 50
 (``on_learner_loss = "freeze"``: the frozen copy starts from the last one)."""
 CHECKPOINT_EVERY = 2000
 """Messages to the worker between two snapshots otherwise: a new worker starts from the last
-one and replays only what came after it, and the log behind it is dropped (memory bounded)."""
+one and replays only what came after it, and the log behind it is dropped (memory bounded).
+A snapshot this many messages past the last one written is also the run directory's
+checkpoint (``checkpoint.py``): ``--resume`` starts from it."""
 LEARN_AHEAD = 64
 """Source steps committed while no twin of the source is in a session, sent to the worker to
 be learned at once in batches of this many (a twin's next trial finds them learned)."""
@@ -125,7 +128,12 @@ class Learner:
         self._commits = 0
         self._snapshot: tuple[int, int, bytes] | None = None
         """(log length, twin steps, pickled worker state) of the last snapshot."""
-        self._snapshot_asked: dict[int, tuple[int, int]] = {}
+        self._snapshot_asked: dict[int, tuple[int, int, int, dict[str, int]]] = {}
+        """Snapshots asked: (log position, twin steps, observations, each twin's commits)."""
+        self._observed, self._committed = 0, dict[str, int]()
+        self.checkpoints: CheckpointWriter | None = None
+        self._written_at = 0
+        """The log position of the last snapshot offered as a checkpoint."""
         self._answered_locally: set[str] = set()
         """Twins whose last trial the local copy answered (a new worker has not seen it)."""
         self._local: LearnerState | None = None
@@ -136,11 +144,18 @@ class Learner:
         """Twin steps committed when the last snapshot was taken (-1: none yet)."""
         return -1 if self._snapshot is None else self._snapshot[1]
 
-    def preload(self, log_: list[Message], *, source_step: int, commits: int) -> None:
-        """Start from a recorded history (``serve --resume``): the worker replays ``log_``
-        before it answers, as a new worker after a loss does."""
-        self.log = list(log_)
-        self._log_base = 0
+    def preload(self, log_: list[Message], *, source_step: int, commits: int,
+                checkpoint: Checkpoint | None = None) -> None:
+        """Start from a recorded history (``serve --resume``): the worker starts from
+        ``checkpoint`` (if the history reaches it) and replays the rest of ``log_`` before it
+        answers, as a new worker after a loss does."""
+        rest = resume_point(self.source, log_, checkpoint)
+        if rest is not None and checkpoint is not None:
+            self._snapshot = (0, checkpoint.twin_steps, checkpoint.state)
+        self.log = list(log_) if rest is None else rest
+        self._log_base = self._written_at = 0
+        self._observed, counts = history_counts(log_)
+        self._committed = dict(counts)
         self.source_step = source_step
         self._commits = commits
 
@@ -161,7 +176,7 @@ class Learner:
         self._loop = asyncio.get_running_loop()
         self.state = "starting"
         await self._spawn()
-        if self.log:  # a resumed run: what the record holds, before anything new
+        if self.log or self._snapshot is not None:  # a resumed run: the record, first
             self.state = "catching-up"
             self._held = list(self.log)
             (through,) = await self._request(("sync",), START_DEADLINE)
@@ -246,8 +261,13 @@ class Learner:
         asked = self._snapshot_asked.pop(reply[1], None)
         if asked is not None:
             if kind == "snapshot":
-                self._snapshot = (*asked, reply[2])
-                self._trim(asked[0])
+                position, steps, observed, committed = asked
+                self._snapshot = (position, steps, reply[2])
+                self._trim(position)
+                if self.checkpoints is not None \
+                        and position - self._written_at >= CHECKPOINT_EVERY:
+                    self._written_at = position
+                    self.checkpoints.offer(Checkpoint(observed, committed, steps, reply[2]))
             else:
                 log.error("learner of %s: %s; freeze answers from an older snapshot or HOLDs",
                           self.source, reply[2])
@@ -311,7 +331,8 @@ class Learner:
         frozen copy of ``freeze`` twins."""
         rid = next(self._ids)
         self._snapshot_asked[rid] = (self._log_base + len(self.log),
-                                     self._commits // len(self.spec.twins))
+                                     self._commits // len(self.spec.twins), self._observed,
+                                     dict(self._committed))
         self._asked_at = self._log_base + len(self.log)
         self._put(("snapshot", rid))
 
@@ -403,6 +424,8 @@ class Learner:
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
         await self._stop_worker(kill=False)
+        if self.checkpoints is not None:
+            await self.checkpoints.close()
         for fut in self._pending.values():
             if not fut.done():
                 fut.set_exception(LearnerError("the bridge is stopping"))
@@ -446,6 +469,10 @@ class Learner:
         The worker needs the source's steps and the twins' commits only before its next
         answer, so the source's committed step costs the step loop an append, no IPC."""
         self.log.append(msg)
+        if msg[0] == "observe":
+            self._observed += 1
+        elif msg[0] == "commit":
+            self._committed[msg[1]] = self._committed.get(msg[1], 0) + 1
         if self.state in ("live", "catching-up"):
             self._held.append(msg)
 

@@ -179,3 +179,36 @@ def test_a_run_killed_after_yield_resumes_equal_to_an_uninterrupted_one(tmp_path
         assert want.size == got.size == 60
         assert float(np.max(np.abs(want[:35]))) > 5.0  # yielded (fy = 5 kN) before the kill
         assert float(np.max(np.abs(got - want))) / float(np.max(np.abs(want))) < 1e-9, site
+
+
+def test_a_resume_after_a_long_run_starts_from_the_learners_checkpoint(tmp_path: Path) -> None:
+    """Past ``CHECKPOINT_EVERY`` messages the learner's snapshot is in the run directory; a
+    kill -9 then ``--resume`` starts the worker from it and replays only the record after it,
+    and the twin still answers exactly as an uninterrupted run's."""
+    cfg = _config(tmp_path, "long")
+    first, ports = serve(tmp_path, "--config", str(cfg))
+    drive(ports, 1, 800)  # 3 messages a step: past one checkpoint
+    first.send_signal(signal.SIGKILL)
+    first.wait(10)
+    (run,) = [p for p in (tmp_path / "long").iterdir() if p.is_dir()]
+    assert (run / "learner-damper.checkpoint").stat().st_mode & 0o777 == 0o600
+    second, ports = serve(tmp_path, "--config", str(cfg), "--resume", str(run))
+    drive(ports, 801, 20)
+    second.send_signal(signal.SIGTERM)
+    second.wait(30)
+
+    logs = "".join(p.read_text() for p in tmp_path.glob("serve-*.log"))
+    found = re.search(r"resumes from its checkpoint of twin step (\d+) and replays (\d+) of the "
+                      r"record's (\d+) message", logs)
+    assert found, "the resumed learner did not start from its checkpoint"
+    at, replayed, total = map(int, found.groups())
+    assert at >= 600 and total == 3 * 800 and replayed == total - 3 * at
+    steps = committed_steps(run)
+    src = [s for s in steps if s.site == "damper"]
+    twin = [s for s in steps if s.site == "twin1"]
+    assert [s.step for s in twin] == list(range(1, 821)) == [s.step for s in src]
+    expected = replay(make_updater("online_ukf"), [s.meas_disp[0] for s in src],
+                      [s.meas_force[0] for s in src], [s.cmd_disp[0] for s in twin],
+                      lag=True).force_pred
+    got = np.array([s.meas_force[0] for s in twin])
+    assert float(np.max(np.abs(got - expected))) / float(np.max(np.abs(expected))) < 1e-9
