@@ -1,0 +1,177 @@
+"""``[sites.correction]`` on an experimental site, driven through a real bridge by the
+project's genericClient (the integrator's side of the wire): an in-process ``rig`` whose
+reaction frame is compliant, so the specimen sits short of every command until corrected."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fresco_bridge.config import ConfigError, parse_config
+from fresco_bridge.integrator.link import GenericClientLink
+from fresco_bridge.record import read_record
+from fresco_bridge.record.export import committed_steps, correction_lines
+from tests.bridge.sites.test_correction_loop import rig_description, toml
+from tests.support.bridge import RunningBridge
+
+K = 8.0  # kN/mm, the specimen (``ELASTIC`` of the loop's tests)
+TARGETS = [2.0, 5.0, 8.0, 3.0, -4.0]
+
+
+def lab(tmp_path: Path, correction: str | None, *, frame: float = 48.0,
+        limits: str = "") -> str:
+    rig_file = tmp_path / "rig.toml"
+    rig_file.write_text(toml(rig_description(frame={"stiffness": frame})), encoding="utf-8")
+    table = "" if correction is None else f"[sites.correction]\n{correction}\n"
+    return f"""
+[bridge]
+run_name = "correction"
+[[sites]]
+name = "frame"
+port = 0
+[sites.controller]
+kind = "rig"
+file = "{rig_file}"
+external = "specimen"
+{table}{limits}"""
+
+
+def drive(config: str, tmp_path: Path, targets: list[float]
+          ) -> tuple[list[tuple[float, ...]], dict[str, Any], Path, list[tuple[float, ...]]]:
+    """Each target a step (trial, force, commit); the forces, the site's status, the run
+    directory and every command the rig was sent."""
+    forces = []
+    with RunningBridge(config, tmp_path / "runs") as b:
+        site = b.bridge.sites["frame"]
+        controller = site.controller  # type: ignore[attr-defined]
+        sent: list[tuple[float, ...]] = []
+        set_ctrl_now = controller.set_ctrl_now
+
+        def spied(command: tuple[float, ...]) -> None:
+            sent.append(command)
+            set_ctrl_now(command)
+
+        controller.set_ctrl_now = spied
+        with GenericClientLink("127.0.0.1", b.ports["frame"], 1, timeout=30.0) as link:
+            for i, t in enumerate(targets, 1):
+                link.set_trial((t,), time=0.01 * i)
+                forces.append(link.force())
+                link.commit()
+            status = b.call(site.status)  # before the session ends (then IDLE)
+        run_dir = b.run_dir
+    return forces, status, run_dir, sent
+
+
+def test_a_compliant_frame_converges_through_the_site(tmp_path: Path) -> None:
+    plain, _, _, _ = drive(lab(tmp_path, None), tmp_path / "plain", TARGETS)
+    # the frame (48 kN/mm) behind the specimen (8 kN/mm): the specimen gets 6/7 of a command
+    assert plain[1][0] == pytest.approx(K * 5.0 * 48.0 / 56.0, rel=0.02)
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 2.0\nmeasured = "external"')
+    forces, status, run_dir, sent = drive(config, tmp_path / "corrected", TARGETS)
+    for force, target in zip(forces, TARGETS, strict=True):
+        # the integrator's answer: the force at the corrected position (specimen within 0.01)
+        assert abs(force[0] - K * target) <= K * 0.01 + 1e-9
+    assert len(sent) > len(TARGETS)  # corrections went to the rig
+    correction = status["correction"]
+    assert correction["trials"] == len(TARGETS) and correction["outcome"] == "converged"
+    assert 1 <= correction["corrections"] <= 3 and correction["residual"] <= 0.01
+    assert status["state"] == "RUNNING"
+    # the record: every iteration read back, and the committed step is the corrected one
+    records = list(read_record(run_dir))
+    lines = correction_lines(records)
+    assert [c.target for c in lines] == [(t,) for t in TARGETS]
+    assert all(c.outcome == "converged" and c.residual <= 0.01 for c in lines)
+    assert [c.step for c in lines] == list(range(1, len(TARGETS) + 1))
+    commanded = [c for line in lines for c in line.commands]
+    assert commanded == sent  # every command the rig got, in order, is in the record
+    for line in lines:
+        assert line.commands[0] == line.target and len(line.commands) == line.corrections + 1
+        assert abs(line.measured[-1][0] - line.target[0]) <= 0.01
+    steps = committed_steps(run_dir)
+    assert [s.cmd_disp for s in steps] == [line.commands[-1] for line in lines]
+    assert [s.meas_force for s in steps] == [pytest.approx(f) for f in forces]
+
+
+def test_export_reads_the_iterations_back(tmp_path: Path) -> None:
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 2.0\nmeasured = "external"')
+    _, _, run_dir, sent = drive(config, tmp_path, TARGETS[:3])
+    out = tmp_path / "corrections.csv"
+    done = subprocess.run([sys.executable, "-m", "fresco_bridge.cli", "export", str(run_dir),
+                           "--corrections", "-o", str(out)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"{len(sent)} command(s) of 3 corrected trial(s)" in done.stdout
+    rows = [line.split(",") for line in out.read_text().splitlines()]
+    assert rows[0] == ["session", "step", "site", "iteration", "target", "command", "measured",
+                       "outcome", "corrections", "residual"]
+    assert [float(r[5]) for r in rows[1:]] == [c[0] for c in sent]
+    assert next(r[3] for r in rows[1:] if r[1] == "1") == "0"
+
+
+def test_beyond_max_correction_holds_and_nothing_beyond_is_forwarded(tmp_path: Path) -> None:
+    # a soft frame (as stiff as the specimen): 2 → measured 1 → 3 (1 off) → 1.5 → 3.5 (1.5 off)
+    # → 1.75 → 3.75 would be 1.75 off: beyond max_correction 1.5
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 1.5\nmeasured = "external"',
+                 frame=K)
+    forces, status, run_dir, sent = drive(config, tmp_path, [2.0, 3.0, 4.0])
+    assert all(math.isnan(f[0]) for f in forces)  # the integrator is told to stop
+    assert sent == [(2.0,), pytest.approx((3.0,)), pytest.approx((3.5,))]
+    assert all(abs(c[0] - 2.0) <= 1.5 + 1e-12 for c in sent)
+    assert status["state"] == "HOLD" and "max_correction 1.5 mm" in status["reason"]
+    assert status["correction"]["outcome"] == "beyond-max-correction"
+    records = list(read_record(run_dir))
+    assert [c.outcome for c in correction_lines(records)] == ["beyond-max-correction"]
+    assert not committed_steps(run_dir)
+
+
+def test_non_convergence_holds_by_default(tmp_path: Path) -> None:
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 10.0\nmax_iterations = 2\n'
+                 'gain = 0.3\nmeasured = "external"', frame=K)
+    forces, status, _, sent = drive(config, tmp_path, [4.0, 5.0])
+    assert all(math.isnan(f[0]) for f in forces) and len(sent) == 3
+    assert status["state"] == "HOLD" and "after the last allowed correction" in status["reason"]
+
+
+def test_non_convergence_accepted_with_an_event(tmp_path: Path) -> None:
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 10.0\nmax_iterations = 2\n'
+                 'gain = 0.3\nmeasured = "external"\npolicy = "accept-with-event"', frame=K)
+    forces, status, run_dir, _ = drive(config, tmp_path, [4.0, 5.0])
+    assert status["state"] == "RUNNING" and status["correction"]["unconverged"] == 2
+    assert status["correction"]["warnings"] == 2  # 2 of 2 iterations: more than half
+    records = list(read_record(run_dir))
+    events = [r for r in records if r["kind"] == "event"]
+    corrections = [e for e in events if e["event"] == "correction"]
+    assert [e["outcome"] for e in corrections] == ["not-converged"] * 2
+    # the warning is rate-limited: one event for the two steps
+    assert [e["event"] for e in events].count("correction-warning") == 1
+    # the answer is the force measured at the last position reached (not the target's)
+    steps = committed_steps(run_dir)
+    assert [s.meas_force for s in steps] == [pytest.approx(f) for f in forces]
+    assert all(0.0 < f[0] < K * t for f, t in zip(forces, [4.0, 5.0], strict=True))
+
+
+def test_a_limit_rejects_a_correction_through_the_site_gate(tmp_path: Path) -> None:
+    limits = '[[sites.limits]]\ndisp_max = 4.5\npolicy = "reject"\n'
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 3.0\nmeasured = "external"',
+                 frame=K, limits=limits)
+    forces, status, _, sent = drive(config, tmp_path, [3.0])
+    # 3 → measured 1.5 → 4.5 (within) → 2.25 → 5.25: rejected by the limit, not sent
+    assert math.isnan(forces[0][0]) and status["state"] == "HOLD"
+    assert all(c[0] <= 4.5 + 1e-12 for c in sent)
+    assert status["limit_events"]
+
+
+def test_the_config_checks_the_correction(tmp_path: Path) -> None:
+    bad = lab(tmp_path, "tolerance = [0.01, 0.02]\nmax_correction = 1.0")
+    with pytest.raises(ConfigError, match=r"correction\.tolerance: 2 value"):
+        parse_config(bad, "<test>")
+    no_channel = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 1.0\nmeasured = "external"'
+                     ).replace('external = "specimen"\n', "")
+    with pytest.raises(ConfigError, match=r"site frame: \[sites\.correction\]: correction: "
+                       r"measured = \"external\", but the controller has no external channel"):
+        RunningBridge(no_channel, tmp_path / "runs").__enter__()
