@@ -20,23 +20,57 @@ site's direct path, without a correction, is unchanged.
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from protocol import Signals
 
 from ..config_model import ConfigError
-from ..controls.base import Daq
+from ..controls.base import Controller, Daq
 from ..logs import RateLimitedLog
 from ..safety import CorrectionConfig, SiteState
+from ..setups import Setup
 from .correction_loop import CorrectionLoop, StepCorrection
+from .gate import CommandGate
 
 if TYPE_CHECKING:
-    from .experimental import ExperimentalSite
+    from ..record.site import SiteRecorder
+    from ..telemetry.metrics import SiteMetrics
 
-__all__ = ["SiteCommandPath", "SiteCorrection"]
+__all__ = ["CorrectedSite", "SiteCommandPath", "SiteCorrection"]
 
 log = logging.getLogger("fresco_bridge.site")
 RUNNING = SiteState.RUNNING
+
+
+class CorrectedSite(Protocol):
+    """What the correction needs of its site (``ExperimentalSite``)."""
+
+    name: str
+    state: SiteState
+    session: int
+    step: int
+    trial: Signals
+    ctrl: tuple[float, ...]
+    setup: Setup
+    controller: Controller
+    gate: CommandGate
+    recorder: SiteRecorder | None
+    metrics: SiteMetrics | None
+
+    @property
+    def sent(self) -> tuple[float, ...] | None: ...
+
+    async def measure(self) -> Daq | None:
+        """A fresh, checked and recorded measurement; None when no longer RUNNING."""
+        ...
+
+    def enter_hold(self, reason: str) -> None: ...
+
+    def event(self, kind: str, reason: str, **extra: object) -> None: ...
+
+    def forwarded(self) -> None:
+        """The trial's last command is reached: the site's trial listeners get it."""
+        ...
 
 
 class SiteCommandPath:
@@ -44,7 +78,7 @@ class SiteCommandPath:
 
     __slots__ = ("site", "trial")
 
-    def __init__(self, site: ExperimentalSite) -> None:
+    def __init__(self, site: CorrectedSite) -> None:
         self.site = site
         self.trial: Signals = site.trial
         """The integrator's trial being corrected (its trial lines in the record)."""
@@ -66,7 +100,7 @@ class SiteCommandPath:
 class SiteCorrection:
     """One experimental site's correction: the loop over its path, and what it last did."""
 
-    def __init__(self, site: ExperimentalSite, config: CorrectionConfig) -> None:
+    def __init__(self, site: CorrectedSite, config: CorrectionConfig) -> None:
         self.site = site
         self.path = SiteCommandPath(site)
         try:

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from fresco_bridge.config import ConfigError, parse_config
+from fresco_bridge.ctl import format_answer, request, socket_path_for
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record import read_record
 from fresco_bridge.record.export import committed_steps, correction_lines
@@ -62,7 +63,10 @@ def drive(config: str, tmp_path: Path, targets: list[float]
                 link.set_trial((t,), time=0.01 * i)
                 forces.append(link.force())
                 link.commit()
-            status = b.call(site.status)  # before the session ends (then IDLE)
+            # ``ctl status`` over the bridge's control socket, before the session ends
+            answer = request(socket_path_for(b.run_dir), "status", "frame", timeout=10.0)
+            (status,) = answer["sites"]
+            status["text"] = format_answer(answer)
         run_dir = b.run_dir
     return forces, status, run_dir, sent
 
@@ -81,6 +85,9 @@ def test_a_compliant_frame_converges_through_the_site(tmp_path: Path) -> None:
     assert correction["trials"] == len(TARGETS) and correction["outcome"] == "converged"
     assert 1 <= correction["corrections"] <= 3 and correction["residual"] <= 0.01
     assert status["state"] == "RUNNING"
+    assert (f"correction: last trial {correction['corrections']} correction(s), residual "
+            f"{correction['residual']:.4g} mm (converged); {len(TARGETS)} trial(s), at most "
+            f"{correction['most']} of 5") in status["text"]
     # the record: every iteration read back, and the committed step is the corrected one
     records = list(read_record(run_dir))
     lines = correction_lines(records)
