@@ -5,12 +5,15 @@ reaction frame is compliant, so the specimen sits short of every command until c
 from __future__ import annotations
 
 import math
+import select
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from fresco_bridge.config import ConfigError, parse_config
 from fresco_bridge.ctl import format_answer, request, socket_path_for
@@ -19,6 +22,7 @@ from fresco_bridge.record import read_record
 from fresco_bridge.record.export import committed_steps, correction_lines
 from tests.bridge.sites.test_correction_loop import rig_description, toml
 from tests.support.bridge import RunningBridge
+from tests.support.net import free_ports
 
 K = 8.0  # kN/mm, the specimen (``ELASTIC`` of the loop's tests)
 TARGETS = [2.0, 5.0, 8.0, 3.0, -4.0]
@@ -182,3 +186,80 @@ def test_the_config_checks_the_correction(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"site frame: \[sites\.correction\]: correction: "
                        r"measured = \"external\", but the controller has no external channel"):
         RunningBridge(no_channel, tmp_path / "runs").__enter__()
+
+
+def test_a_modbus_site_corrects_on_its_external_register(tmp_path: Path) -> None:
+    """The network path of the site (guarded controller calls, one read per command): the
+    bridge's Modbus adapter against ``sim-actuator serve`` over loopback, the specimen's
+    displacement read from its external register."""
+    file = tmp_path / "rig.toml"
+    file.write_text(toml(rig_description(frame={"stiffness": 48.0})), encoding="utf-8")
+    port = free_ports(1)[0]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sim_actuator.cli", "serve", "--protocol", "modbus", "--port",
+         str(port), "--rig", str(file), "--time-scale", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+        line = proc.stdout.readline() if ready else ""
+        assert line.startswith("sim-actuator ready"), line
+        config = f"""
+[bridge]
+run_name = "correction-modbus"
+[[sites]]
+name = "frame"
+port = 0
+[sites.controller]
+kind = "modbus"
+port = {port}
+ramp_time = 0.05
+request_timeout = 2.0
+external_register = 24
+[sites.correction]
+tolerance = 0.01
+max_correction = 2.0
+measured = "external"
+"""
+        with RunningBridge(config, tmp_path / "runs") as b, \
+                GenericClientLink("127.0.0.1", b.ports["frame"], 1, timeout=30.0) as link:
+            forces = []
+            for i, t in enumerate((3.0, -2.0, 4.0), 1):
+                link.set_trial((t,), time=0.01 * i)
+                forces.append(link.force()[0])
+                link.commit()
+            run_dir = b.run_dir
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    lines = correction_lines(read_record(run_dir))
+    assert [c.outcome for c in lines] == ["converged"] * 3
+    assert lines[0].measured[0][0] == pytest.approx(3.0 * 48 / 56, abs=1e-4)  # behind the frame
+    assert all(c.corrections >= 1 and c.residual <= 0.01 for c in lines)
+    # float32 on the wire; the force at the corrected position
+    assert forces == [pytest.approx(K * t, abs=K * 0.011) for t in (3.0, -2.0, 4.0)]
+    assert [s.meas_force[0] for s in committed_steps(run_dir)] == \
+        [pytest.approx(f) for f in forces]
+
+
+@settings(max_examples=12, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(frame=st.floats(4.0, 200.0), targets=st.lists(st.floats(-8.0, 8.0), min_size=1,
+                                                      max_size=6),
+       bound=st.floats(1.0, 6.0), policy=st.sampled_from(["reject", "clamp"]),
+       most=st.floats(0.0, 4.0), gain=st.floats(0.2, 1.0))
+def test_no_corrected_command_outside_the_limits_whatever_the_rig(
+        tmp_path: Path, frame: float, targets: list[float], bound: float, policy: str,
+        most: float, gain: float) -> None:
+    limits = f'[[sites.limits]]\ndisp_min = {-bound!r}\ndisp_max = {bound!r}\npolicy = "{policy}"\n'
+    config = lab(tmp_path, f'tolerance = 0.01\nmax_correction = {most!r}\ngain = {gain!r}\n'
+                 'measured = "external"\npolicy = "accept-with-event"', frame=frame,
+                 limits=limits)
+    _, _, run_dir, sent = drive(config, tmp_path / f"runs-{len(list(tmp_path.iterdir()))}",
+                                targets)
+    assert all(-bound <= c[0] <= bound for c in sent)
+    for line in correction_lines(read_record(run_dir)):
+        # every correction within max_correction of the target it corrects, unless a clamp
+        # put it on a limit (the proposal was within; the command reached is the clamped one)
+        assert all(abs(c[0] - line.target[0]) <= most + 1e-9 or abs(abs(c[0]) - bound) < 1e-12
+                   for c in line.commands[1:])
