@@ -76,6 +76,13 @@ class ExperimentalSiteConfig(SiteConfigBase):
             raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
         if self.correction is not None:
             self.correction.to_settings(n_actuators)  # a per-point list that does not fit
+            if self.correction.measured == "external" and \
+                    self.controller.external_channel() is None:
+                raise ValueError(
+                    f"[sites.correction] measured = \"external\", but [sites.controller] "
+                    f"(kind {self.controller.kind}) names no external channel (rig: external = "
+                    "\"specimen\", modbus: external_register, mts: external_field; "
+                    "docs/configuration.md, \"Which displacement is measured\")")
 
 
 def site_controller(cfg: ExperimentalSiteConfig) -> Controller:

@@ -183,9 +183,9 @@ def test_the_config_checks_the_correction(tmp_path: Path) -> None:
         parse_config(bad, "<test>")
     no_channel = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 1.0\nmeasured = "external"'
                      ).replace('external = "specimen"\n', "")
-    with pytest.raises(ConfigError, match=r"site frame: \[sites\.correction\]: correction: "
-                       r"measured = \"external\", but the controller has no external channel"):
-        RunningBridge(no_channel, tmp_path / "runs").__enter__()
+    with pytest.raises(ConfigError, match=r'measured = "external", but \[sites\.controller\] '
+                       r"\(kind rig\) names no external channel"):
+        parse_config(no_channel, "<test>")
 
 
 def test_a_modbus_site_corrects_on_its_external_register(tmp_path: Path) -> None:
