@@ -467,6 +467,17 @@ def summarise(run: Run) -> list[SiteSummary]:
     return out
 
 
+def correction_summary(lines: list[CorrectionLine]) -> str:
+    """One site's displacement corrections in a line: trials, corrections per trial (median,
+    max), the largest residual left, the trials that did not converge."""
+    counts = sorted(c.corrections for c in lines)
+    worst = max(c.residual for c in lines)
+    other = sum(c.outcome != "converged" for c in lines)
+    return (f"displacement correction: {len(lines)} trial(s), corrections a trial median "
+            f"{counts[len(counts) // 2]} max {counts[-1]}, largest residual {fmt(worst, 'mm')}, "
+            f"{other} not converged")
+
+
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
     """``runs show``: metadata, then one block per site."""
     head = [("run", str(run.directory)), ("state", run_state(run.directory, run.meta))]
@@ -480,6 +491,9 @@ def format_show(run: Run, summaries: list[SiteSummary]) -> str:
         events = ", ".join(f"{k} {n}" for k, n in sorted(s.events.items())) or "none"
         lines += ["", f"site {s.site}: {s.steps} committed step(s), {s.sessions} session(s), "
                   f"{s.holds} hold(s), {s.limit_events} limit event(s)", f"  events: {events}"]
+        corrected = [c for c in run.corrections if c.site == s.site]
+        if corrected:
+            lines.append("  " + correction_summary(corrected))
         for d in s.sessions_detail:
             lines.append(
                 f"  session {d.session} actuator {d.actuator}: {d.steps} steps, t "

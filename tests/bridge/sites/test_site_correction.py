@@ -108,6 +108,17 @@ def test_a_compliant_frame_converges_through_the_site(tmp_path: Path) -> None:
     assert [s.meas_force for s in steps] == [pytest.approx(f) for f in forces]
 
 
+def commands_per_trial(sent: list[tuple[float, ...]], targets: list[float]
+                       ) -> list[list[tuple[float, ...]]]:
+    """The commands sent, split at each target (the first command of each trial)."""
+    trials: list[list[tuple[float, ...]]] = []
+    for command in sent:
+        if len(trials) < len(targets) and command == (targets[len(trials)],):
+            trials.append([])
+        trials[-1].append(command)
+    return trials
+
+
 def test_export_reads_the_iterations_back(tmp_path: Path) -> None:
     config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 2.0\nmeasured = "external"')
     _, _, run_dir, sent = drive(config, tmp_path, TARGETS[:3])
@@ -122,6 +133,13 @@ def test_export_reads_the_iterations_back(tmp_path: Path) -> None:
                        "outcome", "corrections", "residual"]
     assert [float(r[5]) for r in rows[1:]] == [c[0] for c in sent]
     assert next(r[3] for r in rows[1:] if r[1] == "1") == "0"
+    shown = subprocess.run([sys.executable, "-m", "fresco_bridge.cli", "runs", "show",
+                            str(run_dir)], capture_output=True, text=True, timeout=120)
+    assert shown.returncode == 0, shown.stderr
+    counts = sorted(len(c) - 1 for c in commands_per_trial(sent, TARGETS[:3]))
+    assert (f"displacement correction: 3 trial(s), corrections a trial median {counts[1]} max "
+            f"{counts[2]}, largest residual ") in shown.stdout
+    assert "0 not converged" in shown.stdout
 
 
 def test_beyond_max_correction_holds_and_nothing_beyond_is_forwarded(tmp_path: Path) -> None:
