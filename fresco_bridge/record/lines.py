@@ -74,7 +74,8 @@ displacement correction ends (before the step line that holds its commands)::
 
 - ``step``: the step the trial belongs to (its commit will be step ``S``; its trial and daq
   lines say ``S − 1``, as every trial's); ``target``: the integrator's command (ctrl, mm);
-- ``it``: every command the controller reached for it, the target's own first, each with the
+- ``it``: every command the controller reached for it, the target's own first (a trial
+  repeated at the same target: the command already held), each with the
   displacement the correction compared (the daq or the external channel, mm); each command is
   also a trial line (ctrl) followed by its daq line, so a step line folds them as iterations;
 - ``outcome``: ``converged``, ``not-converged``, ``beyond-max-correction``, ``non-finite`` or

@@ -49,6 +49,7 @@ class CorrectedSite(Protocol):
     state: SiteState
     session: int
     step: int
+    time: float
     trial: Signals
     ctrl: tuple[float, ...]
     setup: Setup
@@ -125,7 +126,10 @@ class SiteCorrection:
         """Move to ``target`` and correct (the site's code 3 while it has a correction)."""
         site = self.site
         self.path.trial = trial
-        step = await self.loop.run(target)
+        held = self._held(target)
+        if held is not None and site.recorder is not None:  # its trial line, as any trial's
+            site.recorder.trial(site.session, site.step, site.time, trial.disp, held)
+        step = await self.loop.run(target, held=held)
         self.last = step
         self.trials += 1
         self.most = max(self.most, step.corrections)
@@ -156,6 +160,17 @@ class SiteCorrection:
                            residual=step.residual)
         if site.state is RUNNING and site.sent == site.ctrl:
             site.forwarded()
+
+    def _held(self, target: tuple[float, ...]) -> tuple[float, ...] | None:
+        """The command the controller holds for ``target`` when the last trial had this same
+        target and the site is still where that trial's correction left it (a repeated trial:
+        a Newton iteration, a re-sent step); None: move to the target first."""
+        last, site = self.last, self.site
+        if last is None or last.target != target or not last.iterations \
+                or site.state is not RUNNING:
+            return None
+        command = last.iterations[-1].command
+        return command if site.sent == command else None
 
     def status(self) -> dict[str, object]:
         """``ctl status``'s ``correction``: the last trial and the counts so far."""

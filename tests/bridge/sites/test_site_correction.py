@@ -281,3 +281,34 @@ def test_no_corrected_command_outside_the_limits_whatever_the_rig(
         # put it on a limit (the proposal was within; the command reached is the clamped one)
         assert all(abs(c[0] - line.target[0]) <= most + 1e-9 or abs(abs(c[0]) - bound) < 1e-12
                    for c in line.commands[1:])
+
+
+def test_a_repeated_trial_goes_on_from_the_corrected_command(tmp_path: Path) -> None:
+    """An integrator that sends the same trial again (a Newton iteration at the same
+    displacement) must not move the specimen back to the uncorrected target."""
+    config = lab(tmp_path, 'tolerance = 0.01\nmax_correction = 2.0\nmeasured = "external"')
+    with RunningBridge(config, tmp_path / "runs") as b:
+        controller = b.bridge.sites["frame"].controller  # type: ignore[attr-defined]
+        sent: list[tuple[float, ...]] = []
+        set_ctrl_now = controller.set_ctrl_now
+
+        def spied(command: tuple[float, ...]) -> None:
+            sent.append(command)
+            set_ctrl_now(command)
+
+        controller.set_ctrl_now = spied
+        with GenericClientLink("127.0.0.1", b.ports["frame"], 1, timeout=30.0) as link:
+            forces = []
+            for _ in range(3):
+                link.set_trial((5.0,), time=0.01)
+                forces.append(link.force()[0])
+            link.commit()
+        run_dir = b.run_dir
+    assert sent.count((5.0,)) == 1  # the target once; then only corrections
+    lines = correction_lines(read_record(run_dir))
+    assert len(lines) == 3 and all(c.outcome == "converged" for c in lines)
+    assert lines[1].commands[0] == lines[0].commands[-1]  # went on from the corrected command
+    assert lines[2].corrections == 0 and lines[1].corrections == 0
+    assert forces == [pytest.approx(K * 5.0, abs=K * 0.01)] * 3
+    (step,) = committed_steps(run_dir)
+    assert step.cmd_disp == lines[0].commands[-1]
