@@ -14,11 +14,15 @@
    and without the correction, alternating blocks, ≥ 3 rounds: time per step with correction
    vs (1 + mean corrections) × the uncorrected step.
 
-    taskset -c 1 python -m benchmarks.bench_correction [--quick]
+    taskset -c 1 python -m benchmarks.bench_correction [--quick] [--loop]
 
-Not the site's path yet (the correction is not wired into the experimental site): the loop
-drives the controller through ``LimitedPath`` (limits and state table, no limits configured).
-Feeds BENCHMARKS.md, "Displacement correction".
+The frame runs go through the experimental site (default): a real bridge in a thread serving a
+``rig`` site with ``[sites.correction]``, the frame's integrator its genericClient over loopback;
+the targets, the specimen displacements and the corrections are read back from the run
+record's correction lines (the uncorrected runs: a tolerance no step exceeds, so each trial's
+one measurement is recorded and nothing is corrected). ``--loop``: the loop alone, through
+``LimitedPath`` (limits and state table, no site). The Modbus timing drives the loop through
+``LimitedPath`` either way. Feeds BENCHMARKS.md, "Displacement correction".
 """
 
 from __future__ import annotations
@@ -34,14 +38,19 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from fresco_bridge.config import parse_config
 from fresco_bridge.controls.base import Controller
 from fresco_bridge.controls.modbus import ModbusController, ModbusControllerConfig
 from fresco_bridge.controls.rig import RigController, RigControllerConfig
+from fresco_bridge.daemon import BridgeThread
 from fresco_bridge.eager import Suspended, start_eager
 from fresco_bridge.indicators import nrms_error
 from fresco_bridge.integrator.coupling import Placement, StoryCoupling, run_coupled
 from fresco_bridge.integrator.demo import DEMO_DAMPER, demo_frame_integrator, demo_ground_motion
+from fresco_bridge.integrator.link import GenericClientLink, SiteElement
 from fresco_bridge.lab import dump_toml
+from fresco_bridge.record import read_record
+from fresco_bridge.record.export import correction_lines
 from fresco_bridge.safety import CorrectionConfig, Limiter
 from fresco_bridge.sites.correction_loop import CorrectionLoop, LimitedPath, StepCorrection
 from sim_actuator.config import build_rig, parse_rig_config
@@ -132,6 +141,55 @@ def frame_run(effects: dict[str, Any], corrected: bool, steps: int | None,
             "events": element.events}
 
 
+UNCORRECTED_TOLERANCE = 1e9
+"""mm: no step exceeds it, so the site measures each trial once and corrects nothing."""
+
+
+def site_config(effects: dict[str, Any], correction: CorrectionConfig) -> str:
+    c = correction
+    return f"""
+[bridge]
+run_name = "bench-correction"
+[record]
+fsync = "off"
+[[sites]]
+name = "damper"
+port = 0
+[sites.controller]
+kind = "rig"
+file = "{rig_file(effects)}"
+external = "specimen"
+[sites.correction]
+tolerance = {c.tolerance!r}
+max_correction = {c.max_correction!r}
+max_iterations = {c.max_iterations}
+gain = {c.gain!r}
+measured = "{c.measured}"
+policy = "{c.policy}"
+"""
+
+
+def site_frame_run(effects: dict[str, Any], corrected: bool, steps: int | None,
+                   correction: CorrectionConfig = CORRECTION) -> dict[str, Any]:
+    """``frame_run`` through the experimental site of a real bridge (its gate, its record)."""
+    if not corrected:
+        correction = correction.model_copy(update={"tolerance": UNCORRECTED_TOLERANCE})
+    with tempfile.TemporaryDirectory(prefix="bench-correction-runs-") as runs:
+        config = site_config(effects, correction)
+        with BridgeThread(parse_config(config, "<bench>"), config, run_dir=Path(runs)) as b, \
+                GenericClientLink("127.0.0.1", b.ports["damper"], 1, timeout=60.0) as link:
+            coupling = StoryCoupling({"damper": Placement(0, SiteElement(link, DAMPER["k0"]))})
+            integrator = demo_frame_integrator(coupling, demo_ground_motion())
+            response = run_coupled(integrator, coupling, steps=steps)
+            run_dir = b.run_dir
+        lines = correction_lines(read_record(run_dir))
+    drift = np.asarray(response.drift)[:, 0]
+    return {"drift": drift, "targets": np.array([c.target[0] for c in lines]),
+            "specimen": np.array([c.measured[-1][0] for c in lines]),
+            "corrections": [c.corrections for c in lines],
+            "events": sum(c.outcome != "converged" for c in lines)}
+
+
 def summarise(run: dict[str, Any], ideal: np.ndarray) -> dict[str, float]:
     drift = run["drift"]
     c = run["corrections"]
@@ -191,21 +249,26 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--gain", type=float, default=CORRECTION.gain)
     parser.add_argument("--max-iterations", type=int, default=CORRECTION.max_iterations)
+    parser.add_argument("--loop", action="store_true",
+                        help="the frame runs through the loop alone (LimitedPath), not the site")
     args = parser.parse_args(argv)
+    run = frame_run if args.loop else site_frame_run
+    print("frame runs through " + ("the loop alone (LimitedPath)" if args.loop else
+                                   "the experimental site of a bridge (genericClient, record)"))
     correction = CORRECTION.model_copy(update={"gain": args.gain,
                                                "max_iterations": args.max_iterations})
     print(f"correction: gain {correction.gain:g}, max_iterations {correction.max_iterations}, "
           f"tolerance {correction.tolerance} mm, max_correction {correction.max_correction} mm")
     steps = 500 if args.quick else None
     rounds = 2 if args.quick else max(3, args.rounds)
-    ideal = frame_run({}, corrected=False, steps=steps)
+    ideal = run({}, False, steps)
     print(f"ideal actuator: peak story-1 drift {np.max(np.abs(ideal['drift'])):.3f} mm, "
           f"{len(ideal['drift'])} steps")
     variants = {f"compliant frame {args.frame:g} kN/mm": {"frame": {"stiffness": args.frame}},
                 f"pin gap {args.gap:g} mm": {"backlash": {"gap": args.gap}}}
     for name, effects in variants.items():
-        off = summarise(frame_run(effects, False, steps), ideal["drift"])
-        on = summarise(frame_run(effects, True, steps, correction), ideal["drift"])
+        off = summarise(run(effects, False, steps), ideal["drift"])
+        on = summarise(run(effects, True, steps, correction), ideal["drift"])
         print(f"\n{name}")
         for key in off:
             print(f"  {key:24s} without {off[key]:10.4g}   with {on[key]:10.4g}")

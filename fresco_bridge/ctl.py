@@ -334,6 +334,8 @@ def _answer_lines(answer: dict[str, Any]) -> str:
                          "until it is)")
         counts = ", ".join(f"{k} {v}" for k, v in sorted(st["limit_events"].items())) or "none"
         lines.append(f"    holds {st['holds']}  limit events: {counts}")
+        if st.get("correction"):
+            lines.append("    " + _correction_line(st["correction"]))
         for lim in st["limits"]:
             lines.append("    limits " + _limits_line(lim))
         if not st["limits"]:
@@ -345,6 +347,16 @@ def _answer_lines(answer: dict[str, Any]) -> str:
             lines.append(f"    command {_vec(st['pending'])} waiting for an operator for "
                          f"{st['paused_for'] or 0.0:.1f} s")
     return "\n".join(lines)
+
+
+def _correction_line(c: dict[str, Any]) -> str:
+    """``correction: last trial 1 correction(s), residual 0.002 mm (converged); …``."""
+    last = ("no trial corrected yet" if c["corrections"] is None else
+            f"last trial {c['corrections']} correction(s), residual {c['residual']:.4g} mm "
+            f"({c['outcome']})")
+    return (f"correction: {last}; {c['trials']} trial(s), at most {c['most']} of "
+            f"{c['max_iterations']}, {c['warnings']} above half, {c['unconverged']} not "
+            "converged")
 
 
 def _limits_line(lim: dict[str, Any]) -> str:

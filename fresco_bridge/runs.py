@@ -25,7 +25,9 @@ from .indicators import xcorr_delay as _xcorr_delay
 from .numbers import fmt
 from .record.export import (
     CommittedStep,
+    CorrectionLine,
     MonitorLine,
+    correction_lines,
     monitor_lines,
     pair_commits,
     read_record,
@@ -59,6 +61,9 @@ class Run:
     updates: list[dict[str, Any]] = field(default_factory=list)
     """The update lines of updatable sites (format 5: ``site``, ``session``, ``step``,
     ``through``, ``secs``), in record order."""
+    corrections: list[CorrectionLine] = field(default_factory=list)
+    """The displacement corrections of sites with ``[sites.correction]`` (format 6), in record
+    order."""
 
     @property
     def name(self) -> str:
@@ -148,6 +153,7 @@ def load_run(path: Path) -> Run:
     events: list[dict[str, Any]] = []
     monitors: list[dict[str, Any]] = []
     updates: list[dict[str, Any]] = []
+    corrections: list[dict[str, Any]] = []
     last_seq: list[object] = [None]
 
     def tap(records: Iterator[dict[str, Any]]) -> Iterator[dict[str, Any]]:
@@ -160,12 +166,15 @@ def load_run(path: Path) -> Run:
                 monitors.append(rec)
             elif kind == "update":
                 updates.append(rec)
+            elif kind == "correction":
+                corrections.append(rec)
             yield rec
 
     record = directory / RECORD_FILE
     try:
         steps = pair_commits(tap(read_record(directory)))
         monitor_data = monitor_lines(monitors)
+        correction_data = correction_lines(corrections)
         torn = record_is_torn(directory)
     except RecordFormatError as exc:
         raise RunDirError(str(exc)) from exc
@@ -187,7 +196,7 @@ def load_run(path: Path) -> Run:
         if state != "running":
             notes.append(f"site {site} session {session} was opened and never closed")
     return Run(directory, meta, config_text, steps, events, monitor_data, torn,
-               _dir_size(directory), notes, updates)
+               _dir_size(directory), notes, updates, correction_data)
 
 
 def check_resumable(path: Path) -> Path:
@@ -458,6 +467,17 @@ def summarise(run: Run) -> list[SiteSummary]:
     return out
 
 
+def correction_summary(lines: list[CorrectionLine]) -> str:
+    """One site's displacement corrections in a line: trials, corrections per trial (median,
+    max), the largest residual left, the trials that did not converge."""
+    counts = sorted(c.corrections for c in lines)
+    worst = max(c.residual for c in lines)
+    other = sum(c.outcome != "converged" for c in lines)
+    return (f"displacement correction: {len(lines)} trial(s), corrections a trial median "
+            f"{counts[len(counts) // 2]} max {counts[-1]}, largest residual {fmt(worst, 'mm')}, "
+            f"{other} not converged")
+
+
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:
     """``runs show``: metadata, then one block per site."""
     head = [("run", str(run.directory)), ("state", run_state(run.directory, run.meta))]
@@ -471,6 +491,9 @@ def format_show(run: Run, summaries: list[SiteSummary]) -> str:
         events = ", ".join(f"{k} {n}" for k, n in sorted(s.events.items())) or "none"
         lines += ["", f"site {s.site}: {s.steps} committed step(s), {s.sessions} session(s), "
                   f"{s.holds} hold(s), {s.limit_events} limit event(s)", f"  events: {events}"]
+        corrected = [c for c in run.corrections if c.site == s.site]
+        if corrected:
+            lines.append("  " + correction_summary(corrected))
         for d in s.sessions_detail:
             lines.append(
                 f"  session {d.session} actuator {d.actuator}: {d.steps} steps, t "

@@ -25,6 +25,11 @@ class ControllerConfigBase(StrictConfig):
 
     kind: str
 
+    def external_channel(self) -> str | None:
+        """What the external channel this table names measures (``Controller.external_channel``
+        of the adapter built from it), or None: the kind has none, or the table names none."""
+        return None
+
 
 @dataclass(frozen=True)
 class ControllerKind:

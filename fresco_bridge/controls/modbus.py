@@ -78,6 +78,9 @@ class ModbusControllerConfig(NetworkControllerConfig):
     block, of a float32 displacement (mm) from a second transducer; ``sim-actuator serve``
     serves the specimen's displacement at 24 (EXT_DISP). None: no external channel."""
 
+    def external_channel(self) -> str | None:
+        return None if self.external_register is None else f"register {self.external_register}"
+
 
 class ModbusController(NetworkController):
     """Actuators behind a Modbus TCP controller, a register block each; every call is a
@@ -88,8 +91,7 @@ class ModbusController(NetworkController):
     def __init__(self, config: ModbusControllerConfig, n_actuators: int = 1) -> None:
         super().__init__(config, f"modbus controller {config.host}:{config.port}", n_actuators)
         self._client: AsyncModbusTcpClient | None = None
-        if config.external_register is not None:
-            self.external_channel = f"register {config.external_register}"
+        self.external_channel = config.external_channel()
         self._external_in_one_read = True
         """The external register is read with the status block (until a controller refuses)."""
         self._external: tuple[float, ...] | None = None

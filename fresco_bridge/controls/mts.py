@@ -49,6 +49,9 @@ class MtsControllerConfig(NetworkControllerConfig):
     a second transducer's displacement (mm), read from the same reply (no extra round trip);
     ``sim-actuator serve --protocol mts`` sends the specimen's as ``specimen``. None: none."""
 
+    def external_channel(self) -> str | None:
+        return None if self.external_field is None else f"ACQUIRE {self.external_field}"
+
 
 def _float(fields: dict[str, str], key: str, where: str) -> float:
     try:
@@ -81,8 +84,7 @@ class MtsController(NetworkController):
         """Id of the last ramp this adapter completed (for ``ACQUIRE <id>``)."""
         self._acquired: dict[str, str] = {}
         """The last ``ACQUIRE`` reply (the external channel is read from it)."""
-        if config.external_field is not None:
-            self.external_channel = f"ACQUIRE {config.external_field}"
+        self.external_channel = config.external_channel()
 
     # -- the transport -------------------------------------------------------------------------
 

@@ -113,6 +113,9 @@ class RigControllerConfig(ControllerConfigBase):
     displacement, behind frame compliance, pin play and servo undershoot (an ideal transducer
     on the specimen), for the outer-loop correction's ``measured = "external"``."""
 
+    def external_channel(self) -> str | None:
+        return None if self.external is None else "specimen displacement"
+
     @model_validator(mode="after")
     def _one_rig(self) -> RigControllerConfig:
         if self.channels is None:
@@ -167,8 +170,7 @@ class RigController(InlineController, PhysicalController):
             raise ControllerError(problem)
         self.geometry = geometry
         self.stiffness = config.stiffness
-        if config.external == "specimen":
-            self.external_channel = "specimen displacement"
+        self.external_channel = config.external_channel()
         try:
             self._rig_configs = config.rig_configs(n_actuators)
         except ValueError as exc:

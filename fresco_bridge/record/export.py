@@ -45,6 +45,23 @@ class MonitorLine:
     fei_delay: float | None
 
 
+@dataclass(frozen=True, slots=True)
+class CorrectionLine:
+    """One trial's displacement correction (``correction`` record lines, format 6): every
+    command the controller reached for ``target``, the target's own first, and the displacement
+    measured there (mm)."""
+
+    site: str
+    session: int
+    step: int
+    target: tuple[float, ...]
+    outcome: str
+    corrections: int
+    residual: float
+    commands: tuple[tuple[float, ...], ...]
+    measured: tuple[tuple[float, ...], ...]
+
+
 def _float(v: Any) -> float:
     return float(v)  # numbers, and the "nan"/"inf" strings the writer uses for non-finite values
 
@@ -137,6 +154,51 @@ def monitor_lines(records: Iterable[dict[str, Any]]) -> list[MonitorLine]:
         )
         for rec in records if rec["kind"] == "monitor"
     ]
+
+
+def correction_lines(records: Iterable[dict[str, Any]]) -> list[CorrectionLine]:
+    """The ``correction`` lines among ``records``, in record order (none before format 6)."""
+    def vector(v: Any) -> tuple[float, ...]:
+        return tuple(_float(x) for x in v)
+
+    return [
+        CorrectionLine(
+            site=rec.get("site", ""), session=int(rec.get("session", 0)), step=int(rec["step"]),
+            target=vector(rec["target"]), outcome=str(rec["outcome"]),
+            corrections=int(rec["n"]), residual=_float(rec["residual"]),
+            commands=tuple(vector(c) for c, _ in rec["it"]),
+            measured=tuple(vector(m) for _, m in rec["it"]),
+        )
+        for rec in records if rec["kind"] == "correction"
+    ]
+
+
+def write_corrections_csv(corrections: Iterable[CorrectionLine], out_path: Path, *,
+                          site: str | None = None) -> int:
+    """One row per command of each corrected trial: ``session,step,site,iteration`` (0: the
+    target's own command), ``target_*``, ``command_*``, ``measured_*`` (``_1.._n`` when a site
+    has n > 1 control points), the trial's ``outcome``, ``corrections`` and ``residual``;
+    returns the number of rows."""
+    rows = [c for c in corrections if site is None or c.site == site]
+    n = max((len(c.target) for c in rows), default=1)
+
+    def cols(name: str) -> list[str]:
+        return [name] if n == 1 else [f"{name}_{i}" for i in range(1, n + 1)]
+
+    def pad(v: tuple[float, ...]) -> list[str]:
+        return [repr(x) if math.isfinite(x) else str(x) for x in v] + [""] * (n - len(v))
+
+    count = 0
+    with out_path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["session", "step", "site", "iteration", *cols("target"), *cols("command"),
+                    *cols("measured"), "outcome", "corrections", "residual"])
+        for c in rows:
+            for i, (command, measured) in enumerate(zip(c.commands, c.measured, strict=True)):
+                w.writerow([c.session, c.step, c.site, i, *pad(c.target), *pad(command),
+                            *pad(measured), c.outcome, c.corrections, repr(c.residual)])
+                count += 1
+    return count
 
 
 def export_csv(run_dir: Path, out_path: Path, *, site: str | None = None) -> int:

@@ -51,7 +51,7 @@ monitors run for the record alone (no MQTT, no metrics: the telemetry taps then 
   all five);
 - step lines then carry no ``mon``; ``site``/``session``/``t`` as on every line.
 
-Format 5 (``FORMAT_VERSION``, what this version writes) is format 4 plus the **update line**
+Format 5 is format 4 plus the **update line**
 of an updatable site (``twins/``), written right after each of its committed steps::
 
     {"t":…,"kind":"update","step":S,"through":K,"secs":U,"err":E}
@@ -64,6 +64,25 @@ of an updatable site (``twins/``), written right after each of its committed ste
   learning it (kN);
 - complete (never inherited); ``site``/``session``/``t`` as on every line; a step whose last
   trial the learner did not answer (the site HOLDs) has none.
+
+Format 6 (``FORMAT_VERSION``, what this version writes) is format 5 plus the **correction
+line** of a site with ``[sites.correction]`` (``sites/correcting.py``), written when a trial's
+displacement correction ends (before the step line that holds its commands)::
+
+    {"t":…,"kind":"correction","step":S,"target":[…],"outcome":O,"n":K,"residual":R,
+     "it":[[command, measured],…]}
+
+- ``step``: the step the trial belongs to (its commit will be step ``S``; its trial and daq
+  lines say ``S − 1``, as every trial's); ``target``: the integrator's command (ctrl, mm);
+- ``it``: every command the controller reached for it, the target's own first (a trial
+  repeated at the same target: the command already held), each with the
+  displacement the correction compared (the daq or the external channel, mm); each command is
+  also a trial line (ctrl) followed by its daq line, so a step line folds them as iterations;
+- ``outcome``: ``converged``, ``not-converged``, ``beyond-max-correction``, ``non-finite`` or
+  ``refused``; ``n``: corrected commands after the target; ``residual``: the largest
+  |target − measured| of the corrected control points at the end (mm);
+- complete (never inherited); ``site``/``session``/``t`` as on every line. Older formats have
+  none, and a reader of them sees no correction.
 
 ``expand`` turns lines of every format (or a file mixing them: an older run resumed by this
 version) back into complete format-1 dicts, in file order (each site's lines in the order it
@@ -78,7 +97,7 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 INHERITED_KINDS = frozenset(("trial", "daq", "commit", "monitor"))
 """Line kinds whose absent value fields repeat the previous line's (same site, session)."""
 TRIAL, DAQ, MONITOR = 0, 1, 2
@@ -209,6 +228,14 @@ class LineEncoder:
         """The body of an update line (format 5)."""
         body = f',"step":{step},"through":{through},"secs":{num(seconds)}'
         return body if error is None else f'{body},"err":{num(error)}'
+
+    @staticmethod
+    def correction(step: int, target: Sequence[float], outcome: str, residual: float,
+                   iterations: Sequence[tuple[Sequence[float], Sequence[float]]]) -> str:
+        """The body of a correction line (format 6)."""
+        its = ",".join(f"[{nums(c)},{nums(m)}]" for c, m in iterations)
+        return (f',"step":{step},"target":{nums(target)},"outcome":"{outcome}",'
+                f'"n":{max(0, len(iterations) - 1)},"residual":{num(residual)},"it":[{its}]')
 
     @staticmethod
     def event(kind: str, reason: str, extra: dict[str, object]) -> str:

@@ -95,6 +95,16 @@ class SiteRecorder:
         (``RunRecord.update``)."""
         self._record.update(self.site, session, step, through, seconds, error)
 
+    def correction(self, session: int, step: int, target: tuple[float, ...], outcome: str,
+                   residual: float,
+                   iterations: list[tuple[tuple[float, ...], tuple[float, ...]]]) -> None:
+        """A trial's displacement correction ends (``RunRecord.correction``)."""
+        try:
+            self._record.correction(self.site, session, step, target, outcome, residual,
+                                    iterations)
+        except RecordError as exc:
+            self._failed(exc)
+
     def monitors(self, session: int, step: int,
                  samples: list[tuple[float, float, float | None, float | None, float | None]]
                  ) -> None:

@@ -42,6 +42,7 @@ import os
 import socket
 import time
 from collections import defaultdict
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Literal
@@ -296,6 +297,20 @@ class RunRecord:
         t = _monotonic() - self._t0
         self._buf.append(self._enc.line(t, "update", site, session,
                                         self._enc.update(step, through, seconds, error)))
+        self._seq += 1
+        self.flush()
+
+    def correction(self, site: str, session: int, step: int, target: Sequence[float],
+                   outcome: str, residual: float,
+                   iterations: Sequence[tuple[Sequence[float], Sequence[float]]]) -> None:
+        """A trial's displacement correction (format 6: every command reached and what was
+        measured there; the commands' own trial/daq lines are the site's pending items and go
+        with its next commit or event)."""
+        if self.closed:
+            return
+        t = _monotonic() - self._t0
+        self._buf.append(self._enc.line(t, "correction", site, session, self._enc.correction(
+            step, target, outcome, residual, iterations)))
         self._seq += 1
         self.flush()
 

@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..record.export import write_csv
+from ..record.export import write_corrections_csv, write_csv
 from ..runs import (
     RunDirError,
     format_listing,
@@ -64,6 +64,10 @@ def add_report_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
         p_exp.add_argument("--format", choices=("csv", "hdf5"), default=None,
                            help="default: hdf5 for a .h5/.hdf5 output, else csv")
         p_exp.add_argument("--site", default=None, help="only this site")
+        p_exp.add_argument("--corrections", action="store_true",
+                           help="the displacement corrections instead of the committed steps: "
+                                "one CSV row per command of each corrected trial (default "
+                                "output: RUN_DIR/corrections.csv)")
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -75,6 +79,13 @@ def _export(args: argparse.Namespace) -> int:
     if args.site is not None and args.site not in run.sites:
         raise RunDirError(f"{run.directory}: no site {args.site!r} in this run (sites: "
                           f"{', '.join(run.sites) or 'none'})")
+    if args.corrections:
+        if fmt != "csv":
+            raise RunDirError("--corrections writes CSV; leave out --format hdf5")
+        out = args.output or run.directory / "corrections.csv"
+        n = write_corrections_csv(run.corrections, out, site=args.site)
+        print(f"wrote {out}: {n} command(s) of {len(run.corrections)} corrected trial(s)")
+        return 0
     if fmt == "hdf5":
         from .hdf5 import export_hdf5
 

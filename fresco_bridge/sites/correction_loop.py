@@ -71,7 +71,8 @@ class StepCorrection:
 
     target: tuple[float, ...]
     iterations: tuple[Iteration, ...]
-    """The target's own command first, then every corrected one."""
+    """The target's own command first (or the command already held for it), then every
+    corrected one."""
     verdict: Terminal
     daq: Daq | None
     """The last measurement (the integrator's answer), None if refused before any."""
@@ -118,13 +119,17 @@ class CorrectionLoop:
                                   "channel")
         return daq.external
 
-    async def run(self, target: tuple[float, ...]) -> StepCorrection:
+    async def run(self, target: tuple[float, ...], *,
+                  held: tuple[float, ...] | None = None) -> StepCorrection:
         """Move to ``target`` and correct until a verdict; a HOLD verdict is entered through
-        the path before returning."""
+        the path before returning. ``held``: the command the controller holds already for this
+        same target (an integrator that sends its trial again): nothing is sent first, the
+        correction goes on from there (sending the target again would move the specimen back
+        short of it, an excursion the integrator did not ask for)."""
         settings, path = self.settings, self.path
         iterations: list[Iteration] = []
         daq: Daq | None = None
-        reached = await path.send(target)
+        reached = await path.send(target) if held is None else held
         while reached is not None:
             daq = await path.acquire()
             if daq is None:

@@ -47,6 +47,7 @@ from ..site_output import CommittedStep, SiteNotice
 from ..tangent import TangentEstimate, TangentMethod
 from ..telemetry.schema import SiteStatus
 from .base import Later, SiteError
+from .correcting import SiteCorrection
 from .gate import CommandGate
 from .guard import ControllerGuard
 from .listeners import EventListener, Listeners, StepListener
@@ -132,6 +133,11 @@ class ExperimentalSite:
         self._resume_at: tuple[int, float] | None = None  # (step, time) of a resumed run
         self.rejections: RejectionLog | None = None  # refused connections (set by the listener)
         self._reset_signals()
+        correction = getattr(cfg, "correction", None)
+        self.correction: SiteCorrection | None = None if correction is None \
+            else SiteCorrection(self, correction)
+        """``[sites.correction]``: every trial is corrected (``correcting.py``); None: the
+        direct path."""
 
     # -- sessions ------------------------------------------------------------------------------
     def _reset_signals(self) -> None:
@@ -368,6 +374,7 @@ class ExperimentalSite:
             else str(self.recorder.failure),
             "refused": {} if self.rejections is None else dict(self.rejections.counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
+            "correction": None if self.correction is None else self.correction.status(),
             **self.controller.status_fields(),
         }
 
@@ -409,6 +416,10 @@ class ExperimentalSite:
         """Committed steps (``step_committed``), events (``site_event``) and/or forwarded
         trials (``trial_forwarded``) go to ``listener`` from now on, after the earlier ones."""
         self.listeners.add(listener)
+
+    def forwarded(self) -> None:
+        """``_forwarded`` for the correction, once its last command is reached."""
+        self._forwarded()
 
     def _forwarded(self) -> None:
         """The current trial reached the controller: its listeners get it (and a way to read
@@ -473,6 +484,8 @@ class ExperimentalSite:
         if self.state is HOLD:
             return None
         self._daq_valid = False
+        if self.correction is not None:
+            return self.correction.trial(trial, target)
         if self.state is RUNNING and (self._ctrl_limiter is None
                                       or self.gate.clear_of_limits(target)):  # the hot path
             self.ctrl = target
@@ -539,6 +552,15 @@ class ExperimentalSite:
             return False
         self.guard.sent = self.gate.reference = command
         return True
+
+    async def measure(self) -> Daq | None:
+        """A fresh measurement at the command the controller holds now, checked and recorded
+        as any (the correction's read); None when the site is no longer RUNNING."""
+        self._daq_valid = False
+        daq = self.acquire_eager()
+        if not isinstance(daq, Daq):
+            daq = await daq
+        return daq if self.state is RUNNING else None
 
     def acquire_eager(self) -> Daq | Later[Daq]:
         """The measurement for the current command, acquired once per trial."""

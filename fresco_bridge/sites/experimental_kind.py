@@ -23,6 +23,7 @@ from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controll
 from ..controls.sim import SimControllerConfig
 from ..record import RecordError
 from ..record.export import read_record
+from ..safety import CorrectionConfig
 from ..setups import make_setup
 from ..tangent import TangentMethod
 from .base import Site
@@ -63,6 +64,9 @@ class ExperimentalSiteConfig(SiteConfigBase):
     """The tangent answered to action 13: the controller's (``controller``), its first answer
     kept (``initial``), or estimated from the committed steps (``broyden``, ``bfgs``,
     ``transpose``; docs/openfresco-setups.md)."""
+    correction: CorrectionConfig | None = None
+    """``[sites.correction]``: the outer-loop displacement correction per control point
+    (``sites/correcting.py``); off when absent."""
 
     def actuators_fit(self, n_actuators: int) -> None:
         geometry = make_setup(self.setup, self.dofs).specimen_geometry()
@@ -70,6 +74,15 @@ class ExperimentalSiteConfig(SiteConfigBase):
             self.controller, n_actuators, geometry)
         if problem is not None:
             raise ValueError(f"{problem} (setup {self.setup} with {self.dofs} DOF(s))")
+        if self.correction is not None:
+            self.correction.to_settings(n_actuators)  # a per-point list that does not fit
+            if self.correction.measured == "external" and \
+                    self.controller.external_channel() is None:
+                raise ValueError(
+                    f"[sites.correction] measured = \"external\", but [sites.controller] "
+                    f"(kind {self.controller.kind}) names no external channel (rig: external = "
+                    "\"specimen\", modbus: external_register, mts: external_field; "
+                    "docs/configuration.md, \"Which displacement is measured\")")
 
 
 def site_controller(cfg: ExperimentalSiteConfig) -> Controller:

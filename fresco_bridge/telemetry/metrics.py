@@ -71,6 +71,8 @@ class SiteMetrics:
     _events: Counter
     _monitor: tuple[Gauge, ...] = ()
     _record_writable: Gauge | None = None
+    _correction_gauges: tuple[Gauge, ...] = ()
+    _correction: tuple[Gauge, ...] = ()
     _latency_children: dict[str, Histogram] = field(default_factory=dict)
     _limit_children: dict[str, Counter] = field(default_factory=dict)
     _event_children: dict[str, Counter] = field(default_factory=dict)
@@ -88,6 +90,14 @@ class SiteMetrics:
 
     def hold(self) -> None:
         self.holds.inc()
+
+    def correction(self, corrections: int, residual: float) -> None:
+        """The last trial's displacement correction: corrected commands and residual (mm)."""
+        if not self._correction:  # labelled at the first: a site without correction has none
+            self._correction = tuple(g.labels(self.site) for g in self._correction_gauges)
+        if self._correction:
+            self._correction[0].set(corrections)
+            self._correction[1].set(residual)
 
     def record_writable(self, writable: bool) -> None:
         """1: the run record takes this site's commits; 0: it cannot be written (a full disk,
@@ -181,7 +191,9 @@ class Metrics:
     ``limit_events_total{site,signal}``, ``events_total{site,kind}``, ``updater_step_seconds``
     (present, with zero counts, before any updater runs), the online monitors as gauges
     ``monitor_tracking_error_mm{site}``, ``monitor_tracking_indicator``, ``monitor_nrms``,
-    ``monitor_fei_amplitude``, ``monitor_fei_delay_seconds``, ``record_writable{site}`` and,
+    ``monitor_fei_amplitude``, ``monitor_fei_delay_seconds``, ``record_writable{site}``,
+    ``correction_iterations{site}`` and ``correction_residual_mm{site}`` (sites with
+    ``[sites.correction]``, from their first corrected trial) and,
     once ``track_telemetry`` is called, ``telemetry_dropped_total`` and friends.
     """
 
@@ -209,6 +221,13 @@ class Metrics:
             "record_writable", "1: the run record takes the site's commits; 0: it cannot be "
             "written (the site HOLDs and refuses clients; ctl status says why)", ["site"],
             namespace=NAMESPACE, registry=r)
+        self.correction_gauges = tuple(
+            Gauge(name, doc, ["site"], namespace=NAMESPACE, registry=r) for name, doc in (
+                ("correction_iterations", "Displacement correction: corrected commands of the "
+                 "last trial"),
+                ("correction_residual_mm", "Displacement correction: largest |target - "
+                 "measured| of the last trial at its end"),
+            ))
         self.events_total = Counter("events", "Site events (as in the run record) per kind",
                                     ["site", "kind"], namespace=NAMESPACE, registry=r)
         self.updater_step_seconds = Histogram(
@@ -226,7 +245,8 @@ class Metrics:
                 _latency=self.message_latency_seconds, _limits=self.limit_events_total,
                 _events=self.events_total,
                 _monitor=tuple(g.labels(site) for g in self.monitor_gauges),
-                _record_writable=self.record_writable.labels(site))
+                _record_writable=self.record_writable.labels(site),
+                _correction_gauges=self.correction_gauges)
             bound.record_writable(True)
             self._sites[site] = bound
         return bound

@@ -58,7 +58,7 @@ def test_a_served_twin_records_what_each_step_was_learned_through(tmp_path: Path
         twin.request(Action.GET_DISP)
         source.request(Action.GET_DISP)
         run_dir = bridge.run_dir
-    assert json.loads((run_dir / "run.json").read_text())["format"] == 5
+    assert json.loads((run_dir / "run.json").read_text())["format"] >= 5  # update lines
     updates = [r for r in read_record(run_dir) if r["kind"] == "update"]
     assert [u["site"] for u in updates] == ["twin1"] * steps
     assert [u["step"] for u in updates] == list(range(1, steps + 1))
