@@ -27,7 +27,7 @@ the law generalises. ``law_trust=0`` is the plain mixture. The switch changes on
 *Do no harm* (the offline start kept as a candidate): the twin serves either the mixture or the
 *offline start*, the Bilinear calibrated to the offline database (``none --offline``, what the
 lab would run without updating), whichever has the smaller **prequential free-run error** on
-the tested element so far: the sum over every observed step of the squared error of a free-run
+the tested element so far: the mean over every observed step of the squared error of a free-run
 copy of each (driven by the tested element's displacement alone, never its force, the twin's
 own situation) against the measured force, each made *before* the step is learned. Why this
 and no threshold: the offline start learns nothing, so its error is out of sample by
@@ -37,6 +37,12 @@ Both keep their own state on the twin at every commit, so a switch is to a model
 followed the twin's whole history. Where the specimen is in the Bilinear family the updater
 ends where its start was; where it is not, the mixture takes over as soon as its accumulated
 error is the smaller.
+
+*Divergence*: an expert's law can run away on its own history (a reversal basis extrapolated
+past its data feeds its reversal force back with a gain above 1). A prediction that is not
+finite, or whose squared error overflows a float, scores the largest float (it loses every
+comparison) and a free-run copy that is not finite restarts from the virgin state; the served
+twin leaves out a part whose answer is not finite (the offline start answers if none is left).
 
 Experts (``experts=``; :data:`EXPERTS` by default, :data:`OPTIONAL_EXPERTS` on request):
 ``reversal`` (the basis alone), ``reversal+memory`` (plus previous-branch and envelope terms),
@@ -56,6 +62,7 @@ of the defaults and what fails: ``BENCHMARKS.md``, "Online updating".
 from __future__ import annotations
 
 import math
+import sys
 import time
 from typing import Any, Protocol
 
@@ -117,11 +124,15 @@ class _MixtureTwin:
         if not math.isfinite(d):
             raise trial_input_error(self.name, d)
         w = self._owner.served_weights()
-        force = tangent = 0.0
-        for weight, part in zip(w.tolist(), self._parts, strict=True):
-            f, k = part.set_trial(d)
-            force += weight * f
-            tangent += weight * k
+        answers = [(weight, *part.set_trial(d))
+                   for weight, part in zip(w.tolist(), self._parts, strict=True) if weight > 0.0]
+        finite = [(weight, f, k) for weight, f, k in answers
+                  if math.isfinite(f) and math.isfinite(k)]  # a diverged part has no say
+        total = sum(weight for weight, _, _ in finite)
+        if total <= 0.0:  # every weighted part diverged: the offline start (a Bilinear) answers
+            finite, total = [(1.0, *self._parts[-1].set_trial(d))], 1.0
+        force = sum(weight * f for weight, f, _ in finite) / total
+        tangent = sum(weight * k for weight, _, k in finite) / total
         self._trial = (d, force)
         return force, tangent
 
@@ -154,6 +165,17 @@ class _MixtureTwin:
         twin = _MixtureTwin(self._owner, [part.clone() for part in self._parts])
         twin._committed, twin._trial = self._committed, self._trial
         return twin
+
+
+_WORST = sys.float_info.max
+"""The squared error of a prediction that is not finite or whose error squared overflows: the
+largest a float holds, so such a copy loses every comparison and nothing summed overflows."""
+
+
+def _squared_error(measured: float, predicted: float) -> float:
+    """``(measured - predicted)**2``, never raising: :data:`_WORST` when not finite."""
+    squared = (measured - predicted) * (measured - predicted)
+    return squared if squared <= _WORST else _WORST  # inf and NaN both fail ``<=``
 
 
 def _free_run(model: HysteresisModel, d: float) -> float:
@@ -236,8 +258,10 @@ class OnlineImproved(OwnsTwin):
         start = make_model("bilinear", **self.start_params)
         self._start_free = start.clone()
         self.harm = np.zeros(2)
-        """Prequential free-run squared error on the tested element so far: [mixture, offline
-        start] (module docstring, *do no harm*)."""
+        """Prequential free-run squared error on the tested element so far, per observed step:
+        [mixture, offline start] (module docstring, *do no harm*). A running mean, not the sum:
+        the same choice at every step (one count divides both), bounded over any run length."""
+        self._harm_steps = 0
         self.law_trust = law_trust
         self.trusted: int | None = None
         """Index of the law expert the mixture trusts alone now (``law_trust``), or None."""
@@ -262,7 +286,8 @@ class OnlineImproved(OwnsTwin):
             w = np.zeros(len(self.experts))
             w[self.trusted] = 1.0
             return w
-        w = 1.0 / np.maximum(self.scores, 1e-300) ** 2
+        scores = np.maximum(self.scores, 1e-300)
+        w = (scores.min() / scores) ** 2  # 1 / S_k**2 scaled by the best: no 0/0, no overflow
         return np.asarray(w / w.sum(), dtype=np.float64)
 
     @property
@@ -284,23 +309,31 @@ class OnlineImproved(OwnsTwin):
         start = time.perf_counter()
         lam, cap = self.mixing, self.gate**2
         weights = self.mixture_weights()
-        mixture_free = mixture_ahead = 0.0
+        mixture_free = mixture_ahead = free_weight = 0.0
         for k, expert in enumerate(self.experts):
             free_force = _free_run(self._free[k], d)
-            mixture_free += float(weights[k]) * free_force
+            if not math.isfinite(free_force):  # a diverged copy: it loses, then starts anew
+                self._free[k].revert_to_start()
+            elif weights[k] > 0.0:
+                mixture_free += float(weights[k]) * free_force
+                free_weight += float(weights[k])
             squared = 0.0
             if self.score != "one-step":
-                squared += (force - free_force) ** 2
+                squared += _squared_error(force, free_force)
             one_step = expert.predict(d)
-            mixture_ahead += float(weights[k]) * one_step
+            if weights[k] > 0.0:
+                mixture_ahead += float(weights[k]) * one_step
             if self.score != "free-run":
-                squared += (force - one_step) ** 2
+                squared += _squared_error(force, one_step)
             score = float(self.scores[k])
-            self.scores[k] = lam * score + (1.0 - lam) * min(squared, cap * score)
+            self.scores[k] = min(lam * score + (1.0 - lam) * min(squared, cap * score), _WORST)
             expert.observe(d, force)
+        mixture_free = mixture_free / free_weight if free_weight > 0.0 else math.inf
         start_free = _free_run(self._start_free, d)
         serving_start = self.serving_start
-        self.harm += ((force - mixture_free) ** 2, (force - start_free) ** 2)
+        self._harm_steps += 1
+        step = np.array((_squared_error(force, mixture_free), _squared_error(force, start_free)))
+        self.harm += (step - self.harm) / self._harm_steps
         if self._laws:
             self._update_trust()
         self._last_one_step = abs(force - (start_free if serving_start else mixture_ahead))
