@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -37,6 +38,9 @@ MAX_TEXT = 2000
 _TRACKER_FILTER = "ignore:resource_tracker:UserWarning:multiprocessing.resource_tracker"
 
 log = logging.getLogger("fresco_bridge.worker")
+
+END_SECONDS = 2.0
+"""How long a worker's ``end`` waits for the last lines of its fd 2."""
 
 Send = Callable[[tuple[Any, ...]], None]
 
@@ -59,20 +63,38 @@ def relay_output(site: str, pid: int | None, reply: tuple[Any, ...]) -> None:
 
 
 # -- the worker's side --------------------------------------------------------------------------
-def forward_output(send: Send) -> None:
+def forward_output(send: Send) -> Callable[[], None]:
     """In the worker, first thing: its log records (WARNING and up), its warnings and its
-    file descriptor 2 go to the bridge through ``send`` (the reply channel's ``put``)."""
+    file descriptor 2 go to the bridge through ``send`` (the reply channel's ``put``).
+
+    Returns ``end``, which the worker calls last, while ``send`` still works: what was written
+    to fd 2 just before the worker returns is read and sent, not lost with the process."""
     logging.raiseExceptions = False  # a closed channel: silence, not a traceback per line
     root = logging.getLogger()
     root.handlers[:] = [_Forward(send)]
     root.setLevel(logging.WARNING)
     logging.captureWarnings(True)
+    pump: threading.Thread | None = None
     with contextlib.suppress(OSError):
         read, write = os.pipe()
         os.dup2(write, 2)
         os.close(write)
-        threading.Thread(target=_pump, args=(read, send), name="worker-stderr",
-                         daemon=True).start()
+        pump = threading.Thread(target=_pump, args=(read, send), name="worker-stderr",
+                                daemon=True)
+        pump.start()
+
+    def end() -> None:
+        if pump is None:
+            return
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+        with contextlib.suppress(OSError):  # fd 2 onto /dev/null: the pipe's last writer closes
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 2)
+            os.close(null)
+        pump.join(END_SECONDS)
+
+    return end
 
 
 class _Forward(logging.Handler):

@@ -181,33 +181,36 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
     answer batches of messages in order until ``None`` (or until the bridge process is gone).
     It runs at a lower priority and with one BLAS thread, so training takes the CPU the
     bridge's step loop leaves."""
-    forward_output(outbox.put)  # its warnings and stderr: lines of the bridge's log
-    _end_with_the_bridge()
-    with contextlib.suppress(OSError):
-        os.nice(NICE)
-    limits = _one_blas_thread()
+    end_output = forward_output(outbox.put)  # its warnings and stderr: lines of the log
     try:
-        state = LearnerState(spec) if start is None else pickle.loads(start)
-    except (UpdaterError, OSError, ValueError, pickle.UnpicklingError) as exc:
-        outbox.put(("fatal", f"the learner of {spec.source} could not build its updaters: "
-                    f"{exc}"))
-        return
-    outbox.put(("ready",))
-    parent = multiprocessing.parent_process()
-    while True:
+        _end_with_the_bridge()
+        with contextlib.suppress(OSError):
+            os.nice(NICE)
+        limits = _one_blas_thread()
         try:
-            batch = inbox.get(timeout=1.0)
-        except queue.Empty:
-            if parent is not None and not parent.is_alive():
-                break  # the bridge was killed: no orphan worker
-            continue
-        if batch is None:
-            break
-        for msg in batch:
-            reply = _handled(state, msg)
-            if reply is not None:
-                outbox.put(reply)
-    del limits
+            state = LearnerState(spec) if start is None else pickle.loads(start)
+        except (UpdaterError, OSError, ValueError, pickle.UnpicklingError) as exc:
+            outbox.put(("fatal", f"the learner of {spec.source} could not build its updaters: "
+                        f"{exc}"))
+            return
+        outbox.put(("ready",))
+        parent = multiprocessing.parent_process()
+        while True:
+            try:
+                batch = inbox.get(timeout=1.0)
+            except queue.Empty:
+                if parent is not None and not parent.is_alive():
+                    break  # the bridge was killed: no orphan worker
+                continue
+            if batch is None:
+                break
+            for msg in batch:
+                reply = _handled(state, msg)
+                if reply is not None:
+                    outbox.put(reply)
+        del limits
+    finally:
+        end_output()  # its last lines of fd 2 before the channel closes
 
 
 def _end_with_the_bridge() -> None:

@@ -23,12 +23,13 @@ def noisy_worker(out: Any) -> None:
     a print to stderr over two lines and a C-level write to fd 2."""
     import numpy as np
 
-    forward_output(out.put)
+    end = forward_output(out.put)
     with np.errstate(over="warn"):
         np.array([1e308]) * 10.0
     logging.getLogger("fresco_bridge.twins").warning("learner: source step %d not learned", 7)
     print("first\nsecond\x1b[2J", file=sys.stderr, flush=True)
     os.write(2, b"from C\n")
+    end()  # what a worker does last: its fd 2's last lines are sent before it returns
     out.put(("done",))
 
 
