@@ -121,6 +121,11 @@ class InlineController(Controller):
         """The integrator accepted the step."""
 
     @abc.abstractmethod
+    def reset(self) -> None:
+        """Back to the virgin specimen: a new session that starts from zero, and the start of
+        a resume's replay of the record (``sites/experimental_kind.restore_specimens``)."""
+
+    @abc.abstractmethod
     def tangent_stiffness_now(self) -> tuple[float, ...]:
         """Current tangent stiffness in actuator space, n×n column-major (kN/mm)."""
 

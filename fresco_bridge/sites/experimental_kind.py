@@ -147,8 +147,9 @@ def restore_specimens(sites: Mapping[str, ExperimentalSite], run_dir: Path) -> N
     where the controller resets then. A controller outside the bridge (a real specimen) is
     where the test left it: resume assumes the lab kept it there (``docs/architecture.md``,
     "Crash and resume")."""
-    inline = {name: site for name, site in sites.items()
-              if isinstance(site.controller, InlineController)}
+    inline: dict[str, tuple[ExperimentalSite, InlineController]] = {
+        name: (site, site.controller) for name, site in sites.items()
+        if isinstance(site.controller, InlineController)}
     if not inline:
         return
     session: dict[str, int] = {}
@@ -157,17 +158,14 @@ def restore_specimens(sites: Mapping[str, ExperimentalSite], run_dir: Path) -> N
     try:
         for rec in read_record(run_dir):
             name = rec.get("site")
-            site = inline.get(name) if isinstance(name, str) else None
-            if site is None or rec["kind"] not in ("trial", "commit"):
+            entry = inline.get(name) if isinstance(name, str) else None
+            if entry is None or rec["kind"] not in ("trial", "commit"):
                 continue
-            controller = site.controller
-            assert isinstance(controller, InlineController)
+            site, controller = entry
             number = int(rec.get("session", 0))
             if session.get(site.name) != number:
                 if site.name in session and site.resets_on_new_session:
-                    reset = getattr(controller, "reset", None)
-                    if reset is not None:
-                        reset()
+                    controller.reset()
                 session[site.name], sent[site.name] = number, None
             if rec["kind"] == "trial":
                 command = tuple(float(v) for v in rec["ctrl"])

@@ -123,6 +123,9 @@ class ArbitraryRig(InlineController):
     def commit_now(self) -> None:
         pass
 
+    def reset(self) -> None:
+        pass
+
     def tangent_stiffness_now(self) -> tuple[float, ...]:
         return (1.0,)
 
