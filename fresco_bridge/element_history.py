@@ -35,9 +35,11 @@ __all__ = [
     "RUN_COLUMNS",
     "ElementHistory",
     "HistoryInputError",
+    "InterfaceHistory",
     "SessionChoice",
     "check_increasing",
     "read_element_history",
+    "read_interface",
     "vocabulary",
 ]
 
@@ -276,3 +278,81 @@ def _one_session(path: Path, where: str, body: list[tuple[int, list[str]]], col:
                                     "integer") from None
     number, note = _choose_session(where, {k: len(v) for k, v in groups.items()}, choice)
     return groups[number], note
+
+
+@dataclass(frozen=True)
+class InterfaceHistory:
+    """Per committed step of one site session, actuator: where the integrator asked the specimen
+    to be and where it was measured — the interface layer as the integrator sees it.
+
+    ``target`` is the integrator's command, never a corrected one: a site with
+    ``[sites.correction]`` sends the controller other commands for the same trial, and the
+    committed step's ``cmd_disp`` is the last of them, so the target comes from the trial's
+    correction line. ``measured`` is the displacement the correction compared there, on
+    ``channel`` (``daq``, or ``external``: the channel the site's controller names), or without
+    correction lines the committed step's ``meas_disp`` (``daq``)."""
+
+    step: FloatArray
+    target: FloatArray
+    measured: FloatArray
+    channel: str
+    corrections: npt.NDArray[np.int64] | None
+    """Corrected commands per step (None: the run has no correction lines for the site)."""
+    outcomes: list[str]
+    """Each corrected step's outcome (``converged``…; empty without correction lines)."""
+    tolerance: float | None
+    """The correction's tolerance (mm) for this actuator from the config snapshot, if known."""
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+
+def read_interface(path: Path, *, site: str | None = None, session: SessionChoice = "longest",
+                   actuator: int = 1) -> InterfaceHistory:
+    """The interface history of a run directory (a CSV holds no integrator target apart from
+    its command: HistoryInputError). The session rule is :func:`read_element_history`'s."""
+    from .runs import RunDirError, load_run
+
+    if not path.is_dir():
+        raise HistoryInputError(f"{path}: the interface gap needs a run directory (its "
+                                "correction lines hold the integrator's target), not a file")
+    try:
+        run = load_run(path)
+    except RunDirError as exc:
+        raise HistoryInputError(str(exc)) from None
+    name = _choose_site(path, sorted({s.site for s in run.steps}), site)
+    steps: dict[int, list[int]] = {}
+    for s in run.steps:
+        if s.site == name:
+            steps.setdefault(s.session, []).append(s.step)
+    number, note = _choose_session(f"{path}: site {name!r}",
+                                   {k: len(v) for k, v in steps.items()}, session)
+    committed = [s for s in run.steps if s.site == name and s.session == number]
+    lines = {c.step: c for c in run.corrections if c.site == name and c.session == number}
+    width = len(committed[0].cmd_disp)
+    if not 1 <= actuator <= width:
+        raise HistoryInputError(f"{path}: site {name!r} has {width} actuator(s), not {actuator}")
+    a = actuator - 1
+    notes = [*([note] if note else [])]
+    config = run.site_configs().get(name, {}).get("correction")
+    source = f"{path} (site {name}, session {number}, actuator {actuator})"
+    if not lines:
+        return InterfaceHistory(
+            np.array([s.step for s in committed], dtype=np.float64),
+            np.array([s.cmd_disp[a] for s in committed]),
+            np.array([s.meas_disp[a] for s in committed]), "daq", None, [], None, source,
+            notes)
+    kept = [s for s in committed if s.step in lines]
+    if len(kept) < len(committed):
+        notes.append(f"{len(committed) - len(kept)} committed step(s) without a correction "
+                     "line left out")
+    rows = [lines[s.step] for s in kept]
+    tolerance = None if not isinstance(config, dict) else config.get("tolerance")
+    if isinstance(tolerance, list):
+        tolerance = tolerance[a] if a < len(tolerance) else None
+    channel = "daq" if not isinstance(config, dict) else str(config.get("measured", "daq"))
+    return InterfaceHistory(
+        np.array([s.step for s in kept], dtype=np.float64),
+        np.array([c.target[a] for c in rows]), np.array([c.measured[-1][a] for c in rows]),
+        channel, np.array([c.corrections for c in rows], dtype=np.int64),
+        [c.outcome for c in rows], None if tolerance is None else float(tolerance), source,
+        notes)

@@ -10,6 +10,7 @@ import json
 import sys
 import time
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +54,11 @@ def add_diagnosis_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParse
                         f"the BIC prefers kept), {', '.join(BASELINES)}, or a PARAMS.toml "
                         "(kind, [params], fit = true|false)")
     p.add_argument("--site", default=None, help="the site to diagnose (records with several)")
+    p.add_argument("--against", type=Path, default=None, metavar="RUN",
+                   help="a run directory of the same record without displacement correction: "
+                        "report the interface gap (measured displacement vs the integrator's "
+                        "target) of both runs and the fraction the correction closed (a run "
+                        "with correction lines reports its own gap without it)")
     p.add_argument("--json", type=Path, default=None, metavar="OUT",
                    help="write the diagnosis as JSON (schema: docs/diagnosis.md)")
     p.add_argument("--report", type=Path, default=None, metavar="DIR",
@@ -160,6 +166,9 @@ def _diagnose(args: argparse.Namespace) -> int:
                                   "they are tests of one device, or diagnose them one by one")
     if args.same_device and len(args.record) < 2:
         raise DiagnosisInputError("--same-device needs two or more records of the device")
+    if args.against is not None and (args.same_device or not args.record[0].is_dir()):
+        raise DiagnosisInputError("--against compares two run directories of one record: give "
+                                  "one run directory (not a CSV, not --same-device)")
     records = []
     for path in args.record:
         status(f"diagnose: reading {path}" + (f" (site {args.site})" if args.site else ""))
@@ -182,8 +191,13 @@ def _diagnose(args: argparse.Namespace) -> int:
     from .outputs import summary, write_json, write_report
     from .verdict import diagnose
 
+    gap = None
+    if args.record[0].is_dir():  # read before the minutes of fitting: a bad --against fails now
+        from .interface_gap import interface_gap
+
+        gap = interface_gap(args.record[0], args.site, args.against)
     with ProgressBar("diagnose", 0, enabled=not args.no_progress) as bar:  # total: diagnose
-        result = diagnose(record, options, progress=bar)
+        result = replace(diagnose(record, options, progress=bar), interface_gap=gap)
     print(summary(result))
     if args.json is not None:
         write_json(result, args.json)

@@ -52,6 +52,10 @@ def summary(diagnosis: Diagnosis) -> str:
             f"interface NRMS {pct(interface['nrms_pct'])}, FEI amplitude "
             f"{fmt(interface['fei_amplitude'])}, FEI delay {fmt(fei_ms)} ms, xcorr delay "
             f"{fmt(xcorr_ms)} ms, energy error {pct(loc['force']['energy_error_pct'])}")
+    if result.get("interface_gap") is not None:
+        from .interface_gap import interface_lines
+
+        lines.extend(interface_lines(result["interface_gap"]))
     stories = verdict.get("stories") or []
     named = headline(result)["named"]
     lines.append(f"VERDICT   {named} (confidence {confidence_text(verdict)}): "

@@ -24,7 +24,9 @@ __all__ = ["NOT_AN_EFFECT", "SCHEMA", "Diagnosis", "Series", "Verdict", "json_re
 
 FloatArray = npt.NDArray[np.float64]
 
-SCHEMA = "fresco-bridge/diagnosis/1"
+SCHEMA = "fresco-bridge/diagnosis/2"
+OLDER_SCHEMAS = frozenset({"fresco-bridge/diagnosis/1"})
+"""Documents still read: schema 1 is schema 2 without ``interface_gap`` (read as None)."""
 NOT_AN_EFFECT = frozenset({"none", "unexplained", "baseline_misfit"})
 """Verdicts that add no effect to the sim."""
 
@@ -110,6 +112,9 @@ class Diagnosis:
     """Candidates the record cannot identify (no command channel), with the reason."""
     hidden: list[str]
     seconds: float
+    interface_gap: dict[str, Any] | None = None
+    """Target vs measured displacement of a run with displacement correction, and against the
+    uncorrected run (``diagnosis/interface_gap.py``); None for a record without them."""
     series: Series | None = field(default=None, compare=False)
 
     def winner(self) -> dict[str, Any] | None:
@@ -132,6 +137,8 @@ class Diagnosis:
     def from_json(cls, doc: Mapping[str, Any]) -> Diagnosis:
         """The diagnosis a JSON document holds (no :class:`Series`); ValueError when it is not
         this schema's."""
+        if doc.get("schema") in OLDER_SCHEMAS:
+            doc = {**doc, "schema": SCHEMA, "interface_gap": None}
         if doc.get("schema") != SCHEMA:
             raise ValueError(f"not a diagnosis document: schema {doc.get('schema')!r} "
                              f"(expected {SCHEMA!r})")

@@ -40,7 +40,7 @@ def test_a_csv_is_diagnosed_with_summary_json_and_report(tmp_path: Path,
     assert rc == 0
     assert "VERDICT   friction" in text and "candidates" in text
     doc = json.loads(out.read_text())
-    assert doc["schema"] == "fresco-bridge/diagnosis/1"
+    assert doc["schema"] == "fresco-bridge/diagnosis/2"
     assert doc["verdict"]["effect"] == "friction" and 0.0 <= doc["verdict"]["confidence"] <= 1.0
     names = [e["name"] for e in doc["effects"]]
     assert sorted(names) == sorted(["actuator_delay", "actuator_amplitude",
