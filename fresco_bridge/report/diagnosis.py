@@ -117,6 +117,13 @@ def _section(site: str, folder: Path, img: Callable[[bytes, str, str], str]) -> 
          else f"– ({h['effect']}: no effect added)"),
         ("explanation", h["explanation"]),
     ]
+    gap = result.get("interface_gap")
+    if gap is not None:  # a run with displacement correction (diagnosis/interface_gap.py)
+        other = gap["against"]
+        rows.append((f"interface gap, target vs measured ({gap['run']['channel']} channel, NRMS)",
+                     pct(gap["run"]["nrms_pct"]) + ("" if other is None else
+                     f" (uncorrected run {pct(other['nrms_pct'])}: "
+                     f"{pct(gap['closed_pct'])} closed)")))
     table = "".join(f'<tr><th>{_e(k)}</th><td data-key="{_e(k.split()[0])}">{_e(v)}</td></tr>'
                     for k, v in rows)
     rows_on_basis = [(c["name"], *on_basis(c, h["gap_basis"]))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 
 import pytest
@@ -58,3 +58,22 @@ def test_another_schema_or_a_missing_key_is_refused(diagnosis: Diagnosis) -> Non
         Diagnosis.from_json({k: v for k, v in doc.items() if k != "verdict"})
     with pytest.raises(ValueError, match="unknown key"):
         Diagnosis.from_json({**doc, "verdict": {**doc["verdict"], "guess": 1}})
+
+
+def test_the_interface_gap_round_trips_and_schema_1_is_still_read(diagnosis: Diagnosis) -> None:
+    run = {"source": "runs/a (site s, session 1, actuator 1)", "steps": 900,
+           "channel": "external", "nrms_pct": 0.07, "peak_error_mm": 0.01,
+           "correction_lines": True, "corrections_median": 1.0, "corrections_max": 3,
+           "not_converged": 0, "tolerance_mm": 0.01}
+    gap = {"run": run, "against": {**run, "nrms_pct": 4.5, "corrections_median": 0.0},
+           "closed_pct": 98.4, "notes": []}
+    with_gap = replace(diagnosis, interface_gap=gap)
+    doc = json.loads(to_json(with_gap))
+    assert doc["interface_gap"] == gap
+    assert Diagnosis.from_json(doc) == with_gap
+    older = {**diagnosis.to_json(), "schema": "fresco-bridge/diagnosis/1"}
+    del older["interface_gap"]
+    assert Diagnosis.from_json(older) == diagnosis and diagnosis.interface_gap is None
+    text = DOCS.read_text(encoding="utf-8")
+    for key in [*run, *gap]:
+        assert re.search(rf"\b{key}\b", text), key
