@@ -467,15 +467,41 @@ def summarise(run: Run) -> list[SiteSummary]:
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class CorrectionStats:
+    """One site's displacement corrections, summed up (``runs show``, the report, the same
+    numbers): per trial in record order, its corrections and residual; the median (the upper
+    one of an even count: a whole number of corrections), the max, the largest residual and
+    the trials that did not converge."""
+
+    steps: list[int]
+    corrections: list[int]
+    residual: list[float]
+    converged: list[bool]
+
+    @property
+    def median(self) -> int:
+        counts = sorted(self.corrections)
+        return counts[len(counts) // 2]
+
+    @property
+    def not_converged(self) -> int:
+        return sum(not c for c in self.converged)
+
+
+def correction_stats(lines: list[CorrectionLine]) -> CorrectionStats:
+    """The stats of one site's correction lines (at least one)."""
+    return CorrectionStats([c.step for c in lines], [c.corrections for c in lines],
+                           [c.residual for c in lines], [c.outcome == "converged" for c in lines])
+
+
 def correction_summary(lines: list[CorrectionLine]) -> str:
     """One site's displacement corrections in a line: trials, corrections per trial (median,
     max), the largest residual left, the trials that did not converge."""
-    counts = sorted(c.corrections for c in lines)
-    worst = max(c.residual for c in lines)
-    other = sum(c.outcome != "converged" for c in lines)
+    st = correction_stats(lines)
     return (f"displacement correction: {len(lines)} trial(s), corrections a trial median "
-            f"{counts[len(counts) // 2]} max {counts[-1]}, largest residual {fmt(worst, 'mm')}, "
-            f"{other} not converged")
+            f"{st.median} max {max(st.corrections)}, largest residual "
+            f"{fmt(max(st.residual), 'mm')}, {st.not_converged} not converged")
 
 
 def format_show(run: Run, summaries: list[SiteSummary]) -> str:

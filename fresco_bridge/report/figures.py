@@ -332,3 +332,42 @@ def updating(twin: str, source: str, twin_d: np.ndarray, twin_f: np.ndarray,
     fig.suptitle(f"Updatable site {twin}: the twin of {source}, learned online", fontsize=11)
     fig.tight_layout()
     return png_bytes(fig)
+
+
+def correction(site: str, steps: np.ndarray, corrections: np.ndarray, residual: np.ndarray,
+               converged: np.ndarray, tolerance: float | None,
+               max_iterations: int | None) -> bytes:
+    """A site's displacement correction in two panels: how many corrections its trials needed
+    (a histogram over whole numbers, the warning threshold at half of ``max_iterations``) and
+    per step the residual |target − measured| left after them, with the tolerance line and the
+    trials that did not converge in red."""
+    fig = Figure(figsize=(9.6, 3.8))
+    ax_n, ax_r = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 2]})
+    top = int(max(corrections.max(initial=0), max_iterations or 0))
+    counts = np.bincount(corrections.astype(np.int64), minlength=top + 1)
+    ax_n.bar(np.arange(top + 1), counts, width=0.8, color="C0")
+    if max_iterations is not None:
+        ax_n.axvline(max_iterations / 2, color="tab:orange", lw=0.8, ls=":",
+                     label="warning: over half of max_iterations")
+    ax_n.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax_n.set_xlabel("corrections in the trial")
+    ax_n.set_ylabel("trials")
+    ax_n.set_title("corrections per trial", fontsize=10)
+    k = plot_stride(steps.size)
+    ok = converged.astype(bool)
+    ax_r.plot(steps[ok][::k], residual[ok][::k], ".", ms=2.5, color="C0", label="converged")
+    if (~ok).any():
+        ax_r.plot(steps[~ok], residual[~ok], "x", ms=5, color="tab:red", label="not converged")
+    if tolerance is not None:
+        ax_r.axhline(tolerance, color="tab:red", lw=0.8, ls="--", label="tolerance")
+    ax_r.set_xlabel("step")
+    ax_r.set_ylabel("|target − measured| after (mm)")
+    ax_r.set_title("residual error per step", fontsize=10)
+    if not steps.size:
+        _no_data(ax_r, "no correction lines")
+    for ax in (ax_n, ax_r):
+        ax.grid(alpha=GRID_ALPHA)
+        _legend(ax)
+    fig.suptitle(f"{site}: displacement correction", fontsize=SUPTITLE_SIZE)
+    fig.tight_layout()
+    return png_bytes(fig)

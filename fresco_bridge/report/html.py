@@ -6,11 +6,13 @@ headline figures, the diagnosis in words, what to do next; ``report.overview``),
 error monitors, synchronization subspace; an updatable site, without an actuator, its
 hysteresis only), ``updating-<name>`` for an updatable site (its twin hysteresis, predicted vs
 source force, the source's one-step error, learning lag and update time, from its update
-lines), ``diagnosis-<site>`` when the run directory holds a site's diagnosis
-(``report.diagnosis``: verdict, magnitude, shrink, overlay), ``events``, ``run`` (metadata
-and notes) and ``config`` (the snapshot). The same summary numbers (and the overview's) are
-embedded as JSON in ``<script id="summary-data" type="application/json">`` so that a curation
-pipeline can read them without scraping the tables.
+lines), ``correction-<name>`` for a site with displacement correction (corrections per trial,
+residual per step with the tolerance: ``report.correction``), ``diagnosis-<site>`` when the
+run directory holds a site's diagnosis (``report.diagnosis``: verdict, magnitude, shrink,
+overlay), ``events``, ``run`` (metadata and notes) and ``config`` (the snapshot). The same
+summary numbers (and the overview's, and the corrections') are embedded as JSON in
+``<script id="summary-data" type="application/json">`` so that a curation pipeline can read
+them without scraping the tables.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from ..runs import (
     summarise,
 )
 from . import figures
+from .correction import correction_data, correction_section
 from .diagnosis import diagnosis_sections
 from .overview import overview_section
 
@@ -318,7 +321,9 @@ def render_report(run: Run) -> str:
                                       for d in s.sessions_detail]}
                   for s in summaries},
     }
-    overview, data["overview"] = overview_section(run, summaries)
+    corrected = correction_data(run)
+    data["correction"] = corrected
+    overview, data["overview"] = overview_section(run, summaries, corrected)
     generated = datetime.now(UTC).isoformat(timespec="seconds")
     started = run.meta.get("started_utc", "?")
     return "".join([
@@ -332,6 +337,7 @@ def render_report(run: Run) -> str:
         _summary_section(summaries, frozenset(run.sources())),
         *(_site_section(run, site, float(warn) if warn is not None else None)
           for site in run.sites),
+        *(correction_section(run, site, d, _img) for site, d in corrected.items()),
         *(_updating_section(run, twin, source) for twin, source in run.sources().items()),
         *diagnosis_sections(run.directory, _img),
         _events_section(run),

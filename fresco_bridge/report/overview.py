@@ -20,6 +20,7 @@ from typing import Any, Final
 from ..numbers import fmt, pct
 from ..progress import command_name
 from ..runs import Run, SiteSummary
+from .correction import correction_sentence
 from .diagnosis import DIAGNOSIS_PREFIX, headline
 
 __all__ = ["SCORES_FILE", "overview_section"]
@@ -144,8 +145,11 @@ def _diagnosis(site: str, folder: Path) -> tuple[str, dict[str, Any], list[str]]
     return text, figures, todo
 
 
-def overview_section(run: Run, summaries: list[SiteSummary]) -> tuple[str, dict[str, Any]]:
-    """The ``overview`` section and its figures (for the report's embedded JSON)."""
+def overview_section(run: Run, summaries: list[SiteSummary],
+                     corrections: dict[str, dict[str, Any]] | None = None,
+                     ) -> tuple[str, dict[str, Any]]:
+    """The ``overview`` section and its figures (for the report's embedded JSON);
+    ``corrections``: the corrected sites' figures (``report.correction.correction_data``)."""
     twins = run.sources()
     cmd, where = command_name(), run.directory
     scores = _read_json(run.directory / SCORES_FILE) or {}
@@ -174,6 +178,16 @@ def overview_section(run: Run, summaries: list[SiteSummary]) -> tuple[str, dict[
             todo.append(f"Site {_e(s.site)} held {s.holds} time(s): read why in "
                         '<a href="#events">Events</a> before the next test.')
     rows.append(("holds", ", ".join(holds) or "none"))
+    if corrections:
+        data["correction"] = {site: {k: v for k, v in d.items()
+                                     if k not in ("steps", "corrections", "residual_mm")}
+                              for site, d in corrections.items()}
+        rows.append(("displacement correction", "; ".join(
+            f'<a href="#correction-{_e(site)}">{_e(correction_sentence(site, d))}</a>'
+            for site, d in corrections.items())))
+        todo.extend(f"Site {_e(site)}: {d['not_converged']} trial(s) ended outside the "
+                    "correction's tolerance: read which in its correction section."
+                    for site, d in corrections.items() if d["not_converged"])
     if isinstance(scores.get("twin"), dict):
         text, data["twin"] = _twin_scores(scores)
         rows.append(("twin vs calibrated law", text))
