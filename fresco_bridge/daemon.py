@@ -244,7 +244,8 @@ class Bridge:
                 continue
             taps = SiteTaps(self.telemetry, site.metrics,
                             site.recorder if tcfg.monitors else None, monitor, site.monitor_warning,
-                            predicted=SITE_KINDS[site.cfg.kind].predicted)
+                            predicted=SITE_KINDS[site.cfg.kind].predicted,
+                            correction=site.correction_sample)
             site.add_listener(taps)
             taps.publish_status(site.status_now())
 

@@ -17,7 +17,7 @@ from .site_config import SiteConfigBase
 if TYPE_CHECKING:
     from ..record.site import SiteRecorder
     from ..telemetry.metrics import SiteMetrics
-    from ..telemetry.schema import SiteStatus
+    from ..telemetry.schema import CorrectionSample, SiteStatus
     from .access import RejectionLog
     from .listeners import EventListener, StepListener
 
@@ -137,3 +137,8 @@ class Site(Protocol):
     def status_now(self) -> SiteStatus: ...
 
     def monitor_warning(self, reason: str, step: int) -> None: ...
+
+    def correction_sample(self) -> CorrectionSample | None:
+        """The displacement correction of the step just committed (None: the site has no
+        ``[sites.correction]``, or that step's trial was not corrected); telemetry's."""
+        ...

@@ -29,6 +29,7 @@ from ..controls.base import Controller, Daq
 from ..logs import RateLimitedLog
 from ..safety import CorrectionConfig, SiteState
 from ..setups import Setup
+from ..telemetry.schema import CorrectionSample
 from .correction_loop import CorrectionLoop, StepCorrection
 from .gate import CommandGate
 
@@ -112,6 +113,8 @@ class SiteCorrection:
             raise ConfigError(f"site {site.name}: [sites.correction]: {exc}") from None
         self.settings = settings
         self.last: StepCorrection | None = None
+        self.last_step = 0
+        """The step the last trial belongs to (its commit's number)."""
         self.trials = 0
         """Trials corrected (every trial: Newton iterations of one step too)."""
         self.warnings = 0
@@ -130,7 +133,7 @@ class SiteCorrection:
         if held is not None and site.recorder is not None:  # its trial line, as any trial's
             site.recorder.trial(site.session, site.step, site.time, trial.disp, held)
         step = await self.loop.run(target, held=held)
-        self.last = step
+        self.last, self.last_step = step, site.step + 1
         self.trials += 1
         self.most = max(self.most, step.corrections)
         verdict = step.verdict
@@ -171,6 +174,13 @@ class SiteCorrection:
             return None
         command = last.iterations[-1].command
         return command if site.sent == command else None
+
+    def sample(self, committed: int) -> CorrectionSample | None:
+        """The last trial's correction when it is committed step ``committed``'s."""
+        last = self.last
+        if last is None or self.last_step != committed:
+            return None
+        return CorrectionSample(last.corrections, last.residual, last.verdict.outcome)
 
     def status(self) -> dict[str, object]:
         """``ctl status``'s ``correction``: the last trial and the counts so far."""

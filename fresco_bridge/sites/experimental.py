@@ -45,7 +45,7 @@ from ..safety import (
 from ..setups import Setup, make_setup
 from ..site_output import CommittedStep, SiteNotice
 from ..tangent import TangentEstimate, TangentMethod
-from ..telemetry.schema import SiteStatus
+from ..telemetry.schema import CorrectionSample, SiteStatus
 from .base import Later, SiteError
 from .correcting import SiteCorrection
 from .gate import CommandGate
@@ -438,6 +438,9 @@ class ExperimentalSite:
         if self.listeners.events:
             self.listeners.event(SiteNotice(self.name, self.session, self.step, self.time, kind,
                                             reason, extra), self.status_now())
+
+    def correction_sample(self) -> CorrectionSample | None:
+        return None if self.correction is None else self.correction.sample(self.step)
 
     def monitor_warning(self, reason: str, step: int) -> None:
         """An online monitor's warning at committed ``step`` (the taps raise it)."""

@@ -27,6 +27,7 @@ RESERVED_SITE_NAMES = frozenset({"_bridge"})
 __all__ = [
     "RESERVED_SITE_NAMES",
     "SCHEMA_VERSION",
+    "CorrectionSample",
     "SiteEvent",
     "SiteStatus",
     "StepSample",
@@ -101,6 +102,18 @@ def _monitor_compact(m: MonitorSample) -> list[Any]:
 
 
 @dataclass(frozen=True, slots=True)
+class CorrectionSample:
+    """A committed trial's displacement correction (a site with ``[sites.correction]``)."""
+
+    corrections: int
+    """Corrected commands after the target's own (the correction's iterations)."""
+    residual: float
+    """The largest |target − measured| left after the last one (mm)."""
+    outcome: str
+    """``converged``, ``not-converged``, ``beyond-max-correction``, ``non-finite``, ``refused``."""
+
+
+@dataclass(frozen=True, slots=True)
 class StepSample(CommittedStep):
     """One committed or answered step of a site: what the integrator asked and what was measured.
 
@@ -110,6 +123,7 @@ class StepSample(CommittedStep):
 
     predicted_force: float | None = None
     monitor: MonitorSample | None = None
+    correction: CorrectionSample | None = None
 
     def to_json(self, compact: bool = False) -> bytes:
         """Full: a keyed object. Compact: a positional array (site/session are in the topic)."""
@@ -119,6 +133,8 @@ class StepSample(CommittedStep):
                 _nums(self.trial), _nums(self.ctrl), _nums(self.daq_disp), _nums(self.daq_force),
                 _num(self.predicted_force),
                 None if self.monitor is None else _monitor_compact(self.monitor),
+                None if (c := self.correction) is None else
+                [c.corrections, _num(c.residual), c.outcome],
             ])
         # Written out by hand: the same bytes as json.dumps of the keyed object (the tests
         # compare them) at a third of the cost, once per step on the bridge's loop.
@@ -128,12 +144,18 @@ class StepSample(CommittedStep):
             f'"nrms":{_jnum(m.nrms)},"fei_amplitude":{_jnum(m.fei_amplitude)},'
             f'"fei_delay":{_jnum(m.fei_delay)},"warning":{_jstr(m.warning)}}}'
         )
+        c = self.correction
+        correction = "null" if c is None else (
+            f'{{"corrections":{int(c.corrections)},"residual":{_jnum(c.residual)},'
+            f'"outcome":{_jstr(c.outcome)}}}'
+        )
         return (
             f'{{"v":{SCHEMA_VERSION},"site":{_jstr(self.site)},"session":{int(self.session)},'
             f'"step":{int(self.step)},"time":{_jnum(self.time)},"state":{_jstr(self.state)},'
             f'"trial":{_jnums(self.trial)},"ctrl":{_jnums(self.ctrl)},'
             f'"daq":{{"disp":{_jnums(self.daq_disp)},"force":{_jnums(self.daq_force)}}},'
-            f'"predicted_force":{_jnum(self.predicted_force)},"monitor":{monitor}}}'
+            f'"predicted_force":{_jnum(self.predicted_force)},"monitor":{monitor},'
+            f'"correction":{correction}}}'
         ).encode()
 
 

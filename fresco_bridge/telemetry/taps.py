@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from fresco_bridge.telemetry.base import Telemetry
-from fresco_bridge.telemetry.schema import SiteEvent, SiteStatus, StepSample
+from fresco_bridge.telemetry.schema import CorrectionSample, SiteEvent, SiteStatus, StepSample
 
 if TYPE_CHECKING:
     from fresco_bridge.indicators import OnlineMonitor
@@ -46,9 +46,12 @@ class SiteTaps:
         warn: Callable[[str, int], None] | None = None,
         *,
         predicted: bool = False,
+        correction: Callable[[], CorrectionSample | None] | None = None,
     ) -> None:
         """``predicted``: the site is updatable, its measured force is the twin's prediction
-        (published as ``predicted_force``)."""
+        (published as ``predicted_force``); ``correction``: the committed step's displacement
+        correction (``Site.correction_sample``), published with the step."""
+        self._correction = correction
         self._mqtt = mqtt
         self._predicted = predicted
         self._metrics = metrics
@@ -73,6 +76,7 @@ class SiteTaps:
                 step.site, step.session, step.step, step.time, step.trial, step.ctrl,
                 step.daq_disp, step.daq_force, step.state,
                 step.daq_force[0] if self._predicted else None, sample,
+                None if self._correction is None else self._correction(),
             ))
 
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:

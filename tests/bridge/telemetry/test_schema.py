@@ -10,6 +10,7 @@ import pytest
 from fresco_bridge.indicators import MonitorSample
 from fresco_bridge.telemetry.schema import (
     SCHEMA_VERSION,
+    CorrectionSample,
     SiteEvent,
     SiteStatus,
     StepSample,
@@ -25,6 +26,7 @@ def make_sample(**changes: object) -> StepSample:
         "daq_force": (53.2, -7.75), "state": "RUNNING", "predicted_force": 53.0,
         "monitor": MonitorSample(tracking_error=-0.0009, ti=-0.12, nrms=0.013,
                                  fei_amplitude=0.98, fei_delay=0.004, warning=None),
+        "correction": CorrectionSample(corrections=2, residual=0.004, outcome="converged"),
     }
     fields.update(changes)
     return StepSample(**fields)  # type: ignore[arg-type]
@@ -39,7 +41,9 @@ def test_full_step_payload_has_the_documented_keys_and_values() -> None:
         "predicted_force": 53.0,
         "monitor": {"tracking_error": -0.0009, "ti": -0.12, "nrms": 0.013,
                     "fei_amplitude": 0.98, "fei_delay": 0.004, "warning": None},
+        "correction": {"corrections": 2, "residual": 0.004, "outcome": "converged"},
     }
+    assert json.loads(make_sample(correction=None).to_json())["correction"] is None
 
 
 def test_compact_step_payload_is_positional_and_smaller() -> None:
@@ -48,7 +52,9 @@ def test_compact_step_payload_is_positional_and_smaller() -> None:
     assert json.loads(compact) == [
         SCHEMA_VERSION, 3, 41, 0.41, "RUNNING", [1.25, -0.5], [1.25, -0.5],
         [1.2491, -0.4998], [53.2, -7.75], 53.0, [-0.0009, -0.12, 0.013, 0.98, 0.004, None],
+        [2, 0.004, "converged"],
     ]
+    assert json.loads(make_sample(correction=None).to_json(compact=True))[11] is None
     assert len(compact) < len(sample.to_json()) / 2
     assert b" " not in compact
 

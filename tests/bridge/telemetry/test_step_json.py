@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fresco_bridge.indicators import MonitorSample
-from fresco_bridge.telemetry.schema import SCHEMA_VERSION, StepSample
+from fresco_bridge.telemetry.schema import SCHEMA_VERSION, CorrectionSample, StepSample
 
 floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
 vectors = st.lists(floats, min_size=0, max_size=4).map(tuple)
@@ -18,6 +18,9 @@ optional = st.none() | floats
 monitors = st.none() | st.builds(
     MonitorSample, floats, floats, optional, optional, optional,
     st.none() | st.text(max_size=40))
+corrections = st.none() | st.builds(
+    CorrectionSample, st.integers(0, 100), floats,
+    st.sampled_from(["converged", "not-converged", "beyond-max-correction", "non-finite"]))
 
 
 def _plain(v: float | None) -> float | str | None:
@@ -37,6 +40,9 @@ def reference(s: StepSample) -> bytes:
             "tracking_error": _plain(m.tracking_error), "ti": _plain(m.ti),
             "nrms": _plain(m.nrms), "fei_amplitude": _plain(m.fei_amplitude),
             "fei_delay": _plain(m.fei_delay), "warning": m.warning},
+        "correction": None if (c := s.correction) is None else {
+            "corrections": c.corrections, "residual": _plain(c.residual),
+            "outcome": c.outcome},
     }
     return json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
 
@@ -45,12 +51,14 @@ def reference(s: StepSample) -> bytes:
        session=st.integers(0, 10**6), step=st.integers(0, 10**9), time=floats,
        state=st.sampled_from(["RUNNING", "HOLD", "PAUSED", "IDLE", "FAULT"]),
        trial=vectors, ctrl=vectors, disp=vectors, force=vectors, predicted=optional,
-       monitor=monitors)
+       monitor=monitors, correction=corrections)
 def test_full_step_payload_equals_json_dumps(
     site: str, session: int, step: int, time: float, state: str,
     trial: tuple[float, ...], ctrl: tuple[float, ...], disp: tuple[float, ...],
     force: tuple[float, ...], predicted: float | None, monitor: MonitorSample | None,
+    correction: CorrectionSample | None,
 ) -> None:
-    s = StepSample(site, session, step, time, trial, ctrl, disp, force, state, predicted, monitor)
+    s = StepSample(site, session, step, time, trial, ctrl, disp, force, state, predicted, monitor,
+                   correction)
     assert s.to_json() == reference(s)
     json.loads(s.to_json())  # strict JSON
