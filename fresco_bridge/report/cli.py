@@ -81,7 +81,8 @@ def _export(args: argparse.Namespace) -> int:
                           f"{', '.join(run.sites) or 'none'})")
     if args.corrections:
         if fmt != "csv":
-            raise RunDirError("--corrections writes CSV; leave out --format hdf5")
+            raise RunDirError("--corrections writes CSV; leave out --format hdf5 (the HDF5 "
+                              "export of the run holds them: /sites/<site>/correction)")
         out = args.output or run.directory / "corrections.csv"
         n = write_corrections_csv(run.corrections, out, site=args.site)
         print(f"wrote {out}: {n} command(s) of {len(run.corrections)} corrected trial(s)")

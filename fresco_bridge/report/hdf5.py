@@ -13,6 +13,12 @@ Layout (every dataset has a ``units`` attribute; ``1`` means dimensionless)::
         update/            an updatable site's update lines (format 5): step session
                            through (the source step learned through) secs (s) err (kN;
                            NaN where the updater made no one-step prediction)
+        correction/        a site's displacement corrections (format 6), as ``export
+                           --corrections``: per corrected trial step session target
+                           (trials × actuators, mm) outcome corrections (1) residual (mm);
+                           per command (the target's own first) trial (its row in the
+                           per-trial datasets) iteration (0: the target's own) command
+                           measured (commands × actuators, mm)
     /events/               seq t (s since the bridge started) site session kind reason
                            extra (JSON text of the other fields)
 """
@@ -26,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..record.export import CorrectionLine
 from ..runs import Run, RunDirError
 
 HDF5_FORMAT_VERSION = 1
@@ -39,6 +46,27 @@ def _put(group: Any, name: str, data: Any, units: str) -> None:
 
 def _opt(v: float | None) -> float:
     return math.nan if v is None else v
+
+
+def _corrections(group: Any, lines: list[CorrectionLine], str_dt: Any) -> None:
+    n = max(len(c.target) for c in lines)
+
+    def rows(vectors: list[tuple[float, ...]]) -> np.ndarray:
+        return np.array([v + (math.nan,) * (n - len(v)) for v in vectors],
+                        dtype=np.float64).reshape(len(vectors), n)
+
+    _put(group, "step", np.array([c.step for c in lines], dtype=np.int64), "1")
+    _put(group, "session", np.array([c.session for c in lines], dtype=np.int64), "1")
+    _put(group, "target", rows([c.target for c in lines]), "mm")
+    group.create_dataset("outcome", data=[c.outcome for c in lines], dtype=str_dt)
+    _put(group, "corrections", np.array([c.corrections for c in lines], dtype=np.int64), "1")
+    _put(group, "residual", np.array([c.residual for c in lines], dtype=np.float64), "mm")
+    _put(group, "trial", np.array([i for i, c in enumerate(lines) for _ in c.commands],
+                                  dtype=np.int64), "1")
+    _put(group, "iteration", np.array([k for c in lines for k in range(len(c.commands))],
+                                      dtype=np.int64), "1")
+    _put(group, "command", rows([v for c in lines for v in c.commands]), "mm")
+    _put(group, "measured", rows([v for c in lines for v in c.measured]), "mm")
 
 
 def export_hdf5(run: Run, out_path: Path, *, site: str | None = None) -> int:
@@ -92,6 +120,9 @@ def export_hdf5(run: Run, out_path: Path, *, site: str | None = None) -> int:
                 _put(ug, "secs", np.array([float(u["secs"]) for u in ups], dtype=np.float64), "s")
                 _put(ug, "err", np.array([float(u.get("err", math.nan)) for u in ups],
                                          dtype=np.float64), "kN")
+            corrections = [c for c in run.corrections if c.site == name]
+            if corrections:
+                _corrections(g.create_group("correction"), corrections, str_dt)
         events = [e for e in run.events if site is None or e.get("site") == site]
         eg = f.create_group("events")
         _put(eg, "seq", np.array([int(e.get("seq", 0)) for e in events], dtype=np.int64), "1")

@@ -87,3 +87,28 @@ def test_a_run_without_correction_has_no_such_section(tmp_path: Path) -> None:
     assert 'id="correction-' not in text and "displacement correction" not in text
     data = json.loads(re.search(r'id="summary-data">(.*?)</script>', text, re.S)[1])
     assert data["correction"] == {} and "correction" not in data["overview"]
+
+
+def test_the_hdf5_export_holds_what_export_corrections_gives(run_dir: Path,
+                                                             tmp_path: Path) -> None:
+    import h5py  # type: ignore[import-untyped]
+
+    out, csv_path = tmp_path / "run.h5", tmp_path / "corrections.csv"
+    assert main(["export", str(run_dir), "-o", str(out)]) == 0
+    assert main(["export", str(run_dir), "--corrections", "-o", str(csv_path)]) == 0
+    with csv_path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    with h5py.File(out, "r") as f:
+        g = f["sites/frame/correction"]
+        trial, iteration = g["trial"][()], g["iteration"][()]
+        command, measured = g["command"][()][:, 0], g["measured"][()][:, 0]
+        step, target = g["step"][()], g["target"][()][:, 0]
+        outcome = [o.decode() for o in g["outcome"][()]]
+        corrections, residual = g["corrections"][()], g["residual"][()]
+        assert g["command"].attrs["units"] == "mm" and g["residual"].attrs["units"] == "mm"
+    assert len(rows) == trial.size and step.size == len(TARGETS)
+    for r, t, k, c, m in zip(rows, trial, iteration, command, measured, strict=True):
+        assert (int(r["step"]), int(r["iteration"])) == (int(step[t]), int(k))
+        assert (float(r["command"]), float(r["measured"])) == (c, m)
+        assert float(r["target"]) == target[t] and r["outcome"] == outcome[t]
+        assert (int(r["corrections"]), float(r["residual"])) == (corrections[t], residual[t])
