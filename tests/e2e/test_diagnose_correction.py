@@ -60,8 +60,10 @@ def test_the_reader_takes_the_integrators_target_not_the_corrected_command(
 def test_diagnose_reports_the_gap_closed_against_the_uncorrected_run(
         runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out, corrections = tmp_path / "d.json", tmp_path / "corrections.csv"
+    folder = runs["corrected"] / "diagnosis-frame"  # where the run's report finds it
     rc = main(["diagnose", str(runs["corrected"]), "--site", "frame", "--against",
-               str(runs["recorded"]), "--json", str(out), "--no-progress"])
+               str(runs["recorded"]), "--json", str(out), "--report", str(folder),
+               "--no-progress"])
     printed = capsys.readouterr()
     assert rc == 0, printed.err
     gap = json.loads(out.read_text())["interface_gap"]
@@ -73,6 +75,11 @@ def test_diagnose_reports_the_gap_closed_against_the_uncorrected_run(
     assert gap["closed_pct"] == pytest.approx(100 * (1 - mine["nrms_pct"] / theirs["nrms_pct"]))
     assert mine["not_converged"] == 0 and theirs["corrections_max"] == 0
     assert "gap closed" in printed.out
+    assert json.loads((folder / "diagnosis.json").read_text())["interface_gap"] == gap
+    assert main(["report", str(runs["corrected"]), "-o", str(tmp_path / "r.html")]) == 0
+    section = (tmp_path / "r.html").read_text().split('id="diagnosis-frame"')[1]
+    assert (f"{mine['nrms_pct']:.2f} % (uncorrected run {theirs['nrms_pct']:.2f} %: "
+            f"{gap['closed_pct']:.2f} % closed)") in section
     # the figures are those of the record's correction lines, as export --corrections writes them
     assert main(["export", str(runs["corrected"]), "--corrections", "-o",
                  str(corrections)]) == 0
