@@ -48,6 +48,10 @@ def run_figures(h: InterfaceHistory) -> dict[str, Any]:
     return out
 
 
+def _corrected(h: InterfaceHistory) -> bool:
+    return h.corrections is not None and bool(np.any(h.corrections > 0))
+
+
 def _read(path: Path, site: str | None) -> InterfaceHistory:
     try:
         return read_interface(path, site=site)
@@ -74,6 +78,9 @@ def interface_gap(path: Path, site: str | None,
                 f"in {against}): the fraction closed compares different displacements; give "
                 "the uncorrected run [sites.correction] with the same measured channel and a "
                 "tolerance above any error (it then records without correcting)")
+        if not _corrected(this) and _corrected(other):
+            notes.append(f"this run corrected nothing and {against} did: give the corrected "
+                         "run first and the uncorrected one to --against")
         if other.step.size != this.step.size:
             notes.append(f"the runs differ in length ({this.step.size} and {other.step.size} "
                          "committed steps): not the same record?")

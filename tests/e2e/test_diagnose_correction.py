@@ -100,6 +100,9 @@ def test_an_uncorrected_run_on_another_channel_is_said(runs: dict[str, Path]) ->
     assert gap is not None and gap["against"]["channel"] == "daq"
     assert any("different channels" in n for n in gap["notes"])
     assert interface_gap(runs["plain"], "frame") is None  # nothing beyond the diagnosis' own
+    reversed_ = interface_gap(runs["recorded"], "frame", runs["corrected"])
+    assert reversed_ is not None and reversed_["closed_pct"] < 0
+    assert any("give the corrected run first" in n for n in reversed_["notes"])
 
 
 def test_against_a_csv_is_refused(runs: dict[str, Path], tmp_path: Path,
