@@ -305,6 +305,10 @@ class Bridge:
 
 DRAIN_SECONDS = 10.0
 """How long ``BridgeThread.drain`` waits for the sessions' DIE by default."""
+THREAD_START_DEADLINE = 180.0
+"""How long ``BridgeThread`` waits for ``Bridge.start``: above every part's own start deadline
+(a learner worker's is 120 s: import, offline fit, compiling its kernels), so the part that is
+late reports its own error first."""
 
 
 class BridgeThread:
@@ -349,8 +353,8 @@ class BridgeThread:
 
     def __enter__(self) -> BridgeThread:
         self._thread.start()
-        if not self._ready.wait(30):
-            raise RuntimeError("the bridge did not start within 30 s")
+        if not self._ready.wait(THREAD_START_DEADLINE):
+            raise RuntimeError(f"the bridge did not start within {THREAD_START_DEADLINE:.0f} s")
         if self._error is not None:
             raise self._error
         return self

@@ -286,6 +286,9 @@ class RefitUpdater(OwnsTwin):
         self._twin = _RefitTwin(self._law, name, stride, window)
         self._last_update = 0.0
         self.refits = 0
+        if forces_from is not None:  # its compiled kernel is built (or loaded) now, not in
+            # the step of the first refit: a cold JIT compile takes seconds (BENCHMARKS.md)
+            forces_from(self.parameters, np.zeros(1), self._law.build().state())
 
     @property
     def parameters(self) -> dict[str, float]:
