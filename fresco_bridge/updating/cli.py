@@ -260,13 +260,17 @@ def _replay(args: argparse.Namespace) -> int:
                         session=args.session, actuator=args.actuator, units=args.units)
     assert src.force is not None  # need_force
     served = updatable_site(args.source, args.site)
-    if served is not None:
-        raise HistoryError(f"{args.source}: site {served!r} is an updatable site: its forces are "
+    if served is not None or src.predicted:
+        what = f"site {served!r} is" if served is not None else \
+            f"{src.source}: the export marks these forces as predicted (predicted = 1):"
+        raise HistoryError(f"{args.source}: {what} an updatable site: its forces are "
                            "its updater's predictions, not measurements; give the tested "
                            "element it learns from (its learns_from site) as --source")
     served = updatable_site(args.twin, args.twin_site or args.site)
-    if served is not None and twin.force is not None:
-        print(f"twin: site {served!r} is an updatable site: its forces are the predictions "
+    if (served is not None or twin.predicted) and twin.force is not None:
+        what = f"site {served!r} is" if served is not None else \
+            f"{twin.source}: the export marks these forces as predicted (predicted = 1):"
+        print(f"twin: {what} an updatable site: its forces are the predictions "
               "served to the integrator, not a truth; not scored against (give --twin a "
               "history with measured or true forces to score)", file=sys.stderr)
         twin = replace(twin, force=None)
