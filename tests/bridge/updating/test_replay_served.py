@@ -3,7 +3,6 @@ they are its updater's predictions (a real bridge run with a source and its twin
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import pytest
@@ -12,6 +11,7 @@ from fresco_bridge.cli import main
 from fresco_bridge.integrator.link import GenericClientLink
 from tests.bridge.twins.test_twin_bridge import TOML
 from tests.support.bridge import RunningBridge
+from tests.support.serve import lockstep
 
 
 @pytest.fixture(scope="module")
@@ -21,14 +21,7 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     with RunningBridge(TOML, root) as bridge, \
             GenericClientLink("127.0.0.1", bridge.ports["damper"], 1) as source, \
             GenericClientLink("127.0.0.1", bridge.ports["twin1"], 1) as twin:
-        for i in range(1, 41):
-            d = 1.5 * math.sin(i / 4.0)
-            source.set_trial((d,), time=0.01 * i)
-            source.force()
-            twin.set_trial((0.8 * d,), time=0.01 * i)
-            twin.force()
-            source.commit()
-            twin.commit()
+        lockstep(source, twin, 1, 40)
         path: Path = bridge.run_dir
     return path
 
