@@ -25,7 +25,7 @@ from protocol import Signals, SignalSizes
 
 from ..controls.base import Controller, Daq, InlineController
 from ..record import RecordError, RunRecord
-from ..safety import Limiter, LimitHit, SiteState, Trigger, all_finite
+from ..safety import Limiter, SiteState, Trigger, all_finite
 from ..setups import Setup, make_setup
 from ..site_output import CommittedStep
 from ..tangent import TangentEstimate, TangentMethod
@@ -99,7 +99,6 @@ class ExperimentalSite:
         self.enter_hold: Callable[[str], None] = core.enter_hold
         self.monitor_warning: Callable[[str, int], None] = core.monitor_warning
         self.tell_integrator_to_stop: Callable[[str], None] = core.tell_integrator_to_stop
-        self.record_failed: Callable[[RecordError], None] = core.record_failed
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
@@ -345,14 +344,6 @@ class ExperimentalSite:
         """Why the guard may not re-send ``command`` from ``measured`` (the limits), or None."""
         return self.gate.resend_refused(command, measured)
 
-    @property
-    def limit_counts(self) -> dict[str, int]:
-        """Limit hits by limit (``ctl status``, metrics)."""
-        return self.gate.limit_counts
-
-    def limit_event(self, hit: LimitHit, action: str) -> None:
-        self.gate.limit_event(hit, action)
-
     def _sent(self, command: tuple[float, ...]) -> bool:
         """After ``command`` went to the controller (or failed: the site is in HOLD)."""
         if self.core.state is HOLD or self.core.state is FAULT:
@@ -477,7 +468,7 @@ class ExperimentalSite:
         except RecordError as exc:  # the record is the first listener: nobody saw the step
             self.step -= 1
             self.commit_time = commit_time
-            self.record_failed(exc)
+            self.core.record_failed(exc)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
         """Measured signals in basic DOFs (see ``out_signals_eager``)."""
