@@ -76,7 +76,8 @@ def test_an_export_says_which_forces_are_predicted_and_replay_heeds_it(
                  "--twin", str(csv), "--twin-site", "twin1", "--updater", "online_ukf",
                  "-o", str(out), "--quiet"]) == 0
     captured = capsys.readouterr()
-    assert f"{csv} (site twin1): the export marks these forces as predicted" in captured.err
+    assert f"twin: {csv} (site twin1): an updatable site's, as the export says (predicted = 1)" \
+        in captured.err
     assert "not scored against" in captured.err and "MAETH" not in captured.out
     assert main(["updater", "replay", "--source", str(csv), "--site", "twin1",
                  "--twin", str(csv), "--twin-site", "damper", "--updater", "online_ukf",
