@@ -25,10 +25,8 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -40,54 +38,30 @@ from benchmarks.bench_twin import _offline_csv, _pin
 from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record.export import read_record
 from protocol import Action
+from tests.support.serve import source_and_twin, start_cli, started, workers_of
 
 NANS: list[int] = []
 """The steps the twin answered NaN at (``drive(nan_ok=True)``)."""
-READY = re.compile(r"fresco-bridge ready: damper=(\d+), twin1=(\d+)")
-CONFIG = """
-[bridge]
-run_dir = "{runs}"
-run_name = "long"
-[[sites]]
-name = "damper"
-port = 0
-[sites.controller]
-model = "bilinear"
-params = {{ k0 = 20.0, fy = 15.0, alpha = 0.05 }}
-[[sites]]
-name = "twin1"
-port = 0
-kind = "updatable"
-learns_from = "damper"
-updater = "{updater}"
-offline = "{offline}"
-"""
 
 
-def serve(folder: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, int], float]:
+def lab(folder: Path, updater: str) -> Path:
+    """The source (sim bilinear, yield at 0.75 mm) and its ``updater`` twin with the offline
+    database of ``bench_twin``."""
+    offline = _offline_csv(folder / "offline.csv")
+    return source_and_twin(folder / "lab.toml", folder / "runs", "long", updater=updater,
+                           fy=15.0, twin=f'offline = "{offline}"\n')
+
+
+def serve(folder: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, ...], float]:
     """A bridge process, its ports and the seconds it took to print its ready line."""
     start = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", "serve", *args],
-                            cwd=folder, stdout=subprocess.PIPE, text=True,
-                            stderr=(folder / f"serve-{time.monotonic_ns()}.log").open("w"))
-    assert proc.stdout is not None
-    end = time.monotonic() + 600
-    while time.monotonic() < end:
-        m = READY.search(proc.stdout.readline())
-        if m or proc.poll() is not None:
-            break
-    if not m:
-        proc.kill()
-        raise RuntimeError("the bridge did not print its ready line")
-    return proc, (int(m.group(1)), int(m.group(2))), time.perf_counter() - start
+    proc = start_cli(folder, "serve", *args)
+    ports, _ = started(proc, deadline=600)
+    return proc, ports, time.perf_counter() - start
 
 
 def worker_of(pid: int) -> int | None:
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
-                return int(child)
-    return None
+    return next(iter(workers_of(pid)), None)
 
 
 def disp(i: int) -> float:
@@ -95,7 +69,7 @@ def disp(i: int) -> float:
     return amplitude * math.sin(2 * math.pi * i / 50)
 
 
-def drive(ports: tuple[int, int], steps: int, *, twin: bool, sample: int = 0,
+def drive(ports: tuple[int, ...], steps: int, *, twin: bool, sample: int = 0,
           on_sample: object = None, pace: float = 0.0, nan_ok: bool = False) -> list[float]:
     """``steps`` source (+ twin) steps, one every ``pace`` s at most; the twin's trial + force
     round trips (s). A NaN answer of the twin raises RuntimeError (``nan_ok``: is counted in
@@ -135,9 +109,7 @@ def long_run(steps: int, without_checkpoint: bool) -> None:
     updater = "online_improved"
     with tempfile.TemporaryDirectory(prefix="bench-twin-long-") as tmp:
         folder = Path(tmp)
-        cfg = folder / "lab.toml"
-        cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
+        cfg = lab(folder, updater)
         proc, ports, ready = serve(folder, "--config", str(cfg))
         worker = worker_of(proc.pid)
         print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step")
@@ -212,9 +184,7 @@ def _failed(folder: Path, exc: Exception) -> None:
 def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
     with tempfile.TemporaryDirectory(prefix="bench-twin-catch-up-") as tmp:
         folder = Path(tmp)
-        cfg = folder / "lab.toml"
-        cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
+        cfg = lab(folder, updater)
         proc, ports, _ = serve(folder, "--config", str(cfg))
         try:
             for _ in range(sessions):

@@ -44,6 +44,7 @@ COMPILED: tuple[str, ...] = (
     "fresco_bridge/server/handlers.py",
     "fresco_bridge/sites/gate.py",
     "fresco_bridge/sites/experimental.py",
+    "fresco_bridge/sites/core.py",
     "fresco_bridge/sites/guard.py",
     "fresco_bridge/safety/limits.py",
     "fresco_bridge/record/site.py",

@@ -9,7 +9,9 @@ naming the file, the line or column, and why, so each command can print it as on
 **One CSV vocabulary** (:data:`COLUMNS`, :data:`ALIASES`; ``docs/run-record.md`` shows it to
 users): the bridge's export (``fresco-bridge export``:
 ``time,step,site,cmd_disp,meas_disp,meas_force,session``, with ``_1.._n`` suffixes when a site
-has n actuators) names every column; a CSV from elsewhere may use the short names of
+has n actuators, then ``site_kind,predicted``: ``predicted = 1`` marks a site whose forces are
+its model's predictions, an updatable site's, read back as :attr:`ElementHistory.predicted`)
+names every column; a CSV from elsewhere may use the short names of
 :data:`ALIASES` (``time,disp,force``: the measured displacement and force, as the shipped
 ``examples/data`` records have them). Callers ask for the canonical names; every error lists the
 same accepted set (:func:`vocabulary`).
@@ -88,6 +90,11 @@ class ElementHistory:
     """The file line of each sample (a CSV), so later checks can point into the file."""
     notes: list[str] = field(default_factory=list)
     """Choices made for the caller (which session, which actuator), worth printing."""
+    site_kind: str | None = None
+    """The site's kind as an export names it (``site_kind`` column); None: not said."""
+    predicted: bool = False
+    """The forces are the site's model's predictions (``predicted = 1``: an updatable site's
+    served forces), no measurement: nothing to learn from nor score against."""
 
 
 def check_increasing(name: str, values: FloatArray, source: str,
@@ -263,7 +270,21 @@ def _read_csv(path: Path, required: Sequence[str], optional: Sequence[str],
     for name in ("time", "step"):
         if name in columns:
             check_increasing(name, columns[name], where, lines)
-    return ElementHistory(columns, where, lines, notes)
+    kind, predicted = _site_kind(header, body)
+    return ElementHistory(columns, where, lines, notes, kind, predicted)
+
+
+def _site_kind(header: list[str], body: list[tuple[int, list[str]]]) -> tuple[str | None, bool]:
+    """The chosen rows' ``site_kind`` and whether any is ``predicted`` (an export's last
+    columns; a file without them says nothing: measured)."""
+    def cells(name: str) -> set[str]:
+        if name not in header:
+            return set()
+        col = header.index(name)
+        return {row[col].strip() for _, row in body if len(row) > col} - {""}
+
+    kinds = cells("site_kind")
+    return (", ".join(sorted(kinds)) if kinds else None), "1" in cells("predicted")
 
 
 def _one_session(path: Path, where: str, body: list[tuple[int, list[str]]], col: int,

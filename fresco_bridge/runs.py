@@ -89,6 +89,12 @@ class Run:
             return {}
         return {str(s["name"]): s for s in sites if isinstance(s, dict) and "name" in s}
 
+    def site_kinds(self) -> dict[str, str]:
+        """``{site: its kind}`` from the config snapshot (``experimental`` where the table
+        names none, the config's default; ``{}``: no snapshot)."""
+        return {name: str(s.get("kind", "experimental"))
+                for name, s in self.site_configs().items()}
+
     def sources(self) -> dict[str, str]:
         """``{updatable site: the site it learns from}`` from the config snapshot (``{}``: no
         snapshot, or no updatable site)."""

@@ -1,7 +1,9 @@
 """Read a run record back and export committed steps as CSV (the diagnosis tool's input).
 
 CSV columns: ``time,step,site,cmd_disp,meas_disp,meas_force`` — with ``_1.._n`` suffixes when a
-site has n > 1 actuators — plus ``session`` last (a run can hold several integrator sessions).
+site has n > 1 actuators — plus ``session`` (a run can hold several integrator sessions) and,
+from ``fresco-bridge export``, ``site_kind`` and ``predicted`` last (``1``: the site's force is
+its model's prediction, an updatable site's, never a measurement to learn from or score against).
 ``cmd_disp`` is the actuator command (ctrl), ``meas_*`` the measurement (daq) of that step, in
 mm and kN; ``time`` is the integrator's pseudo-time of the committed trial.
 """
@@ -11,7 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -206,8 +208,11 @@ def export_csv(run_dir: Path, out_path: Path, *, site: str | None = None) -> int
     return write_csv(committed_steps(run_dir), out_path, site=site)
 
 
-def write_csv(steps: Iterable[CommittedStep], out_path: Path, *, site: str | None = None) -> int:
-    """``export_csv`` for steps already read; returns the number of rows."""
+def write_csv(steps: Iterable[CommittedStep], out_path: Path, *, site: str | None = None,
+              kinds: Mapping[str, tuple[str, bool]] | None = None) -> int:
+    """``export_csv`` for steps already read; returns the number of rows. ``kinds``: ``{site:
+    (its kind, whether its force is predicted)}``, written as the last two columns (a site not
+    in it: empty cells, nothing known)."""
     steps = [s for s in steps if site is None or s.site == site]
     n = max((len(s.cmd_disp) for s in steps), default=1)
 
@@ -216,6 +221,14 @@ def write_csv(steps: Iterable[CommittedStep], out_path: Path, *, site: str | Non
 
     header = ["time", "step", "site", *cols("cmd_disp"), *cols("meas_disp"), *cols("meas_force")]
     header.append("session")
+    if kinds is not None:
+        header += ["site_kind", "predicted"]
+
+    def kind(name: str) -> list[str]:
+        if kinds is None:
+            return []
+        known = kinds.get(name)
+        return ["", ""] if known is None else [known[0], "1" if known[1] else "0"]
 
     def pad(v: tuple[float, ...]) -> list[str]:
         return [repr(x) if math.isfinite(x) else str(x) for x in v] + [""] * (n - len(v))
@@ -226,6 +239,6 @@ def write_csv(steps: Iterable[CommittedStep], out_path: Path, *, site: str | Non
         for s in steps:
             w.writerow(
                 [repr(s.time), s.step, s.site, *pad(s.cmd_disp), *pad(s.meas_disp),
-                 *pad(s.meas_force), s.session]
+                 *pad(s.meas_force), s.session, *kind(s.site)]
             )
     return len(steps)

@@ -94,7 +94,11 @@ def _export(args: argparse.Namespace) -> int:
         n = export_hdf5(run, out, site=args.site)
     else:
         out = args.output or run.directory / "steps.csv"
-        n = write_csv(run.steps, out, site=args.site)
+        from ..site_kinds import SITE_KINDS
+
+        kinds = {site: (kind, kind in SITE_KINDS and SITE_KINDS[kind].predicted)
+                 for site, kind in run.site_kinds().items()}
+        n = write_csv(run.steps, out, site=args.site, kinds=kinds)
     print(f"wrote {out}: {n} committed step(s)")
     return 0
 

@@ -37,8 +37,12 @@ class Site(Protocol):
 
     name: str
     cfg: SiteConfigBase
-    session: int
-    """Number of the current (or last) integrator session."""
+
+    @property
+    def session(self) -> int:
+        """Number of the current (or last) integrator session."""
+        ...
+
     pending: tuple[float, ...] | None
     """A command waiting inside a request (operator pause, controller recovery), or None."""
     damping: tuple[float, ...]
@@ -51,7 +55,10 @@ class Site(Protocol):
     time: float
     trial: Signals
     """The current trial (element side, basic DOFs)."""
-    in_session: bool
+
+    @property
+    def in_session(self) -> bool: ...
+
     recorder: SiteRecorder | None
     """The one writer of this site's lines in the run record (None: recording off)."""
 

@@ -47,8 +47,13 @@ class CorrectedSite(Protocol):
     """What the correction needs of its site (``ExperimentalSite``)."""
 
     name: str
-    state: SiteState
-    session: int
+
+    @property
+    def state(self) -> SiteState: ...
+
+    @property
+    def session(self) -> int: ...
+
     step: int
     time: float
     trial: Signals

@@ -1,27 +1,21 @@
 """An experimental site: trial → setup → safety → controller → daq → out.
 
-The site outlives connections: it owns the controller, the limits and the state machine of
-``safety.states`` (IDLE / RUNNING / PAUSED / HOLD / FAULT, one table). A non-finite trial, a
-limit violation under ``reject``, a measured force past its daq limit, a controller failure or
-timeout, or an integrator lost with an uncommitted command puts it in HOLD: nothing more is
-forwarded, requests are answered NaN so the integrator stops, and the reason is logged,
-recorded and published. A controller that is only lost or silent is waited for inside the
-request instead (``recovery``, up to ``controller_recovery`` s): the run goes on with fresh data
-or the integrator is told to stop (NaN answers until its DIE), never answered from a stale
-measurement. PAUSED makes the integrator's next command wait for an operator; FAULT (operator
-abort) tells the integrator to stop the same way and refuses new sessions until resumed.
-
-A run record that cannot be written (a full disk, less than ``record.min_free_mb`` free, an
-I/O error) is a fault of the site: the step whose commit failed does not count, the site HOLDs,
-the integrator is told to stop and its session is ended after ``ABORT_GRACE`` s if it does not
-leave by itself; new clients are refused (``claim``) until the record can be written again.
+The site outlives connections. Its sessions, state table (``safety.states``: IDLE / RUNNING /
+PAUSED / HOLD / FAULT), operator commands, NaN stop, listeners, record writer and status are the
+site core's (``core.py``), composed here as ``self.core``; this module is the step path: the
+setup, the limits (``gate.py``), the controller behind its guard (``guard.py``), the correction
+(``correcting.py``), the tangent. A non-finite trial, a limit violation under ``reject``, a
+measured force past its daq limit, a controller failure or timeout, or an integrator lost with an
+uncommitted command puts the site in HOLD: nothing more is forwarded, requests are answered NaN
+so the integrator stops. A controller that is only lost or silent is waited for inside the
+request instead (``recovery``, up to ``controller_recovery`` s). A run record that cannot be
+written is a fault of the site (``SiteCore.record_failed``): the step whose commit failed does
+not count.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import logging
 import math
 import time as _time
 from collections.abc import Callable
@@ -30,47 +24,29 @@ from typing import TYPE_CHECKING
 from protocol import Signals, SignalSizes
 
 from ..controls.base import Controller, Daq, InlineController
-from ..logs import cause_of
 from ..record import RecordError, RunRecord
-from ..record.site import SiteRecorder
-from ..safety import (
-    Limiter,
-    LimitHit,
-    SiteState,
-    TransitionRefused,
-    Trigger,
-    all_finite,
-    next_state,
-)
+from ..safety import Limiter, SiteState, Trigger, all_finite
 from ..setups import Setup, make_setup
-from ..site_output import CommittedStep, SiteNotice
+from ..site_output import CommittedStep
 from ..tangent import TangentEstimate, TangentMethod
-from ..telemetry.schema import CorrectionSample, SiteStatus
+from ..telemetry.schema import CorrectionSample
 from .base import Later, SiteError
+from .core import SiteCore
 from .correcting import SiteCorrection
 from .gate import CommandGate
 from .guard import ControllerGuard
-from .listeners import EventListener, Listeners, StepListener
 from .site_config import SiteConfigBase
-from .sizes import column_major, size_problems
 
 if TYPE_CHECKING:
     from ..telemetry.metrics import SiteMetrics
     from .access import RejectionLog
 
-log = logging.getLogger("fresco_bridge.site")
-
-ABORT_GRACE = 5.0
-"""After ``ctl abort`` the session's next request is answered NaN (the integrator stops and
-sends DIE); a session still open this many seconds later is ended by the bridge (an idle or
-half-open client cannot keep an aborted site)."""
-
 RUNNING, PAUSED, HOLD, FAULT = SiteState.RUNNING, SiteState.PAUSED, SiteState.HOLD, SiteState.FAULT
 
 
 class ExperimentalSite:
-    """One site: config, setup, limits, controller (behind its guard), state, the current
-    session's signals, and the listeners its committed steps and events go to."""
+    """One site whose force comes from a controller: config, setup, limits, controller (behind
+    its guard), the current session's signals; the rest is its core's (``SiteCore``)."""
 
     def __init__(
         self,
@@ -104,22 +80,26 @@ class ExperimentalSite:
                                      recovery=controller_recovery)
         self._now = controller if isinstance(controller, InlineController) else None
         """The controller's synchronous calls, when it is in process (the eager hot path)."""
-        self.state = SiteState.IDLE
-        self.reason = ""
-        self.session = 0
-        self.peer = ""  # the client holding the site (its session's, or a claim's)
-        self.in_session = False
-        self.damping = column_major(cfg.damping, cfg.dofs)
-        self.mass = column_major(cfg.mass, cfg.dofs)
-        self.holds = 0
-        self.metrics: SiteMetrics | None = None  # set by the bridge when /metrics is served
-        self.listeners = Listeners()
-        """Who takes the committed steps, events and forwarded trials of this site."""
-        self.recorder = None if record is None else SiteRecorder(record, cfg.name)
-        """The one writer of this site's lines in the run record (None: recording off)."""
-        if self.recorder is not None:
-            self.add_listener(self.recorder)
-            self.recorder.failed = self.record_failed
+        self.core = core = SiteCore(cfg, record, self)
+        """Sessions, states, operator, NaN stop, listeners, record, status (``core.py``)."""
+        self.damping, self.mass = core.damping, core.mass
+        self.listeners, self.recorder = core.listeners, core.recorder
+        self.claim: Callable[[str], None] = core.claim
+        self.open_session: Callable[[str], int] = core.open_session
+        self.attach_session_end: Callable[[Callable[[str], None]], None] = \
+            core.attach_session_end
+        self.check_sizes: Callable[[SignalSizes, SignalSizes, str], None] = core.check_sizes
+        self.resume_from: Callable[[int, int, float], None] = core.resume_from
+        self.stopping: Callable[[], bool] = core.stopping
+        self.operator_pause: Callable[[str], str] = core.operator_pause
+        self.operator_resume: Callable[[str], str] = core.operator_resume
+        self.operator_abort: Callable[[str], str] = core.operator_abort
+        self.status: Callable[[], dict[str, object]] = core.status
+        self.status_now = core.status_now
+        self.add_listener = core.add_listener
+        self.enter_hold: Callable[[str], None] = core.enter_hold
+        self.monitor_warning: Callable[[str, int], None] = core.monitor_warning
+        self.tell_integrator_to_stop: Callable[[str], None] = core.tell_integrator_to_stop
         limiter = Limiter([c.to_limits() for c in cfg.limits], self.setup.n_actuators) \
             if cfg.limits else None
         self.limiter = limiter
@@ -127,11 +107,9 @@ class ExperimentalSite:
         """The limits and the operator's pause between a target and the controller."""
         self._ctrl_limiter = self.gate.limiter
         self._daq_limiter = limiter if limiter is not None and limiter.has_daq else None
-        self.paused_since: float | None = None
-        self.pending: tuple[float, ...] | None = None  # waits for an operator or a recovery
-        self._end_session: Callable[[str], None] | None = None  # the transport's, per session
-        self._resume_at: tuple[int, float] | None = None  # (step, time) of a resumed run
-        self.rejections: RejectionLog | None = None  # refused connections (set by the listener)
+        self.step = 0
+        """The last committed step (of the current or last session)."""
+        self.time = 0.0
         self._reset_signals()
         correction = getattr(cfg, "correction", None)
         self.correction: SiteCorrection | None = None if correction is None \
@@ -139,17 +117,85 @@ class ExperimentalSite:
         """``[sites.correction]``: every trial is corrected (``correcting.py``); None: the
         direct path."""
 
-    # -- sessions ------------------------------------------------------------------------------
+    # -- the core's, as this site's (``Site``, and what the gate, guard and correction read) --
+    @property
+    def state(self) -> SiteState:
+        return self.core.state
+
+    @property
+    def reason(self) -> str:
+        return self.core.reason
+
+    @property
+    def session(self) -> int:
+        return self.core.session
+
+    @property
+    def peer(self) -> str:
+        return self.core.peer
+
+    @property
+    def in_session(self) -> bool:
+        return self.core.in_session
+
+    @property
+    def busy(self) -> bool:
+        return self.core.peer != ""
+
+    @property
+    def holds(self) -> int:
+        return self.core.holds
+
+    @property
+    def pending(self) -> tuple[float, ...] | None:
+        return self.core.pending
+
+    @pending.setter
+    def pending(self, command: tuple[float, ...] | None) -> None:
+        self.core.pending = command
+
+    @property
+    def metrics(self) -> SiteMetrics | None:
+        return self.core.metrics
+
+    @metrics.setter
+    def metrics(self, metrics: SiteMetrics | None) -> None:
+        self.core.metrics = metrics
+
+    @property
+    def rejections(self) -> RejectionLog | None:
+        return self.core.rejections
+
+    @rejections.setter
+    def rejections(self, rejections: RejectionLog | None) -> None:
+        self.core.rejections = rejections
+
+    def close_session(self, reason: str, *, error: bool = False) -> bool:
+        return self.core.close_session(reason, error=error)
+
+    def record_refusal(self, message: str, **extra: object) -> None:
+        self.core.record_refusal(message, **extra)
+
+    def transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
+        return self.core.transition(trigger, reason, **extra)
+
+    def recovered(self, reason: str, **extra: object) -> None:
+        self.core.recovered(reason, **extra)
+
+    def event(self, kind: str, reason: str, **extra: object) -> None:
+        self.core.event(kind, reason, **extra)
+
+    # -- what the core asks of its step path (``core.StepPath``) --------------------------------
     def _reset_signals(self) -> None:
         n, na = self.cfg.dofs, self.setup.n_actuators
-        self.step = self._session_first_step = 0
+        self.step = 0
         self.time = 0.0
         self.commit_time = 0.0
         self.trial = Signals(disp=(0.0,) * n, vel=(0.0,) * n, accel=(0.0,) * n, time=(0.0,))
         self.target: tuple[float, ...] = (0.0,) * na  # what the integrator asked for (ctrl)
         self.ctrl: tuple[float, ...] = (0.0,) * na  # what the controller was sent last
         self.guard.sent = None
-        self._uncommitted = False
+        self.uncommitted = False
         self.daq = Daq((0.0,) * na, (0.0,) * na)
         self._daq_valid = False
         self._acquiring: asyncio.Future[Daq] | None = None
@@ -159,263 +205,40 @@ class ExperimentalSite:
         self._k_tangent: tuple[float, ...] = (0.0,) * (n * n)
         self._estimate = TangentEstimate(self._tangent_method, na)  # per session
         self._k_initial: tuple[float, ...] | None = None
-        self.stop_reason: str | None = None  # set: this session's answers are NaN
 
-    @property
-    def resets_on_new_session(self) -> bool:
-        return self._reset_on_new_session
-
-    @property
-    def busy(self) -> bool:
-        return self.peer != ""
-
-    def claim(self, peer: str) -> None:
-        """Refuse ``peer`` (SiteError) if the site cannot take a session now (busy, a state
-        that accepts none). Nothing is held: the site becomes the client's only when it
-        introduces itself (``open_session``, sizes that fit), so a connection that never
-        completes its size ID keeps nobody out. Nothing is logged or recorded."""
-        if self.busy:
-            raise SiteError(f"site {self.name} is busy with {self.peer} (one client per site)")
-        self._check_accepting(peer)
-
-    def _check_accepting(self, peer: str) -> None:
-        try:
-            next_state(self.state, Trigger.SESSION_OPEN, False)
-        except TransitionRefused as exc:
-            raise SiteError(f"site {self.name} is in {self.state} ({self.reason}); not accepting "
-                            f"client {peer}: {exc}") from None
-        if self.recorder is not None:
-            failure = self.recorder.check_writable()
-            if self.metrics is not None:
-                self.metrics.record_writable(failure is None)
-            if failure is not None:
-                raise SiteError(f"site {self.name} is not accepting client {peer}: {failure}")
-
-    def record_failed(self, error: RecordError) -> None:
-        """The run record could not take a line of this site: HOLD (the controller holds, the
-        integrator is told to stop) and end the session if it does not end by itself. Outside
-        a session, or once held, only the metrics and ``ctl status`` say it."""
-        if self.metrics is not None:
-            self.metrics.record_writable(False)
-        if not self.in_session or not (self.state is RUNNING or self.state is PAUSED):
-            return
-        self.enter_hold(f"{error}; step {self.step + 1} not committed")
-        self._end_session_later(self.session, f"the run record cannot be written ({error}); the "
-                                f"client did not leave within {ABORT_GRACE:g} s")
-
-    def open_session(self, peer: str) -> int:
-        """Open ``peer``'s session: the site is its from now on (``claim``'s checks first)."""
-        self.claim(peer)
-        self.session += 1
+    def new_session(self, resume_at: tuple[int, float] | None) -> None:
         self._reset_signals()
-        resumed = self._resume_at is not None
-        if self._resume_at is not None:  # the first session after a crash: it goes on (its
-            self.step, self.time = self._resume_at  # numbering; the specimen is not reset)
+        if resume_at is not None:  # the first session after a crash: it goes on (its
+            self.step, self.time = resume_at  # numbering; the specimen is not reset)
             self.commit_time = self.time
-            self._resume_at = None
-        self._session_first_step = self.step  # the close line counts the session's own steps
-        reset = getattr(self.controller, "reset", None)
-        if reset is not None and self._reset_on_new_session and not resumed:
-            reset()
-            self.gate.reference = None
-        log.info("site %s: session %d opened by %s", self.name, self.session, peer)
-        self.transition(Trigger.SESSION_OPEN, f"client {peer} connected", peer=peer)
-        self.peer, self.in_session = peer, True
-        return self.session
+        elif self._reset_on_new_session:
+            reset = getattr(self.controller, "reset", None)
+            if reset is not None:
+                reset()
+                self.gate.reference = None
 
-    def close_session(self, reason: str, *, error: bool = False) -> bool:
-        """End the session (True); False if none is open."""
-        if not self.in_session:
-            self.peer, self._end_session = "", None
-            return False
-        (log.warning if error else log.info)(
-            "site %s: session %d closed after %d step(s)%s: %s", self.name, self.session,
-            self.step - self._session_first_step, f" (steps {self._session_first_step + 1}-"
-            f"{self.step} of the resumed run)" if self._session_first_step else "", reason,
-        )
-        if self._uncommitted and self.state in (RUNNING, PAUSED):
-            self._enter(Trigger.INTEGRATOR_LOST,
-                        f"integrator session ended with an uncommitted command at step "
-                        f"{self.step + 1} ({reason})")
-        self.transition(Trigger.SESSION_CLOSE, reason, steps=self.step, error=error)
-        self.peer, self.in_session, self._end_session = "", False, None
-        return True
+    def hold(self) -> None:
+        self.guard.hold()
 
-    def resume_from(self, session: int, step: int, time: float) -> None:
-        """A resumed run: the next session is ``session + 1`` and starts after committed
-        ``step`` (pseudo-time ``time``). Nothing is sent to the controller here: the first
-        command is the client's, checked against the measured position."""
-        self.session = session
-        self._resume_at = (step, time)
-        self.step, self.time = step, time  # what ``ctl status`` shows until the session opens
-        self.event("resumed", f"run resumed after an interruption: site {self.name} continues "
-                    f"from committed step {step} (t = {time:g} s) with session {session + 1}",
-                    step=step, time=time)
-
-    def attach_session_end(self, end: Callable[[str], None]) -> None:
-        """The open session's transport: how the bridge itself ends it (abort, deadline)."""
-        self._end_session = end
-
-    def _end_session_later(self, session: int, reason: str) -> None:
-        """End ``session`` after ``ABORT_GRACE`` s if it is still open (an idle client)."""
-        def end() -> None:
-            if self.session == session and self.peer and self._end_session is not None:
-                log.warning("site %s: session %d still open %g s after the abort: ended",
-                            self.name, session, ABORT_GRACE)
-                self._end_session(reason)
-
-        with contextlib.suppress(RuntimeError):  # no loop (the site alone): nothing to end
-            asyncio.get_running_loop().call_later(ABORT_GRACE, end)
-
-    def record_refusal(self, message: str, **extra: object) -> None:
-        """A refused connection (counted and logged by the transport) goes into the record."""
-        if self.recorder is not None:
-            self.recorder.event(self.session, "refused", message, **extra)
-
-    def check_sizes(self, ctrl: SignalSizes, daq: SignalSizes, who: str) -> None:
-        """OpenFresco's rule: every non-zero size equals the element's DOFs, time sizes are 1."""
-        problems = size_problems(self.cfg.dofs, ctrl, daq)
-        if problems:
-            raise SiteError(f"{who} sizes do not fit site {self.name}: " + "; ".join(problems))
-
-    # -- states --------------------------------------------------------------------------------
-    def transition(self, trigger: Trigger, reason: str, **extra: object) -> SiteState:
-        """Move along ``safety.states.TRANSITIONS``; record and publish it with its reason."""
-        old = self.state
-        new = next_state(old, trigger, self.in_session)
-        self.state = new
-        if new is not old:
-            self.reason = reason if new in (PAUSED, HOLD, FAULT) else ""
-            self.paused_since = _time.monotonic() if new is PAUSED else None
-        entered_hold = new is HOLD and old is not HOLD
-        if entered_hold:
-            self.holds += 1  # counted before the event: the status sent with it includes it
-        kind = "hold" if entered_hold else str(trigger)
-        self.event(kind, reason, cause=str(trigger), **{"from": str(old), "to": str(new)},
-                   **extra)
-        return new
-
-    def _enter(self, trigger: Trigger, reason: str) -> None:
-        """A fault trigger (HOLD, integrator lost): never raises, HOLDs the controller."""
-        if self.state is HOLD or self.state is FAULT:
-            log.warning("site %s: %s while in %s: %s", self.name, trigger, self.state, reason)
-            return
-        try:
-            new = self.transition(trigger, reason, step=self.step)
-        except TransitionRefused as exc:
-            log.error("site %s: %s (%s)", self.name, exc, reason)
-            return
-        if new is HOLD:
-            log.error("site %s: HOLD at step %d: %s", self.name, self.step, reason,
-                      extra=cause_of(reason))  # one line per (site, cause) per interval
-            self.guard.hold()
-        else:
-            log.warning("site %s: %s at step %d: %s (stays %s)", self.name, trigger, self.step,
-                        reason, new)
-
-    def enter_hold(self, reason: str) -> None:
-        self._enter(Trigger.HOLD, reason)
-
-    def recovered(self, reason: str, **extra: object) -> None:
-        """HOLD → RUNNING: the guard's recovery found the controller answering again."""
-        self.transition(Trigger.RECOVERED, reason, **extra)
-
-    def _wake_waiter(self) -> None:
+    def wake(self) -> None:
         self.gate.wake()
         self.guard.wake()
 
-    # -- operator ------------------------------------------------------------------------------
-    def operator_pause(self, source: str) -> str:
-        """Stop forwarding at the next trial; the integrator's request waits for resume/abort."""
-        if self.state is PAUSED:
-            return f"site {self.name} is already PAUSED ({self.reason})"
-        self.transition(Trigger.PAUSE, f"operator pause ({source})")
-        log.warning("site %s: PAUSED by the operator (%s) at step %d; the next command waits "
-                    "for 'fresco-bridge ctl resume' or 'abort'", self.name, source, self.step)
-        return f"site {self.name} PAUSED at step {self.step}"
-
-    def operator_resume(self, source: str) -> str:
-        """PAUSED → RUNNING (the waiting command is checked again) or FAULT → IDLE."""
-        old = self.state
-        new = self.transition(Trigger.RESUME, f"operator resume ({source})")
-        log.warning("site %s: %s → %s by the operator (%s)", self.name, old, new, source)
-        self._wake_waiter()
-        return f"site {self.name} {old} → {new}"
-
-    def operator_abort(self, source: str) -> str:
-        """FAULT: hold the controller, answer the session NaN (it stops), refuse new ones."""
-        old = self.state
-        self.transition(Trigger.ABORT, f"operator abort ({source})", step=self.step)
-        log.error("site %s: ABORTED by the operator (%s) at step %d (was %s): controller held, "
-                  "sessions refused until 'fresco-bridge ctl resume'", self.name, source,
-                  self.step, old)
-        self.guard.hold()
-        self._wake_waiter()
-        if self.peer:
-            self._end_session_later(self.session, f"aborted by the operator ({source}); the "
-                                    f"client sent no request within {ABORT_GRACE:g} s")
-        return f"site {self.name} {old} → FAULT"
-
-    def status(self) -> dict[str, object]:
-        """A JSON-able snapshot for ``fresco-bridge ctl status``."""
-        since = self.paused_since
+    def status_fields(self) -> dict[str, object]:
+        since = self.guard.recovering_since
         return {
-            "site": self.name, "kind": self.cfg.kind, "state": str(self.state),
-            "reason": self.reason,
-            "session": self.session, "peer": self.peer or None, "step": self.step,
-            "time": self.time, "target": list(self.target), "ctrl": list(self.ctrl),
+            "target": list(self.target), "ctrl": list(self.ctrl),
             "daq_disp": list(self.daq.disp), "daq_force": list(self.daq.force),
-            "pending": None if self.pending is None else list(self.pending),
-            "paused_for": None if since is None else round(_time.monotonic() - since, 3),
-            "recovering_for": None if self.guard.recovering_since is None
-            else round(_time.monotonic() - self.guard.recovering_since, 3),
-            "holds": self.holds, "limit_events": dict(self.gate.limit_counts),
-            "record": None if self.recorder is None or self.recorder.failure is None
-            else str(self.recorder.failure),
-            "refused": {} if self.rejections is None else dict(self.rejections.counts),
+            "recovering_for": None if since is None else round(_time.monotonic() - since, 3),
+            "limit_events": dict(self.gate.limit_counts),
             "limits": [c.model_dump(exclude_none=True) for c in self.cfg.limits],
             "correction": None if self.correction is None else self.correction.status(),
             **self.controller.status_fields(),
         }
 
-    def tell_integrator_to_stop(self, why: str) -> None:
-        """From now on this session's answers are NaN, until the client sends DIE or leaves.
-
-        Closing the connection cannot stop OpenSees: its genericClient ignores a failed recv
-        and spins at full CPU forever (observed). A NaN force can: Newton fails to converge
-        (``analyze`` returns < 0, the script stops and sends DIE), a non-iterative scheme ends
-        with NaN results — never a plausible run built on forces the specimen did not give.
-        """
-        if self.stop_reason is not None:
-            return
-        self.stop_reason = why
-        log.error("site %s: %s; answering NaN from now on so the integrator stops (session %d, "
-                  "step %d)", self.name, why, self.session, self.step)
-        self.event("integrator-stop", f"answering NaN so the integrator stops: {why}",
-                   step=self.step)
-
-    def _stopping(self) -> bool:
-        """True when this session can only be told to stop: HOLD (nothing is forwarded any more,
-        so no true measurement can follow; a recoverable controller loss is waited out inside
-        the request before any reply), FAULT (operator abort), or a failed recovery."""
-        if self.stop_reason is None and self.in_session:
-            if self.state is HOLD:
-                self.tell_integrator_to_stop(f"HOLD ({self.reason})")
-            elif self.state is FAULT:
-                self.tell_integrator_to_stop(f"aborted by the operator ({self.reason})")
-        return self.stop_reason is not None
-
-    def _nan_signals(self, sizes: SignalSizes) -> Signals:
-        nan = (math.nan,) * self.cfg.dofs
-        return Signals(disp=nan if sizes.disp else (), vel=nan if sizes.vel else (),
-                       accel=nan if sizes.accel else (), force=nan if sizes.force else (),
-                       time=(self.time,) if sizes.time else ())
-
-    # -- listeners ------------------------------------------------------------------------------
-    def add_listener(self, listener: StepListener | EventListener) -> None:
-        """Committed steps (``step_committed``), events (``site_event``) and/or forwarded
-        trials (``trial_forwarded``) go to ``listener`` from now on, after the earlier ones."""
-        self.listeners.add(listener)
+    @property
+    def resets_on_new_session(self) -> bool:
+        return self._reset_on_new_session
 
     def forwarded(self) -> None:
         """``_forwarded`` for the correction, once its last command is reached."""
@@ -424,27 +247,13 @@ class ExperimentalSite:
     def _forwarded(self) -> None:
         """The current trial reached the controller: its listeners get it (and a way to read
         its one measurement)."""
-        if self.listeners.trials and self.state is RUNNING:
-            self.listeners.trial(SourceTrial(self, self.session, self.step + 1, self.time,
+        if self.listeners.trials and self.core.state is RUNNING:
+            self.listeners.trial(SourceTrial(self, self.core.session, self.step + 1, self.time,
                                              self.ctrl))
 
-    def status_now(self) -> SiteStatus:
-        """The site's state for telemetry (retained status)."""
-        return SiteStatus(site=self.name, state=str(self.state), session=self.session,
-                          step=self.step, time=self.time, reason=self.reason, holds=self.holds)
-
-    def event(self, kind: str, reason: str, **extra: object) -> None:
-        """An event of this site (a state change, a limit hit, a fault…) to its listeners."""
-        if self.listeners.events:
-            self.listeners.event(SiteNotice(self.name, self.session, self.step, self.time, kind,
-                                            reason, extra), self.status_now())
-
     def correction_sample(self) -> CorrectionSample | None:
+        """The current trial's displacement correction for telemetry (None: no correction)."""
         return None if self.correction is None else self.correction.sample(self.step)
-
-    def monitor_warning(self, reason: str, step: int) -> None:
-        """An online monitor's warning at committed ``step`` (the taps raise it)."""
-        self.event("monitor-warning", reason, step=step)
 
     # -- the step ------------------------------------------------------------------------------
     # Each request has one implementation, ``*_eager``: it runs to the end at once when it can
@@ -463,11 +272,11 @@ class ExperimentalSite:
 
         In FAULT nothing happens here: the replies of the session are NaN from now on.
         """
-        if self.state is FAULT:
+        if self.core.state is FAULT:
             return None
         values = trial.disp + trial.vel + trial.accel + trial.time
         if not all_finite(values):
-            if self.state is not HOLD:
+            if self.core.state is not HOLD:
                 bad = [v for v in values if not math.isfinite(v)]
                 self.enter_hold(f"non-finite trial value(s) {bad} (disp {list(trial.disp)}); "
                                 "not forwarded to the controller")
@@ -477,29 +286,29 @@ class ExperimentalSite:
             self.time = trial.time[0]
         target = trial.disp if self._plain else self.setup.ctrl_disp(trial.disp)
         if not math.isfinite(sum(target)):  # finite trials whose transform overflows
-            if self.state is not HOLD:
+            if self.core.state is not HOLD:
                 self.enter_hold(f"setup {self.setup.kind} turned trial {list(trial.disp)} into "
                                 f"non-finite ctrl {list(target)}; not forwarded")
             return None
         self.target = target
         if (stalled := self._estimate.trial(target)) is not None:
             self.event("tangent-fallback", stalled)
-        if self.state is HOLD:
+        if self.core.state is HOLD:
             return None
         self._daq_valid = False
         if self.correction is not None:
             return self.correction.trial(trial, target)
-        if self.state is RUNNING and (self._ctrl_limiter is None
-                                      or self.gate.clear_of_limits(target)):  # the hot path
+        if self.core.state is RUNNING and (self._ctrl_limiter is None
+                                           or self.gate.clear_of_limits(target)):  # hot path
             self.ctrl = target
             if self.recorder is not None:
-                self.recorder.trial(self.session, self.step, self.time, trial.disp, target)
-                if self.state is HOLD:  # the record failed (``record_failed``)
+                self.recorder.trial(self.core.session, self.step, self.time, trial.disp, target)
+                if self.core.state is HOLD:  # the record failed (``record_failed``)
                     return None
             if target != self.guard.sent:
                 if self._now is None:
                     return self._send_later(target)
-                self._uncommitted = True
+                self.uncommitted = True
                 self.guard.now("set_ctrl", self._now.set_ctrl_now, target)
                 self._sent(target)
             if self.listeners.trials:
@@ -518,7 +327,7 @@ class ExperimentalSite:
 
     async def send(self, command: tuple[float, ...]) -> bool:
         """One command to the controller; False if the site left RUNNING/PAUSED meanwhile."""
-        self._uncommitted = True
+        self.uncommitted = True
         if self._now is not None:
             self.guard.now("set_ctrl", self._now.set_ctrl_now, command)
         else:
@@ -540,17 +349,9 @@ class ExperimentalSite:
         """Why the guard may not re-send ``command`` from ``measured`` (the limits), or None."""
         return self.gate.resend_refused(command, measured)
 
-    @property
-    def limit_counts(self) -> dict[str, int]:
-        """Limit hits by limit (``ctl status``, metrics)."""
-        return self.gate.limit_counts
-
-    def limit_event(self, hit: LimitHit, action: str) -> None:
-        self.gate.limit_event(hit, action)
-
     def _sent(self, command: tuple[float, ...]) -> bool:
         """After ``command`` went to the controller (or failed: the site is in HOLD)."""
-        if self.state is HOLD or self.state is FAULT:
+        if self.core.state is HOLD or self.core.state is FAULT:
             self.gate.reference = None  # where the actuator stopped is not known
             return False
         self.guard.sent = self.gate.reference = command
@@ -563,11 +364,11 @@ class ExperimentalSite:
         daq = self.acquire_eager()
         if not isinstance(daq, Daq):
             daq = await daq
-        return daq if self.state is RUNNING else None
+        return daq if self.core.state is RUNNING else None
 
     def acquire_eager(self) -> Daq | Later[Daq]:
         """The measurement for the current command, acquired once per trial."""
-        if self._daq_valid or self.state is HOLD:
+        if self._daq_valid or self.core.state is HOLD:
             return self.daq
         if self._now is not None:
             return self._measured(self.guard.now("get_daq", self._now.get_daq_now))
@@ -606,14 +407,14 @@ class ExperimentalSite:
             hit = self._daq_limiter.check_daq(daq.force)
             if hit is not None:
                 if self.recorder is not None:  # a real measurement: keep it in the record
-                    self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
+                    self.recorder.measurement(self.core.session, self.step, daq.disp, daq.force)
                 self.gate.limit_event(hit, "hold")
                 self.enter_hold(f"daq limit exceeded: {hit.describe()}")
                 return self.daq
         self.daq = daq
         self._daq_valid = True
         if self.recorder is not None:
-            self.recorder.measurement(self.session, self.step, daq.disp, daq.force)
+            self.recorder.measurement(self.core.session, self.step, daq.disp, daq.force)
         return daq
 
     async def commit(self) -> None:
@@ -624,12 +425,12 @@ class ExperimentalSite:
 
     def commit_eager(self) -> Later[None] | None:
         """Code 5 (also while PAUSED: it completes a step already forwarded)."""
-        if self.state is HOLD or self.state is FAULT:
+        if self.core.state is HOLD or self.core.state is FAULT:
             return None
         daq = self.acquire_eager()  # every committed step has its measurement in the record
         if not isinstance(daq, Daq):
             return self._commit_later(daq)
-        if self.state is HOLD:
+        if self.core.state is HOLD:
             return None
         if self._now is None:
             return self._commit_later(None)
@@ -640,7 +441,7 @@ class ExperimentalSite:
     async def _commit_later(self, daq: Later[Daq] | None) -> None:
         if daq is not None:
             await daq
-            if self.state is HOLD:
+            if self.core.state is HOLD:
                 return
         if self._now is not None:
             self.guard.now("commit", self._now.commit_now)
@@ -651,7 +452,7 @@ class ExperimentalSite:
     def _committed(self) -> None:
         """The controller committed (or failed to: then the site is in HOLD): the step counts."""
         self.step += 1
-        self._uncommitted = False
+        self.uncommitted = False
         commit_time, self.commit_time = self.commit_time, self.time
         if (refused := self._estimate.committed(self.ctrl, self.daq.force)) is not None:
             self.event("tangent-fallback", refused)
@@ -659,20 +460,20 @@ class ExperimentalSite:
         lean = outlets.step_values
         try:
             if lean is not None:  # the record and its monitor: no CommittedStep to build
-                session, step, time_, ctrl, disp = (self.session, self.step, self.time,
+                session, step, time_, ctrl, disp = (self.core.session, self.step, self.time,
                                                     self.ctrl, self.daq.disp)
                 for listener_values in lean:
                     listener_values(session, step, time_, ctrl, disp)
             elif outlets.steps:
-                committed = CommittedStep(self.name, self.session, self.step, self.time,
+                committed = CommittedStep(self.name, self.core.session, self.step, self.time,
                                           self.trial.disp, self.ctrl, self.daq.disp,
-                                          self.daq.force, str(self.state))
+                                          self.daq.force, str(self.core.state))
                 for listener in outlets.steps:
                     listener.step_committed(committed)
         except RecordError as exc:  # the record is the first listener: nobody saw the step
             self.step -= 1
             self.commit_time = commit_time
-            self.record_failed(exc)
+            self.core.record_failed(exc)
 
     async def out_signals(self, sizes: SignalSizes) -> Signals:
         """Measured signals in basic DOFs (see ``out_signals_eager``)."""
@@ -682,8 +483,8 @@ class ExperimentalSite:
     def out_signals_eager(self, sizes: SignalSizes) -> Signals | Later[Signals]:
         """Measured signals in basic DOFs (OpenFresco *out*), blocks as the client sized them;
         NaN once the integrator must stop (see ``_tell_integrator_to_stop``)."""
-        if self._stopping():
-            return self._nan_signals(sizes)
+        if self.core.stopping():
+            return self.core.nan_signals(sizes)
         daq = self.acquire_eager()
         if not isinstance(daq, Daq):
             return self._out_later(daq, sizes)
@@ -693,11 +494,12 @@ class ExperimentalSite:
         return self._out(await daq, sizes)
 
     def _out(self, daq: Daq, sizes: SignalSizes) -> Signals:
-        # the acquisition may have HOLDed the site: ``_stopping`` decides then (it answers
+        # the acquisition may have HOLDed the site: ``stopping`` decides then (it answers
         # False whenever this first test does)
-        if (self.stop_reason is not None or self.state is HOLD or self.state is FAULT) \
-                and self._stopping():
-            return self._nan_signals(sizes)
+        core = self.core
+        if (core.stop_reason is not None or core.state is HOLD or core.state is FAULT) \
+                and core.stopping():
+            return core.nan_signals(sizes)
         trial, setup, plain = self.trial, self.setup, self._plain
         return Signals(  # disp, vel, accel, force, time: each block the client sized
             (daq.disp if plain else setup.out_disp(trial.disp, self.target, daq.disp))
@@ -709,10 +511,6 @@ class ExperimentalSite:
             (self.time,) if sizes.time else (),
         )
 
-    def stopping(self) -> bool:
-        """True when this session's answers are NaN, the constant ones (damping, mass) too."""
-        return self._stopping()
-
     async def tangent(self) -> tuple[float, ...]:
         """Tangent in basic DOFs (see ``tangent_eager``)."""
         k = self.tangent_eager()
@@ -721,9 +519,9 @@ class ExperimentalSite:
     def tangent_eager(self) -> tuple[float, ...] | Later[tuple[float, ...]]:
         """Tangent in basic DOFs (the last good one if the controller cannot give it); NaN
         when the integrator must stop."""
-        if self._stopping():
+        if self.core.stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
-        if self.state is HOLD:
+        if self.core.state is HOLD:
             return self._k_tangent
         if self._now is None:
             return self._tangent_later()
@@ -740,9 +538,9 @@ class ExperimentalSite:
         return self._k_tangent
 
     async def initial(self) -> tuple[float, ...]:
-        if self._stopping():
+        if self.core.stopping():
             return (math.nan,) * (self.cfg.dofs ** 2)
-        if self._k_initial is None or self.state is not HOLD:
+        if self._k_initial is None or self.core.state is not HOLD:
             k = (self.guard.now("initial_stiffness", self._now.initial_stiffness_now)
                  if self._now is not None else
                  await self.guard.guarded("initial_stiffness", self.controller.initial_stiffness))

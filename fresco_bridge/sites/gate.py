@@ -35,10 +35,19 @@ class GatedSite(Protocol):
     """What the gate needs of its site: where the session is, and how to act on it."""
 
     name: str
-    state: SiteState
-    reason: str
-    peer: str
-    session: int
+
+    @property
+    def state(self) -> SiteState: ...
+
+    @property
+    def reason(self) -> str: ...
+
+    @property
+    def peer(self) -> str: ...
+
+    @property
+    def session(self) -> int: ...
+
     step: int
     time: float
     commit_time: float

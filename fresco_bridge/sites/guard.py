@@ -58,8 +58,13 @@ class GuardedSite(Protocol):
     """What the guard needs of the site it guards."""
 
     name: str
-    state: SiteState
-    reason: str
+
+    @property
+    def state(self) -> SiteState: ...
+
+    @property
+    def reason(self) -> str: ...
+
     step: int
     ctrl: tuple[float, ...]
     pending: tuple[float, ...] | None

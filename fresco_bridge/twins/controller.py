@@ -43,11 +43,16 @@ __all__ = ["TwinController"]
 class TwinHost(Protocol):
     """What the twin controller reads of its own site (its step, trial, events, record)."""
 
-    session: int
     step: int
     time: float
     trial: Signals
-    in_session: bool
+
+    @property
+    def session(self) -> int: ...
+
+    @property
+    def in_session(self) -> bool: ...
+
     recorder: SiteRecorder | None
 
     def event(self, kind: str, reason: str, **extra: object) -> None: ...

@@ -244,6 +244,14 @@ def _fit_plot(path: Path, disp: np.ndarray, force: np.ndarray, one_step: np.ndar
     plt.close(fig)
 
 
+def _served(path: Path, site: str | None, history: History) -> str:
+    """Where a history of an updatable site's served forces comes from, and how it says so
+    (a run directory's config and update lines, or an export's ``predicted`` column)."""
+    if site is not None:
+        return f"{path}: site {site!r} is an updatable site"
+    return f"{history.source}: an updatable site's, as the export says (predicted = 1)"
+
+
 def _replay(args: argparse.Namespace) -> int:
     from fresco_bridge import indicators
     from fresco_bridge.progress import ProgressBar
@@ -260,13 +268,13 @@ def _replay(args: argparse.Namespace) -> int:
                         session=args.session, actuator=args.actuator, units=args.units)
     assert src.force is not None  # need_force
     served = updatable_site(args.source, args.site)
-    if served is not None:
-        raise HistoryError(f"{args.source}: site {served!r} is an updatable site: its forces are "
-                           "its updater's predictions, not measurements; give the tested "
-                           "element it learns from (its learns_from site) as --source")
+    if served is not None or src.predicted:
+        raise HistoryError(f"{_served(args.source, served, src)}: its forces are its "
+                           "updater's predictions, not measurements; give the tested element "
+                           "it learns from (its learns_from site) as --source")
     served = updatable_site(args.twin, args.twin_site or args.site)
-    if served is not None and twin.force is not None:
-        print(f"twin: site {served!r} is an updatable site: its forces are the predictions "
+    if (served is not None or twin.predicted) and twin.force is not None:
+        print(f"twin: {_served(args.twin, served, twin)}: its forces are the predictions "
               "served to the integrator, not a truth; not scored against (give --twin a "
               "history with measured or true forces to score)", file=sys.stderr)
         twin = replace(twin, force=None)

@@ -76,6 +76,9 @@ class History:
     """None when the file has no force column (a twin's displacement alone)."""
     source: str
     notes: list[str]
+    predicted: bool = False
+    """The forces are an updatable site's served predictions (an export's ``predicted``
+    column): never learned from nor scored against."""
 
 
 def read_history(path: Path, *, need_force: bool = True, site: str | None = None,
@@ -101,7 +104,8 @@ def read_history(path: Path, *, need_force: bool = True, site: str | None = None
     cols = history.columns
     force = cols.get("meas_force")
     return History(cols["meas_disp"] * units.to_mm,
-                   None if force is None else force * units.to_kn, history.source, history.notes)
+                   None if force is None else force * units.to_kn, history.source, history.notes,
+                   history.predicted)
 
 
 def updatable_site(path: Path, site: str | None) -> str | None:
@@ -111,7 +115,9 @@ def updatable_site(path: Path, site: str | None) -> str | None:
     Why: an updatable site's forces are its updater's predictions, served to the integrator;
     they are no measurement to learn from and no truth to score against. A run directory says
     which sites are updatable (its config snapshot, and the ``update`` line after each of their
-    committed steps); a CSV cannot, so it is taken as measured.
+    committed steps); a CSV says it in its ``predicted`` column (``fresco-bridge export``),
+    read into ``History.predicted``, which the caller checks (a CSV without the column is taken
+    as measured).
     """
     if not path.is_dir():
         return None

@@ -6,67 +6,33 @@ recorded as ``interrupted`` (resumable); ``serve`` stopped between tests stops c
 from __future__ import annotations
 
 import json
-import math
 import os
-import re
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
 import pytest
 
-from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.runs import load_run
+from tests.support.serve import lockstep, pair, source_and_twin, start_cli, started
 
 pytest.importorskip("filterpy")
 
-REPO = Path(__file__).resolve().parents[2]
-READY = re.compile(r"fresco-bridge ready: damper=(\d+), twin1=(\d+)")
 DEADLINE = 60.0  # s for a start or a stop on a busy machine
 
 
 def _config(tmp_path: Path) -> Path:
-    cfg = tmp_path / "lab.toml"
-    cfg.write_text(textwrap.dedent(f"""
-        [bridge]
-        run_dir = "{tmp_path / 'runs'}"
-        run_name = "ctrl-c"
-        [[sites]]
-        name = "damper"
-        port = 0
-        [sites.controller]
-        model = "bilinear"
-        params = {{ k0 = 20.0, fy = 5.0, alpha = 0.05 }}
-        [[sites]]
-        name = "twin1"
-        port = 0
-        kind = "updatable"
-        learns_from = "damper"
-        updater = "online_ukf"
-        """))
-    return cfg
+    return source_and_twin(tmp_path / "lab.toml", tmp_path / "runs", "ctrl-c")
 
 
 def _start(args: list[str], cwd: Path, err: Path) -> subprocess.Popen[str]:
     """A new session, as a shell's job: ``os.killpg`` is then the terminal's Ctrl-C."""
-    return subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", *args], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=err.open("w"), text=True,
-                            start_new_session=True,
-                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    return start_cli(cwd, *args, stderr=err, new_session=True)
 
 
-def _ready(proc: subprocess.Popen[str], err: Path) -> tuple[int, int]:
-    assert proc.stdout is not None
-    end = time.monotonic() + DEADLINE
-    while time.monotonic() < end:
-        m = READY.search(proc.stdout.readline())
-        if m or proc.poll() is not None:
-            break
-    assert m, err.read_text()
-    return int(m.group(1)), int(m.group(2))
+def _ready(proc: subprocess.Popen[str], err: Path) -> tuple[int, ...]:
+    return started(proc, deadline=DEADLINE, log=err)[0]
 
 
 def _ctrl_c(proc: subprocess.Popen[str]) -> int:
@@ -95,17 +61,8 @@ def test_serve_with_a_twin_interrupted_mid_test(tmp_path: Path) -> None:
     err = tmp_path / "serve.err"
     proc = _start(["serve", "--config", str(_config(tmp_path))], tmp_path, err)
     ports = _ready(proc, err)
-    source = GenericClientLink("127.0.0.1", ports[0], 1, data_size=1)
-    twin = GenericClientLink("127.0.0.1", ports[1], 1, data_size=1)
-    with source, twin:
-        for i in range(1, 21):  # the test is under way when Ctrl-C comes
-            d = 1.5 * math.sin(i / 4.0)
-            source.set_trial((d,), time=0.01 * i)
-            source.force()
-            twin.set_trial((0.8 * d,), time=0.01 * i)
-            twin.force()
-            source.commit()
-            twin.commit()
+    with pair(ports) as (source, twin):
+        lockstep(source, twin, 1, 20)  # the test is under way when Ctrl-C comes
         code = _ctrl_c(proc)
     text = _settled(err)
     assert code == 130, text

@@ -4,51 +4,28 @@ equal an uninterrupted run's (the learner replays the record before it answers).
 
 from __future__ import annotations
 
-import math
 import re
 import signal
 import subprocess
-import sys
-import textwrap
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fresco_bridge.integrator.link import GenericClientLink
 from fresco_bridge.record.export import committed_steps
 from fresco_bridge.updating.registry import make_updater
 from fresco_bridge.updating.replay import replay
-from protocol import Action
 from tests.e2e.test_crash_resume import _STARTED, _kill_leftover_bridges  # noqa: F401
+from tests.support.serve import drive_pair, source_and_twin, start_cli, started, workers_of
 
 pytest.importorskip("filterpy")
 
-READY = re.compile(r"fresco-bridge ready: damper=(\d+), twin1=(\d+)")
-def serve(cwd: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, int]]:
-    proc = subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", "serve", *args],
-                            cwd=cwd, stdout=subprocess.PIPE,
-                            stderr=(cwd / f"serve-{time.monotonic_ns()}.log").open("w"),
-                            text=True)
+
+def serve(cwd: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, ...]]:
+    proc = start_cli(cwd, "serve", *args)
     _STARTED.append(proc)
-    assert proc.stdout is not None
-    end = time.monotonic() + 60
-    while time.monotonic() < end:
-        m = READY.search(proc.stdout.readline())
-        if m or proc.poll() is not None:
-            break
-    assert m, "the bridge did not print its ready line"
-    return proc, (int(m.group(1)), int(m.group(2)))
-
-
-def workers_of(pid: int) -> set[int]:
-    """The learner workers among ``pid``'s children (not multiprocessing's resource tracker)."""
-    found: set[int] = set()
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        found |= {int(p) for p in (task / "children").read_text().split()}
-    return {p for p in found
-            if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()}
+    return proc, started(proc)[0]
 
 
 def gone(pid: int) -> bool:
@@ -59,41 +36,13 @@ def gone(pid: int) -> bool:
         return True
 
 
-def drive(ports: tuple[int, int], start: int, n: int) -> None:
-    with GenericClientLink("127.0.0.1", ports[0], 1, data_size=1) as source, \
-            GenericClientLink("127.0.0.1", ports[1], 1, data_size=1) as twin:
-        for i in range(start, start + n):
-            d = 1.5 * math.sin(i / 4.0)
-            for trial in (0.9 * d, d):  # two Newton iterations: the last one is committed
-                source.set_trial((trial,), time=0.01 * i)
-                source.force()
-                twin.set_trial((0.8 * trial,), time=0.01 * i)
-                twin.force()
-            source.commit()
-            twin.commit()
-        twin.request(Action.GET_DISP)  # answered after the last commit
+def drive(ports: tuple[int, ...], start: int, n: int) -> None:
+    drive_pair(ports, start, n, trials=(0.9, 1.0))  # two Newton iterations, the last committed
 
 
 def test_a_resumed_twin_answers_as_an_uninterrupted_one(tmp_path: Path) -> None:
-    cfg = tmp_path / "lab.toml"
-    cfg.write_text(textwrap.dedent(f"""
-        [bridge]
-        run_dir = "{tmp_path / 'runs'}"
-        run_name = "twin-resume"
-        [[sites]]
-        name = "damper"
-        port = 0
-        [sites.controller]
-        model = "bilinear"
-        params = {{ k0 = 20.0, fy = 5.0, alpha = 0.05 }}
-        reset_on_new_session = false
-        [[sites]]
-        name = "twin1"
-        port = 0
-        kind = "updatable"
-        learns_from = "damper"
-        updater = "online_ukf"
-        """))
+    cfg = source_and_twin(tmp_path / "lab.toml", tmp_path / "runs", "twin-resume",
+                          source="reset_on_new_session = false\n")
     first, ports = serve(tmp_path, "--config", str(cfg))
     workers = workers_of(first.pid)
     assert len(workers) == 1
@@ -130,25 +79,7 @@ def test_a_resumed_twin_answers_as_an_uninterrupted_one(tmp_path: Path) -> None:
 
 
 def _config(tmp_path: Path, name: str) -> Path:
-    cfg = tmp_path / f"{name}.toml"
-    cfg.write_text(textwrap.dedent(f"""
-        [bridge]
-        run_dir = "{tmp_path / name}"
-        run_name = "{name}"
-        [[sites]]
-        name = "damper"
-        port = 0
-        [sites.controller]
-        model = "bilinear"
-        params = {{ k0 = 20.0, fy = 5.0, alpha = 0.05 }}
-        [[sites]]
-        name = "twin1"
-        port = 0
-        kind = "updatable"
-        learns_from = "damper"
-        updater = "online_ukf"
-        """))
-    return cfg
+    return source_and_twin(tmp_path / f"{name}.toml", tmp_path / name, name)
 
 
 def test_a_run_killed_after_yield_resumes_equal_to_an_uninterrupted_one(tmp_path: Path) -> None:

@@ -232,7 +232,7 @@ def test_an_enospc_at_the_writer_holds_the_site_and_leaves_no_torn_line(
     def fail(fd: int, data: bytes | memoryview) -> int:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 0.5)
+    monkeypatch.setattr("fresco_bridge.sites.core.ABORT_GRACE", 0.5)
     with RunningBridge(config(min_free_mb=0), tmp_path) as bridge:
         holds = spy_holds(bridge)
         port = bridge.ports[SITE]

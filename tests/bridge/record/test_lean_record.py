@@ -121,7 +121,8 @@ def test_the_format1_run_reads_unchanged_by_every_reader(tmp_path: Path, capsys:
 
     assert cli_main(["export", str(run), "-o", str(tmp_path / "steps.csv")]) == 0
     rows = (tmp_path / "steps.csv").read_text().splitlines()
-    assert rows[0] == "time,step,site,cmd_disp,meas_disp,meas_force,session" and len(rows) == 13
+    assert rows[0] == ("time,step,site,cmd_disp,meas_disp,meas_force,session,site_kind,"
+                       "predicted") and len(rows) == 13
     assert rows[1].split(",")[:6] == [repr(steps[0].time), "1", "spring",
                                      repr(steps[0].cmd_disp[0]), repr(steps[0].meas_disp[0]),
                                      repr(steps[0].meas_force[0])]

@@ -158,7 +158,7 @@ def test_a_queued_udp_handshake_is_answered_when_the_operator_resumes_an_aborted
 ) -> None:
     """docs/safety.md's advice: ``ctl abort`` ends the vanished client's session at once, the
     site stays in FAULT (the queued handshake waits), ``ctl resume`` lets the new one in."""
-    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 0.5)
+    monkeypatch.setattr("fresco_bridge.sites.core.ABORT_GRACE", 0.5)
     with RunningBridge(config(), tmp_path) as bridge:  # the idle deadline: 60 s
         port = bridge.ports["udp"]
         run_dir = str(bridge.run_dir)

@@ -150,7 +150,7 @@ def test_tcp_keepalive_is_on_for_every_session(tmp_path: Path) -> None:
 def test_ctl_abort_ends_an_idle_session(tmp_path: Path, transport: str,
                                         capsys: pytest.CaptureFixture[str],
                                         monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("fresco_bridge.sites.experimental.ABORT_GRACE", 1.0)
+    monkeypatch.setattr("fresco_bridge.sites.core.ABORT_GRACE", 1.0)
     with RunningBridge(config(), tmp_path) as bridge:
         port = bridge.ports[transport]
         link = GenericClientLink("127.0.0.1", port, 1, data_size=1, transport=transport,

@@ -103,3 +103,22 @@ def test_a_resumed_site_shows_its_real_step_before_its_first_session() -> None:
     status = site.status()
     assert (status["session"], status["step"], status["time"]) == (1, 600, 6.0)
     assert site.open_session("127.0.0.1:1") == 2 and site.step == 600
+
+
+def test_every_kind_holds_the_one_site_core_which_names_no_kind() -> None:
+    """``sites/core.py`` knows its kind's step path only as ``StepPath``; an experimental site
+    and a twin's site each hold a ``SiteCore`` (composed, not inherited): one code for both."""
+    from fresco_bridge.sites.core import SiteCore
+    from fresco_bridge.sites.kind import SiteContext
+
+    names = _names_in("fresco_bridge/sites/core.py")
+    assert not names & {"ExperimentalSite", "controller", "guard", "gate", "setup", *TWIN_TYPES}
+    cfg = parse_config('[[sites]]\nname = "s"\nport = 0\n[[sites]]\nname = "t"\nport = 0\n'
+                       'kind = "updatable"\nlearns_from = "s"\nupdater = "none"\n')
+    context = SiteContext(None, 1.0, 0.0)
+    for kind in SITE_KINDS.values():
+        group = kind.build([c for c in cfg.sites if c.kind == kind.name], context)
+        (site,) = group.sites.values()
+        core = getattr(site, "core")  # noqa: B009 (not part of ``Site``: the kind's own)
+        assert type(core) is SiteCore and core.path is site
+        assert not any(isinstance(site, SiteCore) for site in group.sites.values())
