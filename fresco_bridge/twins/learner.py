@@ -61,6 +61,10 @@ be learned at once in batches of this many (a twin's next trial finds them learn
 STOP_DEADLINE = 5.0
 """Seconds a worker is given to end after the stop message, then it is killed."""
 
+Measured = tuple[float, float] | None
+"""The source's measurement (d, F) of the trial of a twin's step, not committed yet: a
+same-step trial's (``worker.py``: learned tentatively, trained on only if committed)."""
+
 EventSink = Callable[[str, str, dict[str, object]], None]
 """``(kind, reason, extra)``: an event for the twin sites of this learner."""
 
@@ -100,13 +104,19 @@ class Learner:
         self.source_session = 0
         """The source's current (or last) session: a twin's trial may learn every step of
         the sessions before it (source-only sessions are learned from)."""
-        self._last_trial: dict[str, tuple[float, tuple[int, int]]] = {}
-        """Each twin's last trial: its displacement and how far it learned ((session,
-        step), inclusive)."""
+        self._last_trial: dict[str, tuple[float, tuple[int, int], Measured]] = {}
+        """Each twin's last trial: its displacement, how far it learned ((session, step),
+        inclusive) and the source's trial measurement it was given (same-step)."""
         self._through: dict[str, int] = {}
         """The source step each twin's last live answer was learned through."""
-        self._same_step_sent: dict[tuple[int, int], tuple[float, float]] = {}
-        """Source steps already sent at their trial (same-step), until their commit."""
+        self._tentative: dict[str, bool] = {}
+        """Whether each twin's last answer used its source's trial measurement (same-step,
+        learned ahead of the source's commit)."""
+        self._used: dict[tuple[int, int], tuple[str, float, float]] = {}
+        """Source steps whose trial measurement a twin's committed answer used, until the
+        source's commit of that step says whether it was the committed one."""
+        self._last_committed: tuple[int, int, float, float] = (0, 0, math.nan, math.nan)
+        """The source's last committed (session, step, d, F)."""
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
@@ -384,7 +394,7 @@ class Learner:
         local: LearnerState = pickle.loads(data)
         for msg in self.log[position - self._log_base:]:
             if msg[0] != "observe":
-                local.handle(msg)
+                local.handle(msg[:5])  # a trial without its tentative step: learns nothing
         self._local = local
         through = min((t.trained_through for t in local.twins.values()), default=0)
         log.warning("learner of %s: freeze twins answer from the snapshot of twin step %d "
@@ -494,16 +504,13 @@ class Learner:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
         self.source_step, self.source_session = step.step, step.session
-        sent = self._same_step_sent.pop((step.session, step.step), None)
-        if sent is not None:  # learned at its trial already (same-step)
-            if sent != (d, f):
-                log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
-                            "measurement its same-step twin learned (%r, %r): more than one "
-                            "trial in the step", self.source, step.step, d, f, *sent)
-                self._event("same-step-mismatch", f"source {self.source} step {step.step}: "
-                            "the committed measurement differs from the one learned at the "
-                            "trial (same-step needs one trial per step)", source_step=step.step)
-            return
+        self._last_committed = (step.session, step.step, d, f)
+        if self._used:  # a source step whose trial a twin's committed answer used
+            used = self._used.pop((step.session, step.step), None)
+            if used is not None:
+                self._check_used(used[0], (step.session, step.step), used[1:], (d, f))
+            for key in [k for k in self._used if k < (step.session, step.step)]:
+                del self._used[key]  # never committed (the source held): nothing to check
         if not (math.isfinite(d) and math.isfinite(f)):
             self.not_trained += 1
             log.warning("learner of %s: step %d has a non-finite measurement (d %r, F %r); not "
@@ -525,27 +532,45 @@ class Learner:
         if notice.kind == "session-open":
             self.source_session = notice.session
 
+    def _check_used(self, twin: str, key: tuple[int, int], used: tuple[float, float],
+                    committed: tuple[float, float]) -> None:
+        """A twin's committed answer used the source's trial measurement of step ``key``:
+        a commit that differs makes its update line's ``through`` a trial's, said once in
+        an event (the updater itself went back to the committed measurement)."""
+        if used == committed:
+            return
+        log.warning("learner of %s: twin %s answered source step %d with its trial "
+                    "measurement (d %r, F %r); the committed one is (%r, %r)", self.source,
+                    twin, key[1], *used, *committed)
+        self._event("same-step-mismatch", f"twin {twin}: its answer used source {self.source}"
+                    f"'s trial of step {key[1]}, whose commit differs (a later trial of that "
+                    "step came after the twin's answer); trained on the committed one",
+                    source_step=key[1])
+
     def through(self, step: int, *, same_step: bool) -> tuple[int, int]:
         """How far a twin's trial at its ``step`` may learn: the source's steps of earlier
         sessions, and of its current session those before ``step`` (with ``same_step``,
         ``step`` too)."""
         return (self.source_session, step if same_step else step - 1)
 
-    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
-                    ) -> tuple[float, float, int, float, float | None]:
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
+                    measured: Measured = None) -> tuple[float, float, int, float, float | None]:
         """The twin's (force, tangent) at ``d`` (its ``step``), the source step it learned
         through, the update time and the source's one-step error of the twin's current step
-        (``LearnerState``); with ``same_step`` including the source step sent by
-        ``observe_same_step`` just before."""
-        through = self.through(step, same_step=same_step)
+        (``LearnerState``). With ``same_step`` it learns the source's step ``step`` too: the
+        committed one, or ``measured``, that step's trial measurement, learned tentatively
+        (trained on only if it is the one committed)."""
+        through = self.through(step, same_step=same_step or measured is not None)
         if self.state != "live":
             return self._frozen_trial(twin, d, through)
-        self._last_trial[twin] = (d, through)
+        self._last_trial[twin] = (d, through, measured)
         self._answered_locally.discard(twin)
+        msg = ("trial", twin, d, through) if measured is None else \
+            ("trial", twin, d, through, measured)
         try:
             await self._caught_up()
-            force, tangent, trained, seconds, error = await self._request(
-                ("trial", twin, d, through), self.deadline)
+            force, tangent, trained, seconds, error, tentative = await self._request(
+                msg, self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
@@ -553,18 +578,8 @@ class Learner:
         if int(trained) > self._through.get(twin, 0) and self.update_observer is not None:
             self.update_observer(float(seconds))  # each twin's newly learned step(s), once
         self._through[twin] = self.trained_through = int(trained)
+        self._tentative[twin] = bool(tentative)
         return float(force), float(tangent), self.trained_through, float(seconds), error
-
-    def observe_same_step(self, step: int, d: float, f: float, *, committed: bool = False
-                          ) -> None:
-        """The source's measurement of the trial of ``step``, for a same-step twin (sent once
-        per step; its commit then sends nothing more). ``committed``: the source's commit of
-        that step came first and already sent it."""
-        key = (self.source_session, step)
-        if committed or key in self._same_step_sent:
-            return
-        self._same_step_sent[key] = (d, f)
-        self._send(("observe", *key, d, f))
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -576,7 +591,7 @@ class Learner:
     def _frozen_trial(self, twin: str, d: float, through: tuple[int, int]
                       ) -> tuple[float, float, int, float, float | None]:
         local = self._frozen(twin)
-        self._last_trial[twin] = (d, through)
+        self._last_trial[twin] = (d, through, None)
         self._answered_locally.add(twin)
         reply = local.handle(("trial", 0, twin, d, through))
         assert reply is not None
@@ -586,7 +601,13 @@ class Learner:
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, (0, 0))))
+        d, through, measured = self._last_trial.get(twin, (0.0, (0, 0), None))
+        trial: Message = ("trial", 0, twin, d, through, measured)
+        if self._tentative.pop(twin, False) and measured is not None and self.state == "live":
+            if self._last_committed[:2] == through:  # the source committed it first
+                self._check_used(twin, through, measured, self._last_committed[2:])
+            else:
+                self._used[through] = (twin, *measured)
         if self.state == "live" and twin not in self._answered_locally:
             self.log.append(trial)  # the live worker has it; a replay needs it before the commit
         else:

@@ -22,7 +22,8 @@ class FakeLearner:
         self.lost = False
         self.commits: list[str] = []
 
-    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
+                    measured: tuple[float, float] | None = None
                     ) -> tuple[float, float, int, float, float | None]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
