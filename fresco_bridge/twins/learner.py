@@ -1,18 +1,16 @@
-"""The learner of one source site, on the bridge's side: its worker process, the messages to
-it and its answers, never blocking the event loop.
+"""The learner of one source site, on the bridge's side: its worker process (through a
+``WorkerChannel``, ``channel.py``), the messages to it and its answers, never blocking the
+event loop.
 
 Messages go out in batches, one per request (a twin's trial): what changes the worker's state
 (the source's steps, the twins' commits) waits in a list until then, so the source's step
-costs no IPC. Batches go through a bounded queue with ``put_nowait``; when it is full they
-wait in a local backlog that a flush task drains, in order (training data is never dropped).
-Answers come back through a reader thread and ``call_soon_threadsafe``. Every wait has a
-deadline; a missed deadline or a dead worker is a *learner loss*. A twin whose rule is
-``hold`` then fails (``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers
-from a local copy: the worker's last pickled snapshot (taken at start and every
-``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning nothing more.
-The worker is replaced and caught up by replaying the ordered log of what changes its state
-(the source's steps, each twin's committed trial), and the learner is live again once the new
-worker has answered past the end of that log.
+costs no IPC. Every wait has a deadline; a missed deadline or a dead worker is a *learner
+loss*. A twin whose rule is ``hold`` then fails (``LearnerError``: its site HOLDs); one whose
+rule is ``freeze`` answers from a local copy: the worker's last pickled snapshot (taken at
+start and every ``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning
+nothing more. The worker is replaced and caught up by replaying the ordered log of what
+changes its state (the source's steps, each twin's committed trial), and the learner is live
+again once the new worker has answered past the end of that log.
 """
 
 from __future__ import annotations
@@ -22,31 +20,22 @@ import contextlib
 import itertools
 import logging
 import math
-import multiprocessing
-import multiprocessing.queues
 import pickle
-import queue
-import threading
 from collections import deque
 from collections.abc import Callable
-from multiprocessing.process import BaseProcess
 from typing import Any
 
-from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
-from ..worker_output import OUTPUT, quiet_tracker, relay_output
+from ..worker_output import OUTPUT, relay_output
+from .channel import WorkerChannel
 from .checkpoint import Checkpoint, CheckpointWriter, history_counts, resume_point
-from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
+from .worker import LearnerSpec, LearnerState, Message, Reply
 
 log = logging.getLogger("fresco_bridge.twins")
 
 START_DEADLINE = 120.0
 """Seconds a new worker may take to import, read its data and build its updaters."""
-QUEUE_SIZE = 4096
-"""Batches in flight to the worker before the local backlog takes them."""
-FLUSH_PAUSE = 0.002
-"""Seconds the flush task waits for room in the queue between two attempts."""
 SNAPSHOT_EVERY = 50
 """Twin steps between two snapshots of the worker when a twin may freeze
 (``on_learner_loss = "freeze"``: the frozen copy starts from the last one)."""
@@ -58,8 +47,6 @@ checkpoint (``checkpoint.py``): ``--resume`` starts from it."""
 LEARN_AHEAD = 64
 """Source steps committed while no twin of the source is in a session, sent to the worker to
 be learned at once in batches of this many (a twin's next trial finds them learned)."""
-STOP_DEADLINE = 5.0
-"""Seconds a worker is given to end after the stop message, then it is killed."""
 
 Measured = tuple[float, float] | None
 """The source's measurement (d, F) of the trial of a twin's step, not committed yet: a
@@ -120,15 +107,10 @@ class Learner:
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
-        self._backlog: deque[list[Message]] = deque()
         self._held: list[Message] = []
         """Messages for the worker that wait for its next request (``_send``)."""
-        self._flush: asyncio.Task[None] | None = None
         self._restart: asyncio.Task[None] | None = None
-        self._proc: BaseProcess | None = None
-        self._inbox: multiprocessing.queues.Queue[list[Message] | None] | None = None
-        self._reader: threading.Thread | None = None
-        self._generation = 0
+        self._channel: WorkerChannel | None = None
         self._ready: asyncio.Future[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._closing = False
@@ -178,7 +160,7 @@ class Learner:
 
     @property
     def pid(self) -> int | None:
-        return None if self._proc is None else self._proc.pid
+        return None if self._channel is None else self._channel.pid
 
     # -- the worker's life ------------------------------------------------------------------
     async def start(self) -> None:
@@ -198,52 +180,20 @@ class Learner:
 
     async def _spawn(self) -> None:
         assert self._loop is not None
-        ctx = multiprocessing.get_context("spawn")
-        quiet_tracker()  # its report of a killed bridge's semaphores (worker_output)
-        inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
-        outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         start = None if self._snapshot is None else self._snapshot[2]
-        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox, start),
-                           name=f"{WORKER_PROCESS_PREFIX}learner-{self.source}", daemon=True)
-        self._generation += 1
         self._ready = self._loop.create_future()
-        self._backlog.clear()
         self._held.clear()  # in the log: a new worker gets them with the replay
-        await self._loop.run_in_executor(None, proc.start)
-        self._proc, self._inbox = proc, inbox
-        self._reader = threading.Thread(target=self._read, args=(proc, outbox, self._generation),
-                                        name=f"learner-reader-{self.source}", daemon=True)
-        self._reader.start()
+        self._channel = WorkerChannel(self.spec, start, on_reply=self._answer,
+                                      on_exit=self._died)
+        await self._channel.start()
         try:
             await asyncio.wait_for(asyncio.shield(self._ready), START_DEADLINE)
         except TimeoutError:
             raise LearnerError(f"learner of {self.source}: the worker was not ready within "
                                f"{START_DEADLINE:g} s") from None
 
-    def _read(self, proc: BaseProcess, outbox: multiprocessing.queues.Queue[Reply],
-              generation: int) -> None:
-        """The reader thread of one worker: its answers to the loop, then its end."""
-        while not self._closing and generation == self._generation:
-            try:
-                reply = outbox.get(timeout=0.2)
-            except queue.Empty:
-                if not proc.is_alive():
-                    self._call(self._died, generation, proc.exitcode)
-                    return
-                continue
-            except (EOFError, OSError):
-                self._call(self._died, generation, proc.exitcode)
-                return
-            self._call(self._answer, generation, reply)
-
-    def _call(self, fn: Callable[..., None], *args: Any) -> None:
-        loop = self._loop
-        if loop is not None:
-            with contextlib.suppress(RuntimeError):  # the loop closed: the bridge has stopped
-                loop.call_soon_threadsafe(fn, *args)
-
-    def _died(self, generation: int, code: int | None) -> None:
-        if generation != self._generation or self._closing:
+    def _died(self, code: int | None) -> None:
+        if self._closing:
             return
         reason = f"the worker process exited (code {code})"
         if self._ready is not None and not self._ready.done():
@@ -251,9 +201,7 @@ class Learner:
         else:
             self._lose(reason)
 
-    def _answer(self, generation: int, reply: Reply) -> None:
-        if generation != self._generation:
-            return
+    def _answer(self, reply: Reply) -> None:
         kind = reply[0]
         if kind == OUTPUT:  # a line the worker logged or printed
             relay_output(self.source, self.pid, reply)
@@ -405,34 +353,19 @@ class Learner:
                     trained_through=through)
 
     async def _stop_worker(self, *, kill: bool) -> None:
-        proc, inbox, reader = self._proc, self._inbox, self._reader
-        self._proc = self._inbox = self._reader = None
-        if proc is None:
-            return
-        self._generation += 1  # the old reader and its answers are ignored from now on
-        loop = asyncio.get_running_loop()
-        if not kill and inbox is not None:
-            with contextlib.suppress(queue.Full, ValueError, OSError):
-                inbox.put_nowait(None)
-            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
-        if proc.is_alive():
-            proc.kill()
-            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
-        if inbox is not None:
-            inbox.cancel_join_thread()
-            inbox.close()
-        if reader is not None:
-            await loop.run_in_executor(None, reader.join, 1.0)
+        channel, self._channel = self._channel, None
+        if channel is not None:
+            await channel.stop(kill=kill)
 
     async def close(self) -> None:
         """Stop the worker (a clean end, then a kill past ``STOP_DEADLINE``)."""
         self._closing = True
         self.state = "stopped"
-        for task in (self._restart, self._flush):
-            if task is not None and not task.done():
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
+        task = self._restart
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
         await self._stop_worker(kill=False)
         if self.checkpoints is not None:
             await self.checkpoints.close()
@@ -444,34 +377,8 @@ class Learner:
     def _put(self, msg: Message) -> None:
         """``msg`` (a request) to the worker, after everything held before it; never blocks."""
         batch, self._held = [*self._held, msg], []
-        self._post(batch)
-
-    def _post(self, batch: list[Message]) -> None:
-        inbox = self._inbox
-        if inbox is None:
-            return
-        if not self._backlog:
-            try:
-                inbox.put_nowait(batch)
-                return
-            except queue.Full:
-                pass
-        self._backlog.append(batch)
-        if self._flush is None or self._flush.done():
-            assert self._loop is not None
-            self._flush = self._loop.create_task(self._drain(), name=f"learner.{self.source}")
-
-    async def _drain(self) -> None:
-        while self._backlog:
-            inbox = self._inbox
-            if inbox is None:
-                return
-            try:
-                inbox.put_nowait(self._backlog[0])
-            except queue.Full:
-                await asyncio.sleep(FLUSH_PAUSE)
-                continue
-            self._backlog.popleft()
+        if self._channel is not None:
+            self._channel.post(batch)
 
     def _send(self, msg: Message) -> None:
         """A message that changes the worker's state: logged, and held for the worker's next
