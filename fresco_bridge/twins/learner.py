@@ -340,6 +340,7 @@ class Learner:
             return
         position, steps, data = self._snapshot
         local: LearnerState = pickle.loads(data)
+        local.committed_only()  # it sees no more commits: a tentative step is unlearned
         for msg in self.log[position - self._log_base:]:
             if msg[0] != "observe":
                 local.handle(msg[:5])  # a trial without its tentative step: learns nothing

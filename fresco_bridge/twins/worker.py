@@ -233,6 +233,13 @@ class LearnerState:
             twin.one_step_error = twin.updater.last_one_step_error
         return True
 
+    def committed_only(self) -> None:
+        """Every twin back to the committed steps it learned (a tentative step unlearned):
+        a copy that will not see the source's commits (the learner's frozen copy)."""
+        for twin in self.twins.values():
+            if twin.tentative is not None:
+                self._roll_back(twin)
+
     @staticmethod
     def _roll_back(twin: _Twin) -> None:
         """The twin's updater as at its rollback point: the tentative step unlearned, the

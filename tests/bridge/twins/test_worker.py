@@ -243,3 +243,22 @@ def test_the_rollback_point_is_bounded_and_the_log_still_trimmed(
     assert len(worker.observations) < 30
     expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=False).force_pred
     assert np.array_equal(np.array(answers), expected)
+
+
+def test_a_copy_that_sees_no_more_commits_unlearns_its_tentative_step() -> None:
+    """The learner's frozen copy starts from a snapshot taken while a same-step trial was
+    learned tentatively: ``committed_only`` returns it to the committed steps."""
+    sd, sf, td = histories(10)
+    worker, reference = state("twin"), state("twin")
+    for i in range(5):
+        for w in (worker, reference):
+            w.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
+            w.handle(("trial", i, "twin", float(td[i]), (1, i + 1)))
+            w.handle(("commit", "twin"))
+    reply = worker.handle(("trial", 9, "twin", float(td[5]), (1, 6),
+                           (float(sd[5]), float(sf[5]))))
+    assert reply is not None and reply[7] is True and reply[4] == 6
+    worker.committed_only()
+    got = worker.handle(("trial", 10, "twin", float(td[5]), (1, 6)))
+    expected = reference.handle(("trial", 10, "twin", float(td[5]), (1, 6)))
+    assert got is not None and expected is not None and got[2:5] == expected[2:5]
