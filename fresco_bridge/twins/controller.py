@@ -6,15 +6,17 @@ the record, telemetry and status apply unchanged (``docs/architecture.md``, "Upd
 sites"). A learner that cannot answer is a ``ControllerError``: the site HOLDs, the integrator
 stops, and the experimental source is never touched.
 
-With ``causality = "same-step"`` the twin's trial of step k awaits (up to the learner's
-deadline) its source's published trial of the same step and time (``twins/source.py``: no
-polling, no reference to the source site), takes that trial's measurement (the one read of
-that trial, shared with the source's own force request; or the committed one when the source
-already committed the step) and has the learner learn it before answering: the paper's order.
-Where the order of messages makes that impossible (the client asks the twin's force before
-sending the source's trial; an implicit scheme's several trials per step) the twin answers
-``previous-step`` for the rest of the session, said once in a ``same-step-fallback`` event
-with the true reason.
+With ``causality = "same-step"`` the twin's n-th moving trial of step k awaits (up to the
+learner's deadline) its source's n-th published trial of the same step and time
+(``twins/source.py``: no polling, no reference to the source site), takes that trial's
+measurement (the one read of that trial, shared with the source's own force request; or the
+committed one when the source already committed the step) and has the learner learn it before
+answering: the paper's order. A trial's measurement is learned tentatively (``worker.py``):
+trained on only if it is the one the source commits. Where the order of messages makes
+same-step impossible (the client asks the twin's force before sending the source's trial; an
+implicit scheme's several trials per step) the twin answers ``previous-step`` for the rest of
+the session, said once in a ``same-step-fallback`` event with the true reason, and the
+tentative step is unlearned before the answer.
 
 The controller is also a step listener of its own site, after the site's record writer: each
 committed twin step gets an update line (the source step its answer was learned through, the
@@ -32,7 +34,7 @@ from protocol import Signals
 from ..causality import Causality
 from ..controls.base import Controller, ControllerError, Daq
 from ..site_output import CommittedStep
-from .learner import Learner, LearnerError
+from .learner import Learner, LearnerError, Measured
 from .source import SameStepImpossible, SourceFeed
 
 if TYPE_CHECKING:
@@ -91,6 +93,8 @@ class TwinController(Controller):
         """The session in which same-step fell back to previous-step."""
         self.same_step_steps = 0
         """Trials answered same-step."""
+        self._nth: tuple[int, int, int] = (0, 0, 0)
+        """(session, step, n): the twin's moving trials of its current step asked so far."""
 
     def bind(self, site: TwinHost) -> None:
         """The twin's own site (its step and trial time, its events and record)."""
@@ -99,12 +103,13 @@ class TwinController(Controller):
     async def set_ctrl(self, disp: tuple[float, ...]) -> None:
         site = self._site
         moves = site is None or (site.session, disp[0]) != self._committed
-        same = self.causality == "same-step" and moves and await self._source_measured()
+        same, measured = (await self._source_measured() if self.causality == "same-step"
+                          and moves else (False, None))
         self._answered = False
         try:
             force, tangent, through, seconds, error = await self.learner.trial(
                 self.twin, disp[0], step=site.step + 1 if site is not None else 1,
-                same_step=same)
+                same_step=same, measured=measured)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
@@ -112,29 +117,32 @@ class TwinController(Controller):
         self._answered = True
         self.same_step_steps += same
 
-    async def _source_measured(self) -> bool:
-        """The source's measurement of this step to the learner. False: previous-step for this
-        trial (fallen back, no trial time, the source stopped)."""
+    async def _source_measured(self) -> tuple[bool, Measured]:
+        """Whether this trial is answered same-step, and the source's trial measurement it
+        learns tentatively (None: the source's commit of the step came first, the learner has
+        it). ``(False, None)``: previous-step for this trial (fallen back, no trial time, the
+        source stopped)."""
         site, feed = self._site, self._feed
         if site is None or feed is None or self._fallback_session == site.session:
-            return False
+            return False, None
         step, t = site.step + 1, site.time
         if not site.trial.time:
             self._fall_back(site, "the client sends no trial time (the source's step cannot "
                             "be matched)")
-            return False
+            return False, None
+        nth = self._nth[2] + 1 if self._nth[:2] == (site.session, step) else 1
+        self._nth = (site.session, step, nth)
         try:
-            got = await feed.measurement(step, t, self.learner.deadline)
+            got = await feed.measurement(step, t, self.learner.deadline, nth)
         except SameStepImpossible as exc:
             self._fall_back(site, str(exc))
-            return False
+            return False, None
         if got is None:
-            return False  # the integrator is being stopped: nothing to learn
+            return False, None  # the integrator is being stopped: nothing to learn
         d, f, committed = got
         if not (math.isfinite(d) and math.isfinite(f)):
-            return False
-        self.learner.observe_same_step(step, d, f, committed=committed)
-        return True
+            return False, None
+        return True, None if committed else (d, f)
 
     def _fall_back(self, site: TwinHost, why: str) -> None:
         self._fallback_session = site.session

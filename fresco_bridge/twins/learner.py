@@ -1,18 +1,16 @@
-"""The learner of one source site, on the bridge's side: its worker process, the messages to
-it and its answers, never blocking the event loop.
+"""The learner of one source site, on the bridge's side: its worker process (through a
+``WorkerChannel``, ``channel.py``), the messages to it and its answers, never blocking the
+event loop.
 
 Messages go out in batches, one per request (a twin's trial): what changes the worker's state
 (the source's steps, the twins' commits) waits in a list until then, so the source's step
-costs no IPC. Batches go through a bounded queue with ``put_nowait``; when it is full they
-wait in a local backlog that a flush task drains, in order (training data is never dropped).
-Answers come back through a reader thread and ``call_soon_threadsafe``. Every wait has a
-deadline; a missed deadline or a dead worker is a *learner loss*. A twin whose rule is
-``hold`` then fails (``LearnerError``: its site HOLDs); one whose rule is ``freeze`` answers
-from a local copy: the worker's last pickled snapshot (taken at start and every
-``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning nothing more.
-The worker is replaced and caught up by replaying the ordered log of what changes its state
-(the source's steps, each twin's committed trial), and the learner is live again once the new
-worker has answered past the end of that log.
+costs no IPC. Every wait has a deadline; a missed deadline or a dead worker is a *learner
+loss*. A twin whose rule is ``hold`` then fails (``LearnerError``: its site HOLDs); one whose
+rule is ``freeze`` answers from a local copy: the worker's last pickled snapshot (taken at
+start and every ``SNAPSHOT_EVERY`` twin steps) with the twins' commits since replayed, learning
+nothing more. The worker is replaced and caught up by replaying the ordered log of what
+changes its state (the source's steps, each twin's committed trial), and the learner is live
+again once the new worker has answered past the end of that log.
 """
 
 from __future__ import annotations
@@ -22,31 +20,22 @@ import contextlib
 import itertools
 import logging
 import math
-import multiprocessing
-import multiprocessing.queues
 import pickle
-import queue
-import threading
 from collections import deque
 from collections.abc import Callable
-from multiprocessing.process import BaseProcess
 from typing import Any
 
-from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
-from ..worker_output import OUTPUT, quiet_tracker, relay_output
+from ..worker_output import OUTPUT, relay_output
+from .channel import WorkerChannel
 from .checkpoint import Checkpoint, CheckpointWriter, history_counts, resume_point
-from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
+from .worker import LearnerSpec, LearnerState, Message, Reply
 
 log = logging.getLogger("fresco_bridge.twins")
 
 START_DEADLINE = 120.0
 """Seconds a new worker may take to import, read its data and build its updaters."""
-QUEUE_SIZE = 4096
-"""Batches in flight to the worker before the local backlog takes them."""
-FLUSH_PAUSE = 0.002
-"""Seconds the flush task waits for room in the queue between two attempts."""
 SNAPSHOT_EVERY = 50
 """Twin steps between two snapshots of the worker when a twin may freeze
 (``on_learner_loss = "freeze"``: the frozen copy starts from the last one)."""
@@ -58,8 +47,10 @@ checkpoint (``checkpoint.py``): ``--resume`` starts from it."""
 LEARN_AHEAD = 64
 """Source steps committed while no twin of the source is in a session, sent to the worker to
 be learned at once in batches of this many (a twin's next trial finds them learned)."""
-STOP_DEADLINE = 5.0
-"""Seconds a worker is given to end after the stop message, then it is killed."""
+
+Measured = tuple[float, float] | None
+"""The source's measurement (d, F) of the trial of a twin's step, not committed yet: a
+same-step trial's (``worker.py``: learned tentatively, trained on only if committed)."""
 
 EventSink = Callable[[str, str, dict[str, object]], None]
 """``(kind, reason, extra)``: an event for the twin sites of this learner."""
@@ -100,25 +91,26 @@ class Learner:
         self.source_session = 0
         """The source's current (or last) session: a twin's trial may learn every step of
         the sessions before it (source-only sessions are learned from)."""
-        self._last_trial: dict[str, tuple[float, tuple[int, int]]] = {}
-        """Each twin's last trial: its displacement and how far it learned ((session,
-        step), inclusive)."""
+        self._last_trial: dict[str, tuple[float, tuple[int, int], Measured]] = {}
+        """Each twin's last trial: its displacement, how far it learned ((session, step),
+        inclusive) and the source's trial measurement it was given (same-step)."""
         self._through: dict[str, int] = {}
         """The source step each twin's last live answer was learned through."""
-        self._same_step_sent: dict[tuple[int, int], tuple[float, float]] = {}
-        """Source steps already sent at their trial (same-step), until their commit."""
+        self._tentative: dict[str, bool] = {}
+        """Whether each twin's last answer used its source's trial measurement (same-step,
+        learned ahead of the source's commit)."""
+        self._used: dict[tuple[int, int], tuple[str, float, float]] = {}
+        """Source steps whose trial measurement a twin's committed answer used, until the
+        source's commit of that step says whether it was the committed one."""
+        self._last_committed: tuple[int, int, float, float] = (0, 0, math.nan, math.nan)
+        """The source's last committed (session, step, d, F)."""
         self._sinks: list[EventSink] = []
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
-        self._backlog: deque[list[Message]] = deque()
         self._held: list[Message] = []
         """Messages for the worker that wait for its next request (``_send``)."""
-        self._flush: asyncio.Task[None] | None = None
         self._restart: asyncio.Task[None] | None = None
-        self._proc: BaseProcess | None = None
-        self._inbox: multiprocessing.queues.Queue[list[Message] | None] | None = None
-        self._reader: threading.Thread | None = None
-        self._generation = 0
+        self._channel: WorkerChannel | None = None
         self._ready: asyncio.Future[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._closing = False
@@ -168,7 +160,7 @@ class Learner:
 
     @property
     def pid(self) -> int | None:
-        return None if self._proc is None else self._proc.pid
+        return None if self._channel is None else self._channel.pid
 
     # -- the worker's life ------------------------------------------------------------------
     async def start(self) -> None:
@@ -188,52 +180,20 @@ class Learner:
 
     async def _spawn(self) -> None:
         assert self._loop is not None
-        ctx = multiprocessing.get_context("spawn")
-        quiet_tracker()  # its report of a killed bridge's semaphores (worker_output)
-        inbox: multiprocessing.queues.Queue[list[Message] | None] = ctx.Queue(QUEUE_SIZE)
-        outbox: multiprocessing.queues.Queue[Reply] = ctx.Queue()
         start = None if self._snapshot is None else self._snapshot[2]
-        proc = ctx.Process(target=worker_main, args=(self.spec, inbox, outbox, start),
-                           name=f"{WORKER_PROCESS_PREFIX}learner-{self.source}", daemon=True)
-        self._generation += 1
         self._ready = self._loop.create_future()
-        self._backlog.clear()
         self._held.clear()  # in the log: a new worker gets them with the replay
-        await self._loop.run_in_executor(None, proc.start)
-        self._proc, self._inbox = proc, inbox
-        self._reader = threading.Thread(target=self._read, args=(proc, outbox, self._generation),
-                                        name=f"learner-reader-{self.source}", daemon=True)
-        self._reader.start()
+        self._channel = WorkerChannel(self.spec, start, on_reply=self._answer,
+                                      on_exit=self._died)
+        await self._channel.start()
         try:
             await asyncio.wait_for(asyncio.shield(self._ready), START_DEADLINE)
         except TimeoutError:
             raise LearnerError(f"learner of {self.source}: the worker was not ready within "
                                f"{START_DEADLINE:g} s") from None
 
-    def _read(self, proc: BaseProcess, outbox: multiprocessing.queues.Queue[Reply],
-              generation: int) -> None:
-        """The reader thread of one worker: its answers to the loop, then its end."""
-        while not self._closing and generation == self._generation:
-            try:
-                reply = outbox.get(timeout=0.2)
-            except queue.Empty:
-                if not proc.is_alive():
-                    self._call(self._died, generation, proc.exitcode)
-                    return
-                continue
-            except (EOFError, OSError):
-                self._call(self._died, generation, proc.exitcode)
-                return
-            self._call(self._answer, generation, reply)
-
-    def _call(self, fn: Callable[..., None], *args: Any) -> None:
-        loop = self._loop
-        if loop is not None:
-            with contextlib.suppress(RuntimeError):  # the loop closed: the bridge has stopped
-                loop.call_soon_threadsafe(fn, *args)
-
-    def _died(self, generation: int, code: int | None) -> None:
-        if generation != self._generation or self._closing:
+    def _died(self, code: int | None) -> None:
+        if self._closing:
             return
         reason = f"the worker process exited (code {code})"
         if self._ready is not None and not self._ready.done():
@@ -241,9 +201,7 @@ class Learner:
         else:
             self._lose(reason)
 
-    def _answer(self, generation: int, reply: Reply) -> None:
-        if generation != self._generation:
-            return
+    def _answer(self, reply: Reply) -> None:
         kind = reply[0]
         if kind == OUTPUT:  # a line the worker logged or printed
             relay_output(self.source, self.pid, reply)
@@ -382,9 +340,10 @@ class Learner:
             return
         position, steps, data = self._snapshot
         local: LearnerState = pickle.loads(data)
+        local.committed_only()  # it sees no more commits: a tentative step is unlearned
         for msg in self.log[position - self._log_base:]:
             if msg[0] != "observe":
-                local.handle(msg)
+                local.handle(msg[:5])  # a trial without its tentative step: learns nothing
         self._local = local
         through = min((t.trained_through for t in local.twins.values()), default=0)
         log.warning("learner of %s: freeze twins answer from the snapshot of twin step %d "
@@ -395,34 +354,19 @@ class Learner:
                     trained_through=through)
 
     async def _stop_worker(self, *, kill: bool) -> None:
-        proc, inbox, reader = self._proc, self._inbox, self._reader
-        self._proc = self._inbox = self._reader = None
-        if proc is None:
-            return
-        self._generation += 1  # the old reader and its answers are ignored from now on
-        loop = asyncio.get_running_loop()
-        if not kill and inbox is not None:
-            with contextlib.suppress(queue.Full, ValueError, OSError):
-                inbox.put_nowait(None)
-            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
-        if proc.is_alive():
-            proc.kill()
-            await loop.run_in_executor(None, proc.join, STOP_DEADLINE)
-        if inbox is not None:
-            inbox.cancel_join_thread()
-            inbox.close()
-        if reader is not None:
-            await loop.run_in_executor(None, reader.join, 1.0)
+        channel, self._channel = self._channel, None
+        if channel is not None:
+            await channel.stop(kill=kill)
 
     async def close(self) -> None:
         """Stop the worker (a clean end, then a kill past ``STOP_DEADLINE``)."""
         self._closing = True
         self.state = "stopped"
-        for task in (self._restart, self._flush):
-            if task is not None and not task.done():
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
+        task = self._restart
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
         await self._stop_worker(kill=False)
         if self.checkpoints is not None:
             await self.checkpoints.close()
@@ -434,34 +378,8 @@ class Learner:
     def _put(self, msg: Message) -> None:
         """``msg`` (a request) to the worker, after everything held before it; never blocks."""
         batch, self._held = [*self._held, msg], []
-        self._post(batch)
-
-    def _post(self, batch: list[Message]) -> None:
-        inbox = self._inbox
-        if inbox is None:
-            return
-        if not self._backlog:
-            try:
-                inbox.put_nowait(batch)
-                return
-            except queue.Full:
-                pass
-        self._backlog.append(batch)
-        if self._flush is None or self._flush.done():
-            assert self._loop is not None
-            self._flush = self._loop.create_task(self._drain(), name=f"learner.{self.source}")
-
-    async def _drain(self) -> None:
-        while self._backlog:
-            inbox = self._inbox
-            if inbox is None:
-                return
-            try:
-                inbox.put_nowait(self._backlog[0])
-            except queue.Full:
-                await asyncio.sleep(FLUSH_PAUSE)
-                continue
-            self._backlog.popleft()
+        if self._channel is not None:
+            self._channel.post(batch)
 
     def _send(self, msg: Message) -> None:
         """A message that changes the worker's state: logged, and held for the worker's next
@@ -494,16 +412,13 @@ class Learner:
         """The source site's listener: its committed (d, F) to the worker (never a NaN)."""
         d, f = step.daq_disp[0], step.daq_force[0]
         self.source_step, self.source_session = step.step, step.session
-        sent = self._same_step_sent.pop((step.session, step.step), None)
-        if sent is not None:  # learned at its trial already (same-step)
-            if sent != (d, f):
-                log.warning("learner of %s: step %d committed (d %r, F %r) differs from the "
-                            "measurement its same-step twin learned (%r, %r): more than one "
-                            "trial in the step", self.source, step.step, d, f, *sent)
-                self._event("same-step-mismatch", f"source {self.source} step {step.step}: "
-                            "the committed measurement differs from the one learned at the "
-                            "trial (same-step needs one trial per step)", source_step=step.step)
-            return
+        self._last_committed = (step.session, step.step, d, f)
+        if self._used:  # a source step whose trial a twin's committed answer used
+            used = self._used.pop((step.session, step.step), None)
+            if used is not None:
+                self._check_used(used[0], (step.session, step.step), used[1:], (d, f))
+            for key in [k for k in self._used if k < (step.session, step.step)]:
+                del self._used[key]  # never committed (the source held): nothing to check
         if not (math.isfinite(d) and math.isfinite(f)):
             self.not_trained += 1
             log.warning("learner of %s: step %d has a non-finite measurement (d %r, F %r); not "
@@ -525,27 +440,45 @@ class Learner:
         if notice.kind == "session-open":
             self.source_session = notice.session
 
+    def _check_used(self, twin: str, key: tuple[int, int], used: tuple[float, float],
+                    committed: tuple[float, float]) -> None:
+        """A twin's committed answer used the source's trial measurement of step ``key``:
+        a commit that differs makes its update line's ``through`` a trial's, said once in
+        an event (the updater itself went back to the committed measurement)."""
+        if used == committed:
+            return
+        log.warning("learner of %s: twin %s answered source step %d with its trial "
+                    "measurement (d %r, F %r); the committed one is (%r, %r)", self.source,
+                    twin, key[1], *used, *committed)
+        self._event("same-step-mismatch", f"twin {twin}: its answer used source {self.source}"
+                    f"'s trial of step {key[1]}, whose commit differs (a later trial of that "
+                    "step came after the twin's answer); trained on the committed one",
+                    source_step=key[1])
+
     def through(self, step: int, *, same_step: bool) -> tuple[int, int]:
         """How far a twin's trial at its ``step`` may learn: the source's steps of earlier
         sessions, and of its current session those before ``step`` (with ``same_step``,
         ``step`` too)."""
         return (self.source_session, step if same_step else step - 1)
 
-    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
-                    ) -> tuple[float, float, int, float, float | None]:
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
+                    measured: Measured = None) -> tuple[float, float, int, float, float | None]:
         """The twin's (force, tangent) at ``d`` (its ``step``), the source step it learned
         through, the update time and the source's one-step error of the twin's current step
-        (``LearnerState``); with ``same_step`` including the source step sent by
-        ``observe_same_step`` just before."""
-        through = self.through(step, same_step=same_step)
+        (``LearnerState``). With ``same_step`` it learns the source's step ``step`` too: the
+        committed one, or ``measured``, that step's trial measurement, learned tentatively
+        (trained on only if it is the one committed)."""
+        through = self.through(step, same_step=same_step or measured is not None)
         if self.state != "live":
             return self._frozen_trial(twin, d, through)
-        self._last_trial[twin] = (d, through)
+        self._last_trial[twin] = (d, through, measured)
         self._answered_locally.discard(twin)
+        msg = ("trial", twin, d, through) if measured is None else \
+            ("trial", twin, d, through, measured)
         try:
             await self._caught_up()
-            force, tangent, trained, seconds, error = await self._request(
-                ("trial", twin, d, through), self.deadline)
+            force, tangent, trained, seconds, error, tentative = await self._request(
+                msg, self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
@@ -553,18 +486,8 @@ class Learner:
         if int(trained) > self._through.get(twin, 0) and self.update_observer is not None:
             self.update_observer(float(seconds))  # each twin's newly learned step(s), once
         self._through[twin] = self.trained_through = int(trained)
+        self._tentative[twin] = bool(tentative)
         return float(force), float(tangent), self.trained_through, float(seconds), error
-
-    def observe_same_step(self, step: int, d: float, f: float, *, committed: bool = False
-                          ) -> None:
-        """The source's measurement of the trial of ``step``, for a same-step twin (sent once
-        per step; its commit then sends nothing more). ``committed``: the source's commit of
-        that step came first and already sent it."""
-        key = (self.source_session, step)
-        if committed or key in self._same_step_sent:
-            return
-        self._same_step_sent[key] = (d, f)
-        self._send(("observe", *key, d, f))
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -576,7 +499,7 @@ class Learner:
     def _frozen_trial(self, twin: str, d: float, through: tuple[int, int]
                       ) -> tuple[float, float, int, float, float | None]:
         local = self._frozen(twin)
-        self._last_trial[twin] = (d, through)
+        self._last_trial[twin] = (d, through, None)
         self._answered_locally.add(twin)
         reply = local.handle(("trial", 0, twin, d, through))
         assert reply is not None
@@ -586,7 +509,13 @@ class Learner:
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
-        trial = ("trial", 0, twin, *self._last_trial.get(twin, (0.0, (0, 0))))
+        d, through, measured = self._last_trial.get(twin, (0.0, (0, 0), None))
+        trial: Message = ("trial", 0, twin, d, through, measured)
+        if self._tentative.pop(twin, False) and measured is not None and self.state == "live":
+            if self._last_committed[:2] == through:  # the source committed it first
+                self._check_used(twin, through, measured, self._last_committed[2:])
+            else:
+                self._used[through] = (twin, *measured)
         if self.state == "live" and twin not in self._answered_locally:
             self.log.append(trial)  # the live worker has it; a replay needs it before the commit
         else:

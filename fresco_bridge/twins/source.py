@@ -20,6 +20,11 @@ asks nothing of its source).
   trial is not the committed one, and an updater learns only what is committed. The second
   distinct moving trial of a source step says so; from then on the session answers
   ``previous-step`` (trained on commits only), said once per session with that reason.
+
+The twin's n-th moving trial of a step awaits the source's n-th trial of that step: each
+iteration updates every element once, whichever element OpenSees visits first, so the twin's
+second iteration sees the source's second trial (the one that refutes same-step) and never
+answers from the first one again.
 """
 
 from __future__ import annotations
@@ -49,7 +54,10 @@ class SourceFeed:
     def __init__(self, source: str) -> None:
         self.source = source
         self._trial: ForwardedTrial | None = None
-        self._waiters: dict[tuple[int, float], list[asyncio.Future[ForwardedTrial | None]]] = {}
+        self._count = 0
+        """Trials of ``_trial``'s step (and time) published so far."""
+        self._waiters: dict[tuple[int, float],
+                            list[tuple[int, asyncio.Future[ForwardedTrial | None]]]] = {}
         self._committed: OrderedDict[tuple[int, float], tuple[float, float]] = OrderedDict()
         self._committed_session = 0
         self._committed_ctrl: tuple[float, ...] | None = None
@@ -66,53 +74,75 @@ class SourceFeed:
         if trial.ctrl == self._committed_ctrl and trial.session == self._committed_session:
             return  # the committed state again (a new step's first update): nothing new
         last = self._trial
-        if (last is not None and last.session == trial.session and last.step == trial.step
-                and last.ctrl != trial.ctrl and self.iterating != (trial.session, trial.step)):
+        same = last is not None and (last.session, last.step, last.time) == (
+            trial.session, trial.step, trial.time)
+        self._count = self._count + 1 if same else 1
+        if (same and last is not None and last.ctrl != trial.ctrl
+                and self.iterating != (trial.session, trial.step)):
             self.iterating = (trial.session, trial.step)
         self._trial = trial
-        for fut in self._waiters.pop((trial.step, trial.time), ()):
-            if not fut.done():
+        self._wake((trial.step, trial.time), trial, self._count)
+
+    def _wake(self, key: tuple[int, float], trial: ForwardedTrial | None, count: int) -> None:
+        """Resolve the waiters of ``key`` whose trial has come (``count`` trials of it)."""
+        waiting = self._waiters.get(key)
+        if not waiting:
+            return
+        rest = [(n, fut) for n, fut in waiting if n > count and not fut.done()]
+        for n, fut in waiting:
+            if n <= count and not fut.done():
                 fut.set_result(trial)
+        if rest:
+            self._waiters[key] = rest
+        else:
+            del self._waiters[key]
 
     def step_committed(self, step: CommittedStep) -> None:
         self._committed_ctrl, self._committed_session = step.ctrl, step.session
         self._committed[(step.step, step.time)] = (step.daq_disp[0], step.daq_force[0])
         if len(self._committed) > KEEP_COMMITTED:
             self._committed.popitem(last=False)
+        self._wake((step.step, step.time), self._trial, 1 << 30)  # they take the commit
 
     def site_event(self, notice: SiteNotice, status: SiteStatus) -> None:
         """The source stopped forwarding (HOLD, FAULT): nothing more to learn this step."""
         if status.state in STOPPED:
             waiters, self._waiters = self._waiters, {}
             for futs in waiters.values():
-                for fut in futs:
+                for _, fut in futs:
                     if not fut.done():
                         fut.set_result(None)
 
     # -- the twin's side ------------------------------------------------------------------------
-    async def measurement(self, step: int, time: float, deadline: float
+    async def measurement(self, step: int, time: float, deadline: float, nth: int = 1
                           ) -> tuple[float, float, bool] | None:
-        """The source's ``(d, F, committed)`` of step ``step`` at trial time ``time``; None if
-        the source stopped (nothing to learn); ``SameStepImpossible`` if the order of
+        """The source's ``(d, F, committed)`` of step ``step`` at trial time ``time``, from
+        its ``nth`` trial of that step or a later one (the twin's ``nth`` moving trial); None
+        if the source stopped (nothing to learn); ``SameStepImpossible`` if the order of
         messages makes same-step impossible (why)."""
         committed = self._committed.get((step, time))
         if committed is not None:
             return (*committed, True)
         trial = self._trial
-        if trial is None or (trial.step, trial.time) != (step, time):
+        if trial is None or (trial.step, trial.time) != (step, time) or self._count < nth:
             fut: asyncio.Future[ForwardedTrial | None] = \
                 asyncio.get_running_loop().create_future()
-            self._waiters.setdefault((step, time), []).append(fut)
+            self._waiters.setdefault((step, time), []).append((nth, fut))
             try:
                 trial = await asyncio.wait_for(fut, deadline)
             except TimeoutError:
-                self._waiters.pop((step, time), None)
+                waiting = [w for w in self._waiters.pop((step, time), []) if w[1] is not fut]
+                if waiting:
+                    self._waiters[(step, time)] = waiting
                 raise SameStepImpossible(
                     f"the source's trial of step {step} (t = {time:g} s) did not reach its "
                     f"controller within {deadline:g} s of the twin's trial (the client asks "
                     "the twin's force before sending the source's trial)") from None
             if trial is None:
                 return None
+            committed = self._committed.get((step, time))
+            if committed is not None:
+                return (*committed, True)
         if self.iterating is not None and self.iterating[0] == trial.session:
             raise SameStepImpossible(
                 f"the source's step {self.iterating[1]} had several trials (an implicit "

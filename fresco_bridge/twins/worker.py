@@ -13,6 +13,18 @@ earlier source session lies before ``(S, ·)``, so the twin's next trial learns 
 Each twin has its own updater, fed the same observations: a twin cloned from another's updater
 would not follow every updater's parameter changes (a UKF's retargeted Bilinear, an ANN's new
 weights), and two seeded updaters fed the same steps hold the same parameters.
+
+**A same-step answer learns the source's trial tentatively; training is on commits only.** A
+same-step trial carries the source's measurement of the trial of step ``through`` (not
+committed yet). The twin's updater learns it to answer (an updater can only predict from what
+it has learned), having first taken a rollback point (``updating.base.snapshot``, the family
+contract: no updater kind is special). When that step's commit arrives equal, the tentative
+step was the committed one and stays learned; when it differs (an implicit scheme's
+iterations), or a later trial does not allow it (the twin fell back to previous-step), the
+updater returns to the rollback point and re-learns the committed steps since. The point is
+kept while steps are learned and re-taken before a tentative step once ``REBASE`` committed
+steps lie behind it: one snapshot per session's first same-step trial and one per ``REBASE``
+steps after, and a re-learning bounded by ``REBASE`` steps.
 """
 
 from __future__ import annotations
@@ -30,7 +42,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..updating.base import Updater, UpdaterError, UpdaterInputError
+from ..updating.base import Updater, UpdaterError, UpdaterInputError, restore, snapshot
 from ..updating.registry import make_updater
 from ..worker_output import forward_output
 
@@ -41,15 +53,22 @@ TRIM = 1024
 snapshots stay small)."""
 NICE = 10
 """How much lower than the bridge the worker runs (``os.nice``)."""
+REBASE = 64
+"""Committed steps learned behind a twin's rollback point before the next tentative step takes
+a new one: bounds the re-learning of a rollback (at ~1 ms a step, far inside the learner's
+deadline) at one snapshot per this many same-step steps."""
 
 Message = tuple[Any, ...]
-"""``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step))``,
+"""``("observe", session, step, d, f)`` (a committed step),
+``("trial", id, twin, d, (session, step)[, (d, f) | None])`` (the optional last item: the
+source's trial measurement of step ``(session, step)``, not committed yet: same-step),
 ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
 step))``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
 """``("trial", id, force, tangent, trained_through, update_seconds,
-one_step_error)``, ``("initial", id, tangent)``,
+one_step_error, tentative)`` (``tentative``: the answer used the source's trial measurement of
+step ``trained_through``, learned ahead of its commit), ``("initial", id, tangent)``,
 ``("sync", id, trained_through)``, ``("learned", id)``, ``("snapshot", id, pickled
 LearnerState)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
@@ -90,6 +109,15 @@ class _Twin:
     timed_step: int = -1
     """The twin step (its commits so far) ``update_seconds`` and ``one_step_error`` belong
     to."""
+    learned: tuple[int, int] = (0, 0)
+    """The (session, step) of the last committed observation learned."""
+    tentative: tuple[int, int, float, float] | None = None
+    """``(session, step, d, F)``: the source's trial measurement learned ahead of its commit."""
+    base: tuple[bytes, int, int, tuple[int, int]] | None = None
+    """The rollback point: the updater's snapshot with ``applied``, ``trained_through`` and
+    ``learned`` then (committed observations only behind it)."""
+    since_base: int = 0
+    """Committed observations learned since the rollback point."""
 
 
 @dataclass
@@ -118,8 +146,9 @@ class LearnerState:
             twin.commits += 1
             return None
         if kind == "trial":
-            _, rid, name, d, through = msg
-            twin = self._learned(name, (int(through[0]), int(through[1])))
+            rid, name, d, through = msg[1:5]
+            measured = msg[5] if len(msg) > 5 else None
+            twin = self._learned(name, (int(through[0]), int(through[1])), measured)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -127,8 +156,9 @@ class LearnerState:
             if not (math.isfinite(force) and math.isfinite(tangent)):
                 return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
                         f"{tangent!r} at d = {d!r}")
+            used = twin.tentative is not None and twin.tentative[:2] == tuple(through)
             return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds,
-                    twin.one_step_error)
+                    twin.one_step_error, used)
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
@@ -147,32 +177,90 @@ class LearnerState:
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True) -> _Twin:
-        """Twin ``name`` with every source step up to ``through`` ((session, step),
-        inclusive) learned (``timed``: for a trial, whose update time it is)."""
+    def _learned(self, name: str, through: tuple[int, int],
+                 measured: tuple[float, float] | None = None, *, timed: bool = True) -> _Twin:
+        """Twin ``name`` with every committed source step up to ``through`` ((session, step),
+        inclusive) learned and, with ``measured`` (the source's trial measurement of step
+        ``through``, not committed yet), that one tentatively (``timed``: for a trial, whose
+        update time it is)."""
         twin = self.twins[name]
         obs = self.observations
         if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
+        tent = twin.tentative
+        if tent is not None and (tent[:2] > through or (
+                measured is not None and tent[:2] == through and tent[2:] != tuple(measured))):
+            self._roll_back(twin)  # the trial does not allow it: previous-step, or another read
         while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
-            _, step, d, f = obs[twin.applied]
-            twin.applied += 1
-            try:
-                twin.updater.observe(d, f)
-            except UpdaterInputError as exc:
-                self.rejected += 1
-                log.warning("learner: source step %d not learned: %s", step, exc)
+            session, step, d, f = obs[twin.applied]
+            tent = twin.tentative
+            if tent is not None and tent[:2] == (session, step):
+                if tent[2:] != (d, f):  # the commit is not the trial learned: back, re-learn
+                    self._roll_back(twin)
+                    continue
+                twin.tentative = None  # the trial learned was the committed step
+                twin.applied += 1
+                twin.learned = (session, step)
+                twin.since_base += 1
                 continue
-            twin.trained_through = step
-            if timed:
-                twin.update_seconds += twin.updater.last_update_seconds
-                twin.one_step_error = twin.updater.last_one_step_error
-        learned = min(t.applied for t in self.twins.values())
-        if learned >= TRIM:  # what every twin has learned is not needed any more
+            twin.applied += 1
+            twin.learned = (session, step)
+            twin.since_base += 1
+            self._observe(twin, step, d, f, timed=timed)
+        if twin.tentative is None and twin.base is not None and twin.since_base >= REBASE:
+            twin.base = None  # taken again before the next tentative step (trimming goes on)
+        if measured is not None and twin.tentative is None and twin.learned < through:
+            if twin.base is None:
+                twin.base = (snapshot(twin.updater), twin.applied, twin.trained_through,
+                             twin.learned)
+                twin.since_base = 0
+            if self._observe(twin, through[1], float(measured[0]), float(measured[1]),
+                             timed=timed):
+                twin.tentative = (*through, float(measured[0]), float(measured[1]))
+        self._trim()
+        return twin
+
+    def _observe(self, twin: _Twin, step: int, d: float, f: float, *, timed: bool) -> bool:
+        try:
+            twin.updater.observe(d, f)
+        except UpdaterInputError as exc:
+            self.rejected += 1
+            log.warning("learner: source step %d not learned: %s", step, exc)
+            return False
+        twin.trained_through = step
+        if timed:
+            twin.update_seconds += twin.updater.last_update_seconds
+            twin.one_step_error = twin.updater.last_one_step_error
+        return True
+
+    def committed_only(self) -> None:
+        """Every twin back to the committed steps it learned (a tentative step unlearned):
+        a copy that will not see the source's commits (the learner's frozen copy)."""
+        for twin in self.twins.values():
+            if twin.tentative is not None:
+                self._roll_back(twin)
+
+    @staticmethod
+    def _roll_back(twin: _Twin) -> None:
+        """The twin's updater as at its rollback point: the tentative step unlearned, the
+        committed steps since to be learned again."""
+        assert twin.base is not None, "a tentative step is learned after a rollback point"
+        blob, twin.applied, twin.trained_through, twin.learned = twin.base
+        twin.updater = restore(blob)
+        twin.tentative = None
+        twin.since_base = 0
+
+    def _trim(self) -> None:
+        """Drop what every twin has learned and no rollback point needs, in chunks."""
+        obs = self.observations
+        learned = min((t.applied if t.base is None else min(t.applied, t.base[1])
+                       for t in self.twins.values()), default=0)
+        if learned >= TRIM:
             del obs[:learned]
             for t in self.twins.values():
                 t.applied -= learned
-        return twin
+                if t.base is not None:
+                    t.base = (t.base[0], t.base[1] - learned, *t.base[2:])
 
 
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],

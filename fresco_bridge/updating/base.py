@@ -109,6 +109,11 @@ def snapshot(updater: Updater) -> bytes:
     random streams). Why: a learner checkpointed at step N is restored by a new worker instead
     of replaying every step from 0, so catch-up is bounded by the steps since the checkpoint.
 
+    The same pair is a served same-step twin's rollback point (``twins/worker.py``): the
+    source's trial measurement is learned tentatively after a snapshot and unlearned by a
+    restore if it is not the one committed, so every updater trains on commits only without
+    a method of its own for it.
+
     The format is pickle behind a version line: restore only snapshots this software wrote
     (a checkpoint file of the bridge's own run directory), never one from elsewhere.
     """

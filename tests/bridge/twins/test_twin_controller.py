@@ -22,7 +22,8 @@ class FakeLearner:
         self.lost = False
         self.commits: list[str] = []
 
-    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False
+    async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
+                    measured: tuple[float, float] | None = None
                     ) -> tuple[float, float, int, float, float | None]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
@@ -114,3 +115,31 @@ def test_status_says_behind_only_while_the_twin_runs_and_frozen_says_the_snapsho
     learner.state, learner._local, learner.trained_through = "lost", local, 724
     status = learner.status("t")
     assert status["learner"] == "frozen" and status["steps_trained"] == 700
+
+
+@pytest.mark.parametrize("source_first", [False, True])
+def test_a_committed_answer_that_used_a_trial_the_source_committed_otherwise_is_said(
+        source_first: bool) -> None:
+    """A same-step answer used the source's trial measurement of step 3 and the twin
+    committed it; the source's commit of step 3 differs (a later trial came after the twin's
+    answer): one ``same-step-mismatch`` event, whichever commit came first. An equal commit
+    (steps 4) says nothing; the source's steps always go to the log as committed."""
+    learner = Learner("damper", LearnerSpec("damper", (TwinSpec("t", "none", {}),)),
+                      deadline=1.0)
+    learner.state = "live"
+    events: list[tuple[str, str, dict[str, object]]] = []
+    learner.add_event_sink(lambda kind, reason, extra: events.append((kind, reason, extra)))
+    for n, used, committed in ((3, (0.5, 2.0), (0.6, 2.1)), (4, (0.7, 2.5), (0.7, 2.5))):
+        learner._last_trial["t"] = (0.1, (1, n), used)
+        learner._tentative["t"] = True
+        if source_first:
+            learner.step_committed(step(n, *committed))
+            learner.commit("t")
+        else:
+            learner.commit("t")
+            learner.step_committed(step(n, *committed))
+    assert [(k, x["source_step"]) for k, _, x in events] == [("same-step-mismatch", 3)]
+    assert "trial of step 3" in events[0][1]
+    assert [m for m in learner.log if m[0] == "observe"] == [
+        ("observe", 1, 3, 0.6, 2.1), ("observe", 1, 4, 0.7, 2.5)]
+    assert not learner._used

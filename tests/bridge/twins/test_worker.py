@@ -155,3 +155,110 @@ def test_a_source_only_session_is_learned_from_by_the_next_pair() -> None:
         updater.observe(float(d), float(f))
     expected = replay(updater, sd[30:], sf[30:], td[30:], lag=True).force_pred
     assert np.array_equal(np.array(answers), expected)
+
+
+def _committed_only(sd: np.ndarray, sf: np.ndarray, td: np.ndarray,
+                    through: list[int]) -> list[float]:
+    """The twin's answers of an updater that learned the committed source steps
+    ``1..through[i]`` before the twin's step ``i + 1``, and nothing else."""
+    updater = make_updater("online_ukf", **UKF)
+    learned, answers = 0, []
+    for i, k in enumerate(through):
+        while learned < k:
+            updater.observe(float(sd[learned]), float(sf[learned]))
+            learned += 1
+        answers.append(updater.twin.set_trial(float(td[i]))[0])
+        updater.twin.commit()
+    return answers
+
+
+@pytest.mark.parametrize("source_first", [True, False])
+def test_a_tentative_trial_that_is_not_committed_is_never_trained_on(
+        source_first: bool) -> None:
+    """Newmark + Newton served same-step: the twin's first iteration learns the source's
+    first trial tentatively; the second (another trial: the twin falls back to previous-step)
+    unlearns it; from then on the learner has learned committed steps only, exactly."""
+    sd, sf, td = histories(40)
+    worker = state("twin")
+    answers, through = [], []
+    for i in range(sd.size):
+        if i == 0:  # the first iteration: the source's first trial (0.5 of the way)
+            reply = worker.handle(("trial", 1, "twin", 0.5 * float(td[0]), (1, 1),
+                                   (0.5 * float(sd[0]), 0.5 * float(sf[0]))))
+            assert reply is not None and reply[4] == 1 and reply[7] is True
+        reply = worker.handle(("trial", 2, "twin", float(td[i]), (1, i)))  # previous-step
+        assert reply is not None and reply[4] == i and reply[7] is False
+        answers.append(reply[2])
+        through.append(i)
+        observe = ("observe", 1, i + 1, float(sd[i]), float(sf[i]))
+        for msg in (observe, ("commit", "twin")) if source_first else (("commit", "twin"),
+                                                                        observe):
+            worker.handle(msg)
+    assert np.array_equal(np.array(answers), _committed_only(sd, sf, td, through))
+
+
+def test_a_tentative_trial_committed_differently_is_replaced_by_the_commit() -> None:
+    """The twin's answer used the source's trial of step k (the client visits the twin's
+    element first); the source then commits another measurement of step k: the updater goes
+    back to the committed steps, so it ends holding exactly what learning the committed
+    steps alone gives."""
+    sd, sf, td = histories(40)
+    worker = state("twin")
+    for i in range(sd.size):
+        trial = (float(sd[i]), float(sf[i])) if i % 3 else (float(sd[i]) + 0.1,
+                                                              float(sf[i]) - 0.2)
+        reply = worker.handle(("trial", i, "twin", float(td[i]), (1, i + 1), trial))
+        assert reply is not None and reply[4] == i + 1 and reply[7] is True
+        worker.handle(("commit", "twin"))
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
+    worker.handle(("learn", 0, (1, sd.size)))
+    committed = make_updater("online_ukf", **UKF)
+    for d, f in zip(sd, sf, strict=True):
+        committed.observe(float(d), float(f))
+    learned = worker.twins["twin"].updater
+    assert learned.parameters == committed.parameters  # type: ignore[attr-defined]
+    assert np.array_equal(learned.covariance, committed.covariance)  # type: ignore
+
+
+def test_the_rollback_point_is_bounded_and_the_log_still_trimmed(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Explicit same-step for many steps: a new rollback point every REBASE steps (the
+    re-learning bounded), the learned observations still dropped; the answers those of the
+    paper's order."""
+    from fresco_bridge.twins import worker as worker_module
+
+    monkeypatch.setattr(worker_module, "TRIM", 16)
+    monkeypatch.setattr(worker_module, "REBASE", 8)
+    sd, sf, td = histories(60)
+    worker = state("twin")
+    answers = []
+    for i in range(sd.size):
+        reply = worker.handle(("trial", i, "twin", float(td[i]), (1, i + 1),
+                               (float(sd[i]), float(sf[i]))))
+        assert reply is not None
+        answers.append(reply[2])
+        worker.handle(("commit", "twin"))
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
+        assert worker.twins["twin"].since_base <= 8
+    assert len(worker.observations) < 30
+    expected = replay(make_updater("online_ukf", **UKF), sd, sf, td, lag=False).force_pred
+    assert np.array_equal(np.array(answers), expected)
+
+
+def test_a_copy_that_sees_no_more_commits_unlearns_its_tentative_step() -> None:
+    """The learner's frozen copy starts from a snapshot taken while a same-step trial was
+    learned tentatively: ``committed_only`` returns it to the committed steps."""
+    sd, sf, td = histories(10)
+    worker, reference = state("twin"), state("twin")
+    for i in range(5):
+        for w in (worker, reference):
+            w.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
+            w.handle(("trial", i, "twin", float(td[i]), (1, i + 1)))
+            w.handle(("commit", "twin"))
+    reply = worker.handle(("trial", 9, "twin", float(td[5]), (1, 6),
+                           (float(sd[5]), float(sf[5]))))
+    assert reply is not None and reply[7] is True and reply[4] == 6
+    worker.committed_only()
+    got = worker.handle(("trial", 10, "twin", float(td[5]), (1, 6)))
+    expected = reference.handle(("trial", 10, "twin", float(td[5]), (1, 6)))
+    assert got is not None and expected is not None and got[2:5] == expected[2:5]
