@@ -26,7 +26,8 @@ from .options import Policy
 from .scored import Scored, at_bound, information
 from .scored import finite as _finite
 
-__all__ = ["SEPARATED_BY", "confidence_words", "decide", "nothing_systematic", "pct_text"]
+__all__ = ["SEPARATED_BY", "confidence_words", "decide", "explained", "nothing_systematic",
+           "pct_text"]
 
 SEPARATED_BY: dict[frozenset[str], str] = {
     frozenset({"friction", "rate_dependence"}):
@@ -72,18 +73,23 @@ def nothing_systematic(gap: float, noise_pct: float, policy: Policy, reason: str
 
 def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[Scored],
            families: list[Scored], policy: Policy, systematic_cal: float, law: str,
-           n_eff: tuple[float, float | None]) -> dict[str, Any]:
-    """The verdict on a gap above the floor (module doc: the rule)."""
+           n_eff: tuple[float, float | None],
+           resolved: float | None = None) -> dict[str, Any]:
+    """The verdict on a gap above the floor (module doc: the rule); ``resolved`` is the
+    smallest systematic gap the record resolves (:func:`.scored.systematic_floor`; at least
+    the policy's floor, which it is when not given)."""
     gap = before["total_pct"] or 0.0
     floor = policy.noise_floor_pct
+    resolved = floor if resolved is None else max(resolved, floor)
     base_bic = information(before, n_eff, 0)
     # heard: a candidate that leaves less of the withheld gap than the baseline (better than the
-    # sim) and changes its prediction by at least the floor (big enough to hear)
+    # sim), changes its prediction by at least the floor (big enough to hear) and accounts for
+    # a part of the gap the record resolves (explained)
     heard = [s for s in [*singles, *[p for p in pairs if not _collapsed(p, singles)],
                          *families]
              if s.force is not None and "sensor_noise" not in s.effects
              and s.after["total_pct"] is not None and s.after["total_pct"] < gap
-             and (not s.effects or s.size >= floor)]
+             and (not s.effects or (s.size >= floor and explained(s) >= resolved))]
     bic = {id(s): information(s.after, n_eff, s.n_free) for s in heard}
     ranked = sorted(heard, key=lambda s: bic[id(s)])
     best = ranked[0] if ranked else None
@@ -162,6 +168,18 @@ def decide(before: dict[str, float | None], singles: list[Scored], pairs: list[S
         "flags": flags, "better_family": None, "stories": stories,
         "separated_by": separated_by, "explanation": text,
     }
+
+
+def explained(s: Scored) -> float:
+    """The part of the withheld gap a candidate accounts for, √(before² − after²) (NRMS %):
+    the white noise is the same samples in both and cancels from the difference, so this is
+    the systematic part the effect closes. An effect is heard only when it is at least what the
+    record resolves (the systematic floor): a law absorbing 1.6 % of a misfit it does not
+    model closes less than the noise lets the record tell from nothing."""
+    b, a = s.before["total_pct"], s.after["total_pct"]
+    if b is None or a is None or not math.isfinite(a) or not math.isfinite(b):
+        return 0.0
+    return math.sqrt(max(b * b - a * a, 0.0))
 
 
 def _limit_form(best: Scored, ranked: Sequence[Scored]) -> Scored | None:

@@ -6,8 +6,8 @@ order of the load path of ``sim_actuator`` (the simulated lab the bench generate
 
     command c -> [actuator: undershoot u, amplitude a, delay tau] -> piston x  (the LVDT reads x)
     x -> [pin gap g] -> specimen law (Bouc-Wen, + pinching, + degradation) -> connection force
-    force + fixture friction Fc (behind a spring) + rate law c_v*sign(v)|v|^a -> load cell
-      -> [sensor bias, noise]
+    force + fixture friction Fc (behind a spring, tanh(v/v0)) + rate law c_v*sign(v)|v|^a
+      -> load cell -> [sensor bias, noise]
 
 so every candidate predicts both channels: the measured displacement and the measured force.
 ``sensor_noise`` predicts nothing new: it claims the white part of the gap (see ``fit``).
@@ -187,6 +187,15 @@ RATE_EXPONENT = (0.1, 2.0)
 name, which is its own candidate."""
 
 
+FRICTION_V0_MAX = 0.25
+"""Upper bound of the friction's regularisation velocity v0, in units of the record's RMS
+command velocity. Dry friction is a force that does not change with velocity: regularised as
+``F_c tanh(v/v0)`` (a common lab and solver form of it) it reaches 96 % of F_c at 2 v0, so up
+to this bound it is saturated from half the RMS velocity on, over most of the record. A law
+still building up beyond that changes with velocity over the record: the rate law's form,
+which is its own candidate."""
+
+
 LIMIT_FORMS = {("rate_dependence", "rate_exponent", "lower"): "friction"}
 """The nesting of the candidates: (effect, parameter, bound) -> the candidate whose form the
 effect takes at that bound. A rate law at its smallest exponent is Coulomb friction in all but
@@ -198,6 +207,7 @@ law when friction is a candidate too (``multi``)."""
 def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
     """Candidate effects and their parameters, bounded by the record's scales."""
     d, f = ctx.d_peak, ctx.f_peak
+    v_ref = ctx.record.velocity_scale
     tau_max = min(0.5, 0.1 * ctx.duration)
     return {
         "actuator_delay": (Param("tau", "path", "s", 0.0, tau_max, 2.0 * ctx.dt,
@@ -213,7 +223,11 @@ def effect_parameters(ctx: Context) -> dict[str, tuple[Param, ...]]:
                            "Coulomb friction of the fixture"),
                      Param("slip", "out", "mm", 0.0, 0.2 * d, 0.005 * d,
                            "piston travel after a reversal until the fixture slips (Coulomb "
-                           "behind a spring; 0: rigid)")),
+                           "behind a spring; 0: rigid)"),
+                     Param("v0", "out", "mm/s", 0.0, FRICTION_V0_MAX * v_ref,
+                           0.02 * v_ref,
+                           "velocity over which the Coulomb force builds up, tanh(v/v0) "
+                           "(0: sign(v), dry friction's limit)")),
         "pinching": _PINCHING,
         "degradation": _DEGRADATION,
         "rate_dependence": (Param("viscous", "out", "kN*s/mm", 0.0, 2.0 * f / ctx.v_rms,
@@ -399,22 +413,29 @@ def finish(ctx: Context, values: Mapping[str, float],
     if fc or cv:
         v = np.zeros_like(x)
         v[1:] = np.diff(x) / np.diff(rec.time)
-        out = (out + friction_force(x, v, fc, values.get("slip", 0.0))
+        out = (out + friction_force(x, v, fc, values.get("slip", 0.0), values.get("v0", 0.0))
                + rate_force(v, cv, values.get("rate_exponent", 1.0), rec.velocity_scale))
     return out, x + values.get("disp_bias", 0.0)
 
 
-def friction_force(x: FloatArray, v: FloatArray, coulomb: float, slip: float) -> FloatArray:
+def friction_force(x: FloatArray, v: FloatArray, coulomb: float, slip: float,
+                   v0: float = 0.0) -> FloatArray:
     """Coulomb friction behind a spring (a Jenkins element: elastic-perfectly-plastic on the
-    piston travel, slipping at ``coulomb`` after ``slip`` mm); ``slip`` 0 is the rigid
-    fixture, ``coulomb·sign(v)`` held through holds."""
+    piston travel, slipping at ``coulomb`` after ``slip`` mm), regularised in velocity by
+    ``tanh(v/v0)``. Both regularisations of dry friction's ``coulomb·sign(v)`` have it as their
+    limit: ``slip`` 0 is the rigid fixture (``sign(v)`` held through holds), ``v0`` 0 the
+    unregularised slider; with both, the Jenkins force times ``|tanh(v/v0)|``."""
     if not coulomb:
         return np.zeros_like(x)
-    if slip <= 1e-9 * (float(np.max(np.abs(x))) or 1.0):
+    rigid = slip <= 1e-9 * (float(np.max(np.abs(x))) or 1.0)
+    if rigid and v0 > 0.0:
+        smooth: FloatArray = coulomb * np.tanh(v / v0)
+        return smooth
+    if rigid:
         return coulomb * held_sign(v)
     out: FloatArray = drive(LAW_BILINEAR, np.array([coulomb / slip, coulomb, 0.0]), x, 0.0,
                             DZ_MAX)
-    return out
+    return out * np.abs(np.tanh(v / v0)) if v0 > 0.0 else out
 
 
 def rate_force(v: FloatArray, viscous: float, exponent: float, v_ref: float) -> FloatArray:

@@ -17,20 +17,21 @@ physics. ``diagnose A B C --same-device`` therefore:
    per record, so a magnitude may differ between tests. Holding the law at the joint baseline
    instead would not do: a law fitted to records that all carry the effect has absorbed what it
    can of it, and the effect alone on top no longer shrinks anything.
-3. **Consistent effects.** An effect *explains the device* when its joint candidate shrinks the
-   withheld gaps of the records above the noise floor by at least
-   :data:`~.verdict.MIN_SHRINK_PCT` on average and makes none worse by more than
-   :data:`WORSE_PCT` (one effect may matter more in one test than in another: a pin gap is a
-   larger share of a small-amplitude test); it is *consistent* when every record carries it
-   (one of its per-record parameters more than three standard deviations from zero), else
-   *partial*. They are ranked consistent first, then by their mean score (shrink −
-   :data:`~.verdict.PARSIMONY_PCT` per parameter of one record); the first one is the device's
-   story. Pinching and degradation on a law that is not Bouc-Wen are measured from the joint
-   Bouc-Wen law and must leave less than the device's own; with a named law, when another
-   family's shared law alone shrinks the gaps more than any effect, the story is
-   ``baseline_misfit`` naming it (the single-record rules). Its parameters are listed per
-   record with a flag saying whether they agree (within :data:`MAGNITUDE_SPREAD` of their
-   median, or within three combined standard deviations).
+3. **Consistent effects.** The single record's selection rule (``decision``), on the device:
+   a joint candidate's evidence is its BIC on the withheld parts of the records above the
+   noise floor, Σ_records Σ_channel n_eff · ln(gap²) + k · ln(Σ n_eff), with n_eff each
+   record's effective withheld samples under the shared law (:func:`.scored.evidence_samples`)
+   and k the parameters the records estimate (shared and per record, none at a bound). An
+   effect *explains the device* when its BIC is below the shared law's (one effect may matter
+   more in one test than in another: a pin gap is a larger share of a small-amplitude test);
+   it is *consistent* when every record carries it (one of its per-record parameters more than
+   three standard deviations from zero), else *partial*. They are ranked consistent first,
+   then by their BIC; the first one is the device's story. Pinching and degradation on a law
+   that is not Bouc-Wen are judged against the device's own law too; with a named law, when
+   another family's shared law alone has a lower BIC than the shared law and than every
+   effect, the story is ``baseline_misfit`` naming it (the single-record rules). Its
+   parameters are listed per record with a flag saying whether they agree (within
+   :data:`MAGNITUDE_SPREAD` of their median, or within three combined standard deviations).
 4. **Departures.** Each record is then diagnosed on its own with the story's law and the story
    effect at that record's magnitude *held* (or the joint baseline, with no story): its verdict
    is what departs from the device's story in that test, and a ``baseline_misfit`` or
@@ -74,7 +75,7 @@ from .model import (
 )
 from .names import AUTO_FAMILIES
 from .nocommand import hidden_effects
-from .scored import MIN_SHRINK_PCT, PARSIMONY_PCT, at_bound
+from .scored import at_bound, evidence_samples, information
 from .scored import gap as _gap
 from .verdict import Options, diagnose, stop_of
 
@@ -88,9 +89,7 @@ their median (or within three combined standard deviations of it)."""
 AGREE_FLOOR = 0.01
 """A share of a parameter's range below which values count as equal (see ``_agree``)."""
 NOT_EFFECTS = frozenset({"none", "baseline_misfit", "unexplained"})
-WORSE_PCT = 5.0
-"""An effect that makes one record's withheld gap worse by more than this does not explain the
-device, whatever it does to the others."""
+Gaps = dict[str, float | None]
 JOINT_CANDIDATE_EVALUATIONS = 30
 """As a single record's candidate fit (``verdict``): from the joint baseline, few steps."""
 FloatArray = npt.NDArray[np.float64]
@@ -152,14 +151,28 @@ class _Joint:
     std: list[dict[str, float]]
     before: list[float]
     after: list[float]
+    after_gaps: list[Gaps]
+    """Each record's withheld gap per channel (``scored.gap``), for the evidence."""
     n_params: int
     """Parameters a single record's candidate would have: shared effect ones plus own."""
     bounds: dict[str, tuple[float, float]]
     """(lower, upper) of every parameter (the first record's context: the flags' tolerance)."""
+    shared_effect: list[str]
+    """The effect's own parameters shared by the records (pinching's, degradation's)."""
 
     def at_bound(self, name: str, side: str, i: int) -> bool:
         """Record ``i``'s ``name`` at its ``side`` bound (:func:`.scored.at_bound`)."""
         return at_bound(self.values[i][name], *self.bounds[name], side)
+
+    def n_free(self, active: Sequence[int]) -> int:
+        """The parameters the records in ``active`` estimate: the shared effect parameters and
+        each record's own, none at a bound (:attr:`.scored.Scored.free`, on the device)."""
+        def free(name: str, i: int) -> bool:
+            hi = self.bounds[name][1]
+            return not (self.at_bound(name, "lower", i)
+                        or (math.isfinite(hi) and self.at_bound(name, "upper", i)))
+        shared = [n for n in self.shared_effect if free(n, active[0])] if active else []
+        return len(shared) + sum(free(n, i) for i in active for n in self.own)
 
     def shrink(self, i: int) -> float:
         b, a = self.before[i], self.after[i]
@@ -228,7 +241,7 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
             max_nfev=JOINT_CANDIDATE_EVALUATIONS,
             jac=lambda x: _jacobian(parts, x, lower, upper, owner), tolerance=1e-5)
     sd = parameter_std(sol.residual, sol.jacobian)
-    values, stds, after = [], [], []
+    values, stds, after, after_gaps = [], [], [], []
     for i in range(n):
         v = values_of(sol.x, i)
         k = len(shared) + i * len(own)
@@ -236,48 +249,88 @@ def fit_joint_candidate(kind: str, effect: str, cals: Sequence[Context],
         stds.append({p.name: float(sd[k + j]) for j, p in enumerate(own)}
                     | {p.name: float(sd[j]) for j, p in enumerate(shared)})
         force, disp = predict(specs[i], fulls[i], v)
-        after.append(_total(fulls[i].record, force, disp, withheld[i]))
+        after_gaps.append(_gap(fulls[i].record, force, disp, withheld[i]))
+        after.append(_total(after_gaps[-1]))
     effect_shared = [p for p in shared if p.name in {q.name for q in
                                                      effect_parameters(ref_ctx(cals))[effect]}]
-    return _Joint(effect, [p.name for p in own], values, stds, list(before), after,
+    return _Joint(effect, [p.name for p in own], values, stds, list(before), after, after_gaps,
                   len(effect_shared) + len(own),
-                  {p.name: (p.lo, p.hi) for p in [*shared, *own]})
+                  {p.name: (p.lo, p.hi) for p in [*shared, *own]},
+                  [p.name for p in effect_shared])
 
 
-def _better_family(alternatives: Mapping[str, list[float]], before: Sequence[float],
-                   story: _Joint | None, floor: float) -> tuple[str, float] | None:
-    """(family, mean shrink %) when another family's shared law alone shrinks the gaps of the
-    records above the floor by :data:`~.verdict.MIN_SHRINK_PCT` on average and leaves less
-    than the story's effect does (the single-record rule, on the device)."""
-    active = [i for i, b in enumerate(before) if b >= floor]
+def _better_family(alternatives: Mapping[str, tuple[list[Gaps], int]], before: Sequence[Gaps],
+                   story_bic: float | None, evidence: Evidence, floor: float
+                   ) -> tuple[str, float] | None:
+    """(family, mean shrink %) when another family's shared law alone (``alternatives``: its
+    gaps and how many law parameters it has beyond the device's) has a lower BIC on the
+    withheld parts than the shared law and than the story's effect (the single-record rule,
+    on the device)."""
+    active = _active(before, floor)
     if not alternatives or not active:
         return None
-
-    def mean(gaps: Sequence[float]) -> float:
-        return sum(gaps[i] for i in active) / len(active)
-
-    family = min(alternatives, key=lambda k: mean(alternatives[k]))
-    shrink = 100.0 * (1.0 - mean(alternatives[family]) / mean(before))
-    if shrink < MIN_SHRINK_PCT or (story is not None
-                                   and mean(story.after) <= mean(alternatives[family])):
+    bic = {k: _device_bic(g, evidence, active, extra)
+           for k, (g, extra) in alternatives.items()}
+    family = min(bic, key=lambda k: bic[k])
+    if bic[family] >= _device_bic(before, evidence, active, 0) or (
+            story_bic is not None and story_bic <= bic[family]):
         return None
-    return family, shrink
+
+    def mean(gaps: Sequence[Gaps]) -> float:
+        return sum(_total(gaps[i]) for i in active) / len(active)
+
+    return family, 100.0 * (1.0 - mean(alternatives[family][0]) / mean(before))
+
+
+Evidence = list[tuple[float, float | None]]
+"""Each record's effective withheld samples per channel (force, displacement)."""
+
+
+def _active(before: Sequence[Gaps], floor: float) -> list[int]:
+    """The records whose withheld gap under the shared law is above the noise floor."""
+    return [i for i, b in enumerate(before) if _total(b) >= floor]
+
+
+def _device_bic(gaps: Sequence[Gaps], evidence: Evidence, active: Sequence[int],
+                k: int) -> float:
+    """The BIC of a prediction of the ``active`` records' withheld parts: each record's
+    likelihood term (:func:`.scored.information` with no parameter) summed, plus k · ln of
+    every channel's effective samples (module doc)."""
+    total = sum(information(gaps[i], evidence[i], 0) for i in active)
+    samples = sum(n for i in active for n in evidence[i] if n)
+    return total + k * math.log(max(samples, 2.0))
+
+
+def _evidence(kind: str, law: Mapping[str, float], cals: Sequence[Context],
+              fulls: Sequence[Context], withheld: Sequence[slice]) -> Evidence:
+    """Each record's effective withheld samples per channel under the shared law
+    (:func:`.scored.evidence_samples` of its withheld residual)."""
+    spec = make_spec(ref_ctx(cals), kind, [], law)
+    out: Evidence = []
+    for full, part in zip(fulls, withheld, strict=True):
+        force, disp = predict(spec, full, law)
+        rec = full.record
+        out.append((evidence_samples((rec.force - force)[part]),
+                    None if rec.meas_disp is None else
+                    evidence_samples((rec.meas_disp - disp)[part])))
+    return out
 
 
 def _gaps(kind: str, law: Mapping[str, float], cals: Sequence[Context],
-          fulls: Sequence[Context], withheld: Sequence[slice]) -> list[float]:
-    """Each record's withheld gap (total NRMS %) under law ``kind`` with values ``law``."""
+          fulls: Sequence[Context], withheld: Sequence[slice]) -> list[Gaps]:
+    """Each record's withheld gap (NRMS % per channel, ``scored.gap``) under law ``kind``
+    with values ``law``."""
     spec = make_spec(ref_ctx(cals), kind, [], law)
     out = []
     for full, part in zip(fulls, withheld, strict=True):
         force, disp = predict(spec, full, law)
-        out.append(_total(full.record, force, disp, part))
+        out.append(_gap(full.record, force, disp, part))
     return out
 
 
-def _total(record: Record, force: FloatArray, disp: FloatArray, part: slice) -> float:
+def _total(gaps: Gaps) -> float:
     """The withheld gap's total NRMS in % (``verdict``'s measure, one home)."""
-    total = _gap(record, force, disp, part)["total_pct"]
+    total = gaps["total_pct"]
     return math.inf if total is None else float(total)
 
 
@@ -302,25 +355,27 @@ def _agree(values: list[float], stds: list[float], span: float) -> bool:
 
 
 def _present(j: _Joint, i: int) -> bool:
-    """Whether record ``i`` carries the effect: one of its own parameters is more than three
-    standard deviations from zero (an effect with shared parameters only: always)."""
+    """Whether record ``i`` carries the effect: one of its own parameters the record estimates
+    (not at its lower bound, where its std is no measure) is more than three standard
+    deviations from zero (an effect with shared parameters only: always)."""
     if not j.own:
         return True
-    return any(abs(j.values[i][n]) > 3.0 * j.std[i].get(n, math.inf) for n in j.own)
+    return any(not j.at_bound(n, "lower", i)
+               and abs(j.values[i][n]) > 3.0 * j.std[i].get(n, math.inf) for n in j.own)
 
 
 def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
-                units: Mapping[str, str], device_before: Sequence[float]
+                units: Mapping[str, str], device_before: Sequence[Gaps], evidence: Evidence
                 ) -> list[dict[str, Any]]:
     """The joint candidates that explain the device (module docstring): the consistent ones
-    (present in every record) first, then the partial ones, each by its mean score. A
-    candidate measured from another family's baseline must also leave less, on average, than
-    the device's own law (a pinching that shrinks Bouc-Wen's gap but not steel02's is a
-    family change, not an effect)."""
-    active = [i for i in range(len(sources)) if device_before[i] >= floor]
+    (present in every record) first, then the partial ones, each by its BIC. A candidate
+    measured from another family's baseline is judged against the device's own law too (a
+    pinching that shrinks Bouc-Wen's gap but not steel02's is a family change, not an
+    effect)."""
+    active = _active(device_before, floor)
     if not active:
         return []
-    device_mean = sum(device_before[i] for i in active) / len(active)
+    base_bic = _device_bic(device_before, evidence, active, 0)
     out = []
     named = {j.effect for j in joints}
     for j in joints:
@@ -330,8 +385,8 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
             continue  # a rate law become Coulomb friction: the friction candidate says it
         shrinks = [j.shrink(i) for i in active]
         mean = sum(shrinks) / len(shrinks)
-        if mean < MIN_SHRINK_PCT or min(shrinks) < -WORSE_PCT or (
-                sum(j.after[i] for i in active) / len(active) >= device_mean):
+        bic = _device_bic(j.after_gaps, evidence, active, j.n_free(active))
+        if bic >= base_bic:
             continue
         names = [*(k for k in j.values[0] if k not in j.own and k in j.std[0]
                    and k in units), *j.own]
@@ -350,10 +405,10 @@ def _explaining(joints: Sequence[_Joint], sources: Sequence[str], floor: float,
                     "absent_from": [sources[i] for i, p in zip(active, present, strict=True)
                                     if not p],
                     "mean_shrink_pct": mean, "shrink_pct": shrinks,
-                    "mean_score": mean - PARSIMONY_PCT * j.n_params,
+                    "delta_bic": bic - base_bic,
                     "records": [sources[i] for i in active], "params": params,
                     "magnitudes_agree": all(p["agree"] for p in params.values())})
-    return sorted(out, key=lambda c: (c["consistent"], c["mean_score"]), reverse=True)
+    return sorted(out, key=lambda c: (c["consistent"], -c["delta_bic"]), reverse=True)
 
 
 def diagnose_device(records: Sequence[Record], options: Options | None = None) -> dict[str, Any]:
@@ -382,16 +437,25 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
             selection["criterion"] = ("BIC on the calibration force residual, all records "
                                       "together")
         law = fitted[kind][0]
-    before = _gaps(kind, law, cals, fulls, withheld)
-    alternatives: dict[str, list[float]] = {}  # other families' gaps (a named baseline)
+    before_gaps = _gaps(kind, law, cals, fulls, withheld)
+    before = [_total(g) for g in before_gaps]
+    evidence = _evidence(kind, law, cals, fulls, withheld)
+    # other families' gaps and extra law parameters (a named baseline)
+    alternatives: dict[str, tuple[list[Gaps], int]] = {}
     if opts.fit_baseline and opts.baseline != AUTO:
-        alternatives = {k: _gaps(k, fit_joint(k, cals)[0], cals, fulls, withheld)
-                        for k in AUTO_FAMILIES if k != kind}
+        n_own = len(make_spec(ref_ctx(cals), kind, []).params)
+        for k in AUTO_FAMILIES:
+            if k != kind:
+                values, _mse, n_k = fit_joint(k, cals)
+                alternatives[k] = (_gaps(k, values, cals, fulls, withheld),
+                                   max(n_k - n_own, 0))
     family_before = before  # what a candidate driving Bouc-Wen is measured from
     if kind in NOT_BOUC_WEN and {"pinching", "degradation"} & set(opts.effects):
-        family_before = alternatives.get("bouc-wen") or _gaps(
-            "bouc-wen", (fitted["bouc-wen"][0] if opts.fit_baseline and "bouc-wen" in fitted
-                         else fit_joint("bouc-wen", cals)[0]), cals, fulls, withheld)
+        family_before = [_total(g) for g in (
+            alternatives["bouc-wen"][0] if "bouc-wen" in alternatives else _gaps(
+                "bouc-wen", (fitted["bouc-wen"][0] if opts.fit_baseline
+                             and "bouc-wen" in fitted else fit_joint("bouc-wen", cals)[0]),
+                cals, fulls, withheld))]
     no_command = any(r.no_command for r in records)
     hidden = {e for r in records for e in hidden_effects(r, opts.effects)}
     joint_effects = [e for e in opts.effects if e != "sensor_noise" and e not in hidden]
@@ -401,7 +465,8 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
               for e in joint_effects]
     units = {p.name: p.unit for ps in effect_parameters(ref_ctx(cals)).values() for p in ps}
     sources = [r.source for r in records]
-    explaining = _explaining(joints, sources, opts.noise_floor_pct, units, before)
+    explaining = _explaining(joints, sources, opts.noise_floor_pct, units, before_gaps,
+                             evidence)
     consistent = [c for c in explaining if c["consistent"]]
     top = explaining[0] if explaining else None
     story_joint = next((j for j in joints if top is not None and j.effect == top["effect"]),
@@ -429,17 +494,20 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
                            "gap_before_pct": result.verdict.gap_before_pct,
                            "gap_after_pct": result.verdict.gap_after_pct,
                            "departures": departures})
+    story_bic = None if top is None else top["delta_bic"] + _device_bic(
+        before_gaps, evidence, _active(before_gaps, opts.noise_floor_pct), 0)
     story: dict[str, Any]
     if all(b < opts.noise_floor_pct for b in before):
         story = {"effect": "none", "explanation": "every record is within the noise floor of "
                                                   "the shared law"}
-    elif (better := _better_family(alternatives, before, story_joint,
+    elif (better := _better_family(alternatives, before_gaps, story_bic, evidence,
                                    opts.noise_floor_pct)) is not None:
         family, shrink = better
         story = {"effect": "baseline_misfit", "better_family": family,
                  "explanation": f"only a change of law family closes the gaps: one shared "
-                                f"{family} law shrinks them by {shrink:.1f} % on average, more "
-                                f"than any effect on the {kind} law"
+                                f"{family} law shrinks them by {shrink:.1f} % on average, its "
+                                f"withheld evidence (BIC) better than any effect's on the "
+                                f"{kind} law"
                                 + ("" if top is None else f" (best: {top['effect']}, "
                                    f"{top['mean_shrink_pct']:.1f} %)")}
     elif top is not None and top["consistent"]:
@@ -461,10 +529,9 @@ def diagnose_device(records: Sequence[Record], options: Options | None = None) -
                                 "records, not of the device"}
     else:
         story = {"effect": "no_consistent_effect",
-                 "explanation": f"no candidate shrinks the records' gaps by {MIN_SHRINK_PCT:g} %"
-                                f" on average without making one worse by {WORSE_PCT:g} %, "
-                                f"with one shared {kind} law: each record's verdict is its "
-                                "own departure"}
+                 "explanation": "no candidate's withheld evidence (BIC over the records) "
+                                f"beats the one shared {kind} law's: each record's verdict "
+                                "is its own departure"}
     return {
         "schema": SCHEMA,
         "records": sources,

@@ -21,17 +21,15 @@ from .fit import Fit
 from .load import Record
 from .model import Param, baseline_report
 
-__all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "MIN_SHRINK_PCT", "PARSIMONY_PCT", "Scored",
+__all__ = ["BOUND_TOLERANCE", "MAX_RELATIVE_STD", "PARSIMONY_PCT", "Scored",
            "at_bound", "effect_size", "evidence_samples", "finite", "gap", "information", "rms",
            "systematic_floor", "without_noise"]
 
 FloatArray = npt.NDArray[np.float64]
 
 PARSIMONY_PCT = 2.0
-"""Score = shrink % − this per fitted parameter: the table's ranking and ``--same-device``'s
-rule; a single record's verdict is chosen by :func:`information`."""
-MIN_SHRINK_PCT = 20.0
-"""The share of the gap a device's joint candidate must shrink on average (``multi``)."""
+"""Score = shrink % − this per fitted parameter: the candidate table's ranking only; the
+verdict (of one record and of ``--same-device``) is chosen by :func:`information`."""
 GAP_ZERO_PCT = 1e-6
 """A withheld gap below this (NRMS %) is rounding noise: no shrink is defined against it."""
 MAX_RELATIVE_STD = 0.5

@@ -215,7 +215,7 @@ def diagnose(record: Record, options: Options | None = None,
                  None if record.meas_disp is None else
                  evidence_samples(((record.meas_disp - d0) / d_scale)[withheld]))
         decided = decide(before, singles, pairs, families, policy, systematic_cal,
-                         spec0.baseline, n_eff)
+                         spec0.baseline, n_eff, sys_floor)
         noise_single = next((s for s in singles if s.name == "sensor_noise"), None)
         if (decided["effect"] in ("unexplained", "baseline_misfit") and noise_single is not None
                 and noise_pct > policy.ordinary_noise_pct

@@ -104,3 +104,44 @@ def test_layer_shares_add_to_100_when_layers_cancel() -> None:
     assert all(0.0 <= s <= 100.0 for s in shares), shares
     assert abs(sum(shares) - 100.0) < 1e-6
     assert shares[0] > shares[2]
+
+
+def _named(verdict: dict[str, object]) -> set[str]:
+    """The effects a verdict names: its winner, and both stories when it tells two."""
+    stories = verdict.get("stories") or []
+    assert isinstance(stories, list)
+    return {str(verdict["effect"]), *(str(s["effect"]) for s in stories)}
+
+
+def test_tanh_friction_near_the_coulomb_limit_is_friction() -> None:
+    """Coulomb friction regularised by tanh(v/v0), v0 at 2 % of the peak velocity (a common
+    lab and solver form of dry friction): friction, or two stories containing it — never a
+    confident rate law (a power law with its exponent near the Coulomb limit fitted it
+    better than friction's old form, behind a spring only). v0 is measured near its value."""
+    dt, coulomb = 0.01, 1.4
+    cmd = _command(33)
+    v = np.diff(cmd, prepend=cmd[0]) / dt
+    v0 = 0.02 * float(np.max(np.abs(v)))
+    options = Options(effects=EFFECTS, pairs=False)
+    result = diagnose(_record(coulomb * np.tanh(v / v0), cmd, dt, 33), options).to_json()
+    verdict = result["verdict"]
+    assert "friction" in _named(verdict), verdict["explanation"]
+    friction = next(e for e in result["effects"] if e["name"] == "friction")
+    assert abs(friction["params"]["coulomb"]["value"] - coulomb) < 0.1 * coulomb
+    assert 0.3 * v0 < friction["params"]["v0"]["value"] < 3.0 * v0
+
+
+def test_unregularised_coulomb_friction_is_its_limit() -> None:
+    """Coulomb friction as sign(v): friction, fitted at its limit (v0 at its lower bound, not
+    counted as estimated), so the regularisation costs the plain form nothing."""
+    dt, coulomb = 0.01, 1.4
+    cmd = _command(34)
+    v = np.diff(cmd, prepend=cmd[0])
+    options = Options(effects=EFFECTS, pairs=False)
+    result = diagnose(_record(coulomb * np.sign(v), cmd, dt, 34), options).to_json()
+    assert result["verdict"]["effect"] == "friction", result["verdict"]["explanation"]
+    params = _winner(result)["params"]
+    assert isinstance(params, dict)
+    assert abs(params["coulomb"]["value"] - coulomb) < 0.1 * coulomb
+    v_rms = float(np.sqrt(np.mean(np.diff(cmd) ** 2))) / dt
+    assert params["v0"]["value"] < 0.01 * v_rms

@@ -5,8 +5,6 @@ bench's credit. The forms the selection rule does not yet name right are marked 
 failures, strictly: a rule that starts naming one fails the test until the mark is removed, so
 this list is the measured state, not a wish (``BENCHMARKS.md``, "Diagnosis", bad cases):
 
-* friction as ``tanh(v/v0)`` with v0 at 5 % of the peak velocity is taken for a rate law at a
-  small exponent (the withheld evidence prefers it clearly: not a two-story case);
 * pinching as an elastic slip spring in series is taken for a gap with smooth contact, and as a
   force reduction near zero displacement for a law misfit;
 * this short record's linear viscosity (4 % of fy at the RMS velocity) is below what its
@@ -22,8 +20,6 @@ from benchmarks.diagnosis.forms import FORMS, form_record
 from fresco_bridge.diagnosis.verdict import diagnose
 
 NOT_YET = {
-    "friction/tanh-5": "named rate_dependence: the withheld data prefer a rate law at a small "
-                       "exponent (ΔBIC 13) to rigid or spring-backed Coulomb friction",
     "pinching/slip-spring": "named backlash: a slip spring looks like a gap with smooth contact",
     "pinching/near-zero": "named baseline_misfit on this record",
     "rate_dependence/linear": "named none on this short record: 4 % of fy at the RMS velocity "
