@@ -4,7 +4,7 @@ it, instead of the whole record (ready-after-resume bounded whatever the run's l
 
 A checkpoint says how much of the run it covers as counts the record can be checked against:
 the source's observations and each twin's commits. On resume, the record's history (rebuilt by
-``build.preload_from_record``) is cut after those counts; a checkpoint the record does not
+``build.RecordedHistory``) is cut after those counts; a checkpoint the record does not
 reach (the bridge was killed between the snapshot and the record's write), one written for
 other updaters, or an unreadable one is not used: the whole record is replayed, as before.
 The file is written privately and atomically (``record.rundir.write_private``), off the event
