@@ -299,7 +299,7 @@ class RunRecord:
         self.flush(sync=True, urgent=True)
 
     def update(self, site: str, session: int, step: int, through: int, seconds: float,
-               error: float | None) -> None:
+               error: float | None, upto: tuple[int, int] | None = None) -> None:
         """An updatable site's committed ``step`` learned through source step ``through`` in
         ``seconds`` of updating, with the source's one-step ``error`` (derived data, after its
         step line: the next commit or event asks for its sync; the site's pending items wait
@@ -308,7 +308,8 @@ class RunRecord:
             return
         t = _monotonic() - self._t0
         self._buf.append(self._enc.line(t, "update", site, session,
-                                        self._enc.update(step, through, seconds, error)))
+                                        self._enc.update(step, through, seconds, error,
+                                                         upto)))
         self._seq += 1
         self.flush()
 

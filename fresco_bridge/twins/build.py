@@ -128,10 +128,11 @@ class _Replayed:
 class RecordedHistory:
     """Each learner starts where the interrupted run stopped (a reader of the resume's one
     pass over the record, ``record/scan.py``): the source's committed steps keyed by
-    (session, step) and each twin's committed trials with how far each learned (the source's
-    session open then; through the twin's step if its update line says same-step, else the
-    step before), in the record's order (the order the bridge saw them), so the twins'
-    answers after ``--resume`` equal an uninterrupted run's."""
+    (session, step) and each twin's committed trials with how far each learned (its update
+    line's ``upto`` if it has one, else the source's session open then, through the twin's
+    step if its update line says same-step, else the step before), in the record's order
+    (the order the bridge saw them), so the twins' answers after ``--resume`` equal an
+    uninterrupted run's."""
 
     def __init__(self, learners: Mapping[str, Learner], run_dir: Path,
                  configs: Sequence[UpdatableSiteConfig]) -> None:
@@ -160,6 +161,10 @@ class RecordedHistory:
             self._committed(site, key, int(rec["step"]))
         elif kind == "update" and site in self._of_twin and site in self._of_twin[site].awaiting:
             replayed = self._of_twin[site]
+            upto = rec.get("upto")
+            if upto is not None:  # learned less than it asked for: exactly this far
+                replayed.twin_committed(site, (int(upto[0]), int(upto[1])))
+                return
             step = replayed.awaiting[site][1]
             same = site in self._same_step and int(rec.get("through", -1)) == step
             replayed.twin_committed(site, (replayed.source_session, step if same else step - 1))

@@ -31,9 +31,10 @@ __all__ = ["Checkpoint", "CheckpointWriter", "checkpoint_path", "history_after",
 
 log = logging.getLogger("fresco_bridge.twins")
 
-MAGIC = b"fresco-bridge learner checkpoint 2\n"
+MAGIC = b"fresco-bridge learner checkpoint 3\n"
 """The file's first line: a checkpoint of another format is not read (2: ``online_improved``
-keeps its do-no-harm errors as running means, which a version-1 state cannot resume)."""
+keeps its do-no-harm errors as running means, which a version-1 state cannot resume; 3: each
+twin's background-learning state, ``twins/catchup.py``)."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ weights), and two seeded updaters fed the same steps hold the same parameters.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import logging
 import math
@@ -43,14 +44,15 @@ NICE = 10
 """How much lower than the bridge the worker runs (``os.nice``)."""
 
 Message = tuple[Any, ...]
-"""``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step))``,
-``("commit", twin)``,
+"""``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step)[,
+cap])`` (``cap``: learn at most this many of the steps it may, ``twins/catchup.py``; absent:
+all of them, as a replay must), ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
 step))``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
-"""``("trial", id, force, tangent, trained_through, update_seconds,
-one_step_error)``, ``("initial", id, tangent)``,
-``("sync", id, trained_through)``, ``("learned", id)``, ``("snapshot", id, pickled
+"""``("trial", id, force, tangent, trained_through, update_seconds, one_step_error,
+(session, step) learned through, steps it asked for and has not learned)``,
+``("initial", id, tangent)``, ``("sync", id, trained_through)``, ``("snapshot", id, pickled
 LearnerState)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
 
@@ -90,6 +92,13 @@ class _Twin:
     timed_step: int = -1
     """The twin step (its commits so far) ``update_seconds`` and ``one_step_error`` belong
     to."""
+    learned: tuple[int, int] = (0, 0)
+    """The (session, step) of the last observation applied (learned or rejected)."""
+    wanted: tuple[int, int] = (0, 0)
+    """How far the twin may learn in the background: the farthest ``through`` asked of it."""
+    mid_step: bool = False
+    """A trial since the last commit: nothing is learned in the background until the commit
+    (a replay learns a step's steps at its committed trial: ``twins/catchup.py``)."""
 
 
 @dataclass
@@ -116,10 +125,13 @@ class LearnerState:
             twin = self.twins[msg[1]]
             twin.updater.twin.commit()
             twin.commits += 1
+            twin.mid_step = False
             return None
         if kind == "trial":
-            _, rid, name, d, through = msg
-            twin = self._learned(name, (int(through[0]), int(through[1])))
+            rid, name, d, through = msg[1:5]
+            key = (int(through[0]), int(through[1]))
+            twin = self._learned(name, key, limit=msg[5] if len(msg) > 5 else None)
+            twin.mid_step, twin.wanted = True, max(twin.wanted, key)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -128,7 +140,7 @@ class LearnerState:
                 return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
                         f"{tangent!r} at d = {d!r}")
             return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds,
-                    twin.one_step_error)
+                    twin.one_step_error, twin.learned, self._unlearned(twin, key))
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
@@ -137,26 +149,48 @@ class LearnerState:
                 return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
             except (pickle.PicklingError, AttributeError, TypeError) as exc:
                 return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
-        if kind == "learn":  # steps no twin can ask for later: learned now, in the background
-            _, rid, (session, step) = msg
-            for name in self.twins:
-                self._learned(name, (int(session), int(step)), timed=False)
-            return ("learned", rid)
+        if kind == "learn":  # steps no twin can ask for later: learned in the background
+            key = (int(msg[2][0]), int(msg[2][1]))
+            for twin in self.twins.values():
+                twin.wanted = max(twin.wanted, key)
+            return None
         if kind == "sync":
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
-    def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True) -> _Twin:
+    def learn_in_background(self) -> bool:
+        """One source step learned for each twin between its steps that may learn it
+        (``wanted``); whether any such step is left (``twins/catchup.py``)."""
+        left = False
+        for name, twin in self.twins.items():
+            if twin.mid_step or self._unlearned(twin, twin.wanted) == 0:
+                continue
+            self._learned(name, twin.wanted, timed=False, limit=1)
+            left = left or self._unlearned(twin, twin.wanted) > 0
+        return left
+
+    def _unlearned(self, twin: _Twin, through: tuple[int, int]) -> int:
+        """The source steps up to ``through`` the twin has not learned yet."""
+        obs, n = self.observations, twin.applied
+        if n >= len(obs) or obs[n][:2] > through:
+            return 0
+        return bisect.bisect_right(obs, through, lo=n, key=_key) - n
+
+    def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True,
+                 limit: int | None = None) -> _Twin:
         """Twin ``name`` with every source step up to ``through`` ((session, step),
-        inclusive) learned (``timed``: for a trial, whose update time it is)."""
+        inclusive) learned, or the first ``limit`` of those it has not (``timed``: for a
+        trial, whose update time it is)."""
         twin = self.twins[name]
         obs = self.observations
         if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
-        while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
-            _, step, d, f = obs[twin.applied]
+        end = len(obs) if limit is None else min(len(obs), twin.applied + limit)
+        while twin.applied < end and obs[twin.applied][:2] <= through:
+            session, step, d, f = obs[twin.applied]
             twin.applied += 1
+            twin.learned = (session, step)
             try:
                 twin.updater.observe(d, f)
             except UpdaterInputError as exc:
@@ -173,6 +207,10 @@ class LearnerState:
             for t in self.twins.values():
                 t.applied -= learned
         return twin
+
+
+def _key(obs: tuple[int, int, float, float]) -> tuple[int, int]:
+    return obs[0], obs[1]
 
 
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
@@ -195,11 +233,14 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
             return
         outbox.put(("ready",))
         parent = multiprocessing.parent_process()
+        background = False
         while True:
             try:
-                batch = inbox.get(timeout=1.0)
+                batch = inbox.get_nowait() if background else inbox.get(timeout=1.0)
             except queue.Empty:
-                if parent is not None and not parent.is_alive():
+                if background:  # nothing asked: a step of the backlog, then look again
+                    background = state.learn_in_background()
+                elif parent is not None and not parent.is_alive():
                     break  # the bridge was killed: no orphan worker
                 continue
             if batch is None:
@@ -208,6 +249,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
                 reply = _handled(state, msg)
                 if reply is not None:
                     outbox.put(reply)
+            background = True  # whether there is anything to learn: the next empty inbox says
         del limits
     finally:
         end_output()  # its last lines of fd 2 before the channel closes
