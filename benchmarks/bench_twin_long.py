@@ -9,7 +9,9 @@ bilinear source and its ``online_improved`` twin (previous-step), driven over TC
   removed (the whole record replayed). Targets: no HOLD, no NaN; p99 last tenth <= 1.5x the
   first; RSS growth <= 20 MB; ready-after-resume <= 5 s.
 * ``catch-up``: ten source-only sessions of 2,500 steps, then a source + twin session: the
-  twin answers from step 1, each answer within the learner's deadline (2 s).
+  twin answers from step 1, each answer within the learner's deadline (2 s); how many of its
+  answers were learned through less than they asked for (``upto``, ``twins/catchup.py``) and
+  where it caught up.
 
 Everything (the client, the bridge and its learner worker) runs on CPU 1 when the machine has
 it, as under ``taskset -c 1``.
@@ -225,11 +227,22 @@ def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
         finally:
             proc.send_signal(signal.SIGTERM)
             proc.wait(60)
+        (run,) = [p for p in (folder / "runs").iterdir() if p.is_dir()]
+        lines = list(read_record(run))
+        updates = [r for r in lines if r["kind"] == "update" and r.get("site") == "twin1"]
+        behind = [r for r in updates if "upto" in r]
+        caught = [r for r in lines if r.get("event") == "learner-caught-up"]
         print(f"{updater}: {sessions} source-only sessions of {steps} steps (one every "
               f"{1e3 * pace:g} ms at most), then a pair of 200 steps: "
               f"the twin answered every step; first answer {trips[0]:.1f} ms, max "
               f"{float(trips.max()):.1f} ms, p50 {float(np.median(trips)):.2f} ms "
               "(deadline 2000 ms)")
+        first = behind[0]["upto"] if behind and behind[0]["step"] == 1 else None
+        print(f"  answers learned through less than asked (upto): {len(behind)} of "
+              f"{len(updates)}; step 1 learned through source {first or 'all it asked'}; "
+              f"last: {behind[-1]['upto'] if behind else '-'}; caught up at twin step "
+              f"{caught[0].get('step', '?') if caught else '-'} "
+              f"({caught[0]['reason'] if caught else 'not within the pair'})")
 
 
 def main(argv: list[str] | None = None) -> None:
