@@ -16,6 +16,7 @@ import json
 import logging
 import os
 import socket
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -76,7 +77,10 @@ class LastCommit:
 class ResumePoint:
     """Where a record stops, read line by line (one pass, shared with other readers:
     ``record/scan.py``): the last line's sequence number and time, and per site its last
-    session and committed step."""
+    session and committed step. It needs only the commit and event lines (every session
+    opens with an event line) and the last line."""
+
+    KINDS = ("commit", "event")
 
     def __init__(self) -> None:
         self.seq = 0
@@ -85,13 +89,18 @@ class ResumePoint:
         self._sessions: dict[str, int] = {}
 
     def line(self, rec: dict[str, Any]) -> None:
-        self.seq, self.t = int(rec.get("seq", self.seq)), float(rec.get("t", self.t))
+        """A commit or event line (``KINDS``)."""
         site, session = str(rec.get("site", "")), int(rec.get("session", 0))
-        self._sessions[site] = max(self._sessions.get(site, 0), session)
+        if session > self._sessions.get(site, -1):
+            self._sessions[site] = session
         if rec.get("kind") == "commit":
             t = rec.get("time", 0.0)
             self._commits[site] = LastCommit(site, session, int(rec["step"]),
                                              float(t) if isinstance(t, int | float) else 0.0)
+
+    def last_line(self, rec: dict[str, Any]) -> None:
+        """The record's last line (any kind): where the sequence numbers and times go on."""
+        self.seq, self.t = int(rec.get("seq", self.seq)), float(rec.get("t", self.t))
 
     def last_commits(self) -> dict[str, LastCommit]:
         """Per site, the last committed step (a session opened after it counts too)."""
@@ -109,14 +118,15 @@ def last_commits(run_dir: Path) -> dict[str, LastCommit]:
     """Per site, the last committed step of the record (torn tail ignored)."""
     point = ResumePoint()
     for rec in _lines(run_dir):
-        point.line(rec)
+        if rec.get("kind") in ResumePoint.KINDS:
+            point.line(rec)
     return point.last_commits()
 
 
 def last_seq_and_time(run_dir: Path) -> tuple[int, float]:
     point = ResumePoint()
-    for rec in _lines(run_dir):
-        point.line(rec)
+    for rec in deque(_lines(run_dir), maxlen=1):
+        point.last_line(rec)
     return point.seq, point.t
 
 

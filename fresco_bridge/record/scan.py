@@ -11,7 +11,7 @@ every reader in the record's order, then tells each reader the record has ended.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
 
@@ -32,15 +32,18 @@ class ResumeScan:
 
     def __init__(self, directory: Path) -> None:
         self.directory = directory
-        self._readers: list[LineReader] = []
+        self._readers: dict[str | None, list[LineReader]] = {}
         self._ends: list[Callable[[], None]] = []
         self._point: ResumePoint | None = None
 
-    def add(self, reader: LineReader, end: Callable[[], None] | None = None) -> None:
-        """``reader`` gets every line of the pass, ``end`` is called after the last one."""
+    def add(self, reader: LineReader, end: Callable[[], None] | None = None, *,
+            kinds: Collection[str] | None = None) -> None:
+        """``reader`` gets every line of the pass (only those of ``kinds``, if given: most
+        lines are of kinds few readers want), ``end`` is called after the last one."""
         if self._point is not None:
             raise RuntimeError("the record was read already: a reader added later sees nothing")
-        self._readers.append(reader)
+        for kind in (None,) if kinds is None else kinds:
+            self._readers.setdefault(kind, []).append(reader)
         if end is not None:
             self._ends.append(end)
 
@@ -48,14 +51,18 @@ class ResumeScan:
         """The one pass (a torn last line is skipped; ``RunRecord.resume`` moved it aside
         already). A line no reader can take raises ``RecordError`` naming the record."""
         point = ResumePoint()
-        readers = [point.line, *self._readers]
+        self.add(point.line, kinds=ResumePoint.KINDS)
+        every = self._readers.pop(None, [])
+        of_kind = {kind: [*readers, *every] for kind, readers in self._readers.items()}
+        rec: dict[str, Any] = {}
         try:
             for rec in read_record(self.directory):
-                for reader in readers:
+                for reader in of_kind.get(rec["kind"], every):
                     reader(rec)
         except (RecordFormatError, KeyError) as exc:  # a reader's own errors are its own
             raise RecordError(f"resuming {self.directory}: the record cannot be read back: "
                               f"{exc}") from exc
+        point.last_line(rec)
         self._point = point
         for end in self._ends:
             end()

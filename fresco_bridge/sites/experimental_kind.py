@@ -108,7 +108,7 @@ class ExperimentalGroup:
         self._timeout = context.controller_timeout
         if context.resume is not None:
             restore = SpecimenRestore(self._sites, context.resume.directory)
-            context.resume.add(restore.line, restore.end)
+            context.resume.add(restore.line, restore.end, kinds=SpecimenRestore.KINDS)
 
     @property
     def sites(self) -> Mapping[str, Site]:
@@ -156,10 +156,13 @@ class SpecimenRestore:
         self._sent: dict[str, tuple[float, ...] | None] = {}
         self.counts = dict.fromkeys(self._inline, 0)
 
+    KINDS = ("trial", "commit")
+    """The lines it reads."""
+
     def line(self, rec: dict[str, Any]) -> None:
-        name = rec.get("site")
-        entry = self._inline.get(name) if isinstance(name, str) else None
-        if entry is None or rec["kind"] not in ("trial", "commit"):
+        """A trial or commit line (``KINDS``)."""
+        entry = self._inline.get(rec.get("site", ""))
+        if entry is None:
             return
         site, controller = entry
         try:

@@ -145,8 +145,12 @@ class RecordedHistory:
         self._last_trial: dict[tuple[str, int], dict[str, Any]] = {}
         self._last_daq: dict[tuple[str, int], dict[str, Any]] = {}
 
+    KINDS = ("trial", "daq", "commit", "event", "update")
+    """The lines it reads."""
+
     def line(self, rec: dict[str, Any]) -> None:
-        kind, site = rec["kind"], str(rec.get("site", ""))
+        """A line of one of ``KINDS`` (``read_record``'s complete dicts)."""
+        kind, site = rec["kind"], rec.get("site", "")
         if site not in self._by_source and site not in self._of_twin:
             return
         key = (site, int(rec.get("session", 0)))

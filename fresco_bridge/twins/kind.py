@@ -39,7 +39,7 @@ class TwinGroup:
                                                                                  context)
         if context.resume is not None:  # the learners' histories, from the resume's one pass
             history = RecordedHistory(self.learners, context.resume.directory, configs)
-            context.resume.add(history.line, history.end)
+            context.resume.add(history.line, history.end, kinds=RecordedHistory.KINDS)
 
     @property
     def sites(self) -> Mapping[str, Site]:
