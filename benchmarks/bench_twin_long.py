@@ -69,9 +69,10 @@ offline = "{offline}"
 def serve(folder: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, int], float]:
     """A bridge process, its ports and the seconds it took to print its ready line."""
     start = time.perf_counter()
+    log = folder / f"serve-{time.monotonic_ns()}.log"
     proc = subprocess.Popen([sys.executable, "-m", "fresco_bridge.cli", "serve", *args],
                             cwd=folder, stdout=subprocess.PIPE, text=True,
-                            stderr=(folder / f"serve-{time.monotonic_ns()}.log").open("w"))
+                            stderr=log.open("w"))
     assert proc.stdout is not None
     end = time.monotonic() + 600
     while time.monotonic() < end:
@@ -80,7 +81,8 @@ def serve(folder: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, i
             break
     if not m:
         proc.kill()
-        raise RuntimeError("the bridge did not print its ready line")
+        raise RuntimeError("the bridge did not print its ready line; its log ends: "
+                           + "".join(log.read_text().splitlines(keepends=True)[-5:]))
     return proc, (int(m.group(1)), int(m.group(2))), time.perf_counter() - start
 
 

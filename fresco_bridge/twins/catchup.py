@@ -5,12 +5,14 @@ that is said.
 The rule (docs/updatable-sites.md, "Catch-up"): every committed source step is learned, in
 order, once; none is skipped. A twin's trial asks for the source steps its causality allows
 (previous-step: through (S, k − 1); same-step: (S, k)); the worker learns at most
-``CATCH_UP`` of those it has not learned yet, then answers from its model as learned so far.
+``CATCH_UP`` of those it has not learned yet, and stops early once it has spent
+``CATCH_UP_SHARE`` of the learner's deadline past the first two (a loaded host, a law refit
+among them), then answers from its model as learned so far.
 What is left is learned in the background, one step at a time between the twin's steps (never
 between a twin's trial and its commit, so a replay that learns a step's steps at its committed
 trial rebuilds the same model), and by the next trials. So the first trial after any backlog
-waits for at most ``CATCH_UP`` updates, and the backlog shrinks by at least ``CATCH_UP − 1``
-steps per twin step: the twin catches up.
+waits for at most ``CATCH_UP`` updates and about a quarter of the deadline, and the backlog
+shrinks by at least one step per twin step: the twin catches up.
 
 An answer that learned less than it asked for is never passed off as current: its update line
 carries ``upto`` (the source (session, step) it was learned through, ``record/lines.py``,
@@ -22,11 +24,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-__all__ = ["CATCH_UP", "CatchUpEvents"]
+__all__ = ["CATCH_UP", "CATCH_UP_SHARE", "CatchUpEvents"]
 
 CATCH_UP = 32
-"""Source steps a trial may learn before it answers (the worker's cap); at least 2, so a
-twin that learns one new step per step of its own always gains on a backlog."""
+"""Source steps a trial may learn before it answers (the worker's cap)."""
+CATCH_UP_SHARE = 0.25
+"""The share of ``learner_deadline`` a trial may spend learning a backlog past its first two
+steps (two: a twin that learns one new step per step of its own always gains on it)."""
 
 Event = Callable[..., None]
 """``event(kind, reason, **extra)``: an event of the learner's twins."""

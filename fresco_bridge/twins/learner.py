@@ -36,7 +36,7 @@ from .. import WORKER_PROCESS_PREFIX
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 from ..worker_output import OUTPUT, quiet_tracker, relay_output
-from .catchup import CATCH_UP, CatchUpEvents
+from .catchup import CATCH_UP, CATCH_UP_SHARE, CatchUpEvents
 from .checkpoint import Checkpoint, CheckpointWriter, history_counts, resume_point
 from .worker import LearnerSpec, LearnerState, Message, Reply, worker_main
 
@@ -525,7 +525,8 @@ class Learner:
         self._answered_locally.discard(twin)
         try:
             force, tangent, trained, seconds, error, upto, behind = await self._request(
-                ("trial", twin, d, through, CATCH_UP), self.deadline)
+                ("trial", twin, d, through, (CATCH_UP, CATCH_UP_SHARE * self.deadline)),
+                self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise

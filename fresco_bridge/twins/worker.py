@@ -28,6 +28,7 @@ import os
 import pickle
 import queue
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,8 +46,8 @@ NICE = 10
 
 Message = tuple[Any, ...]
 """``("observe", session, step, d, f)``, ``("trial", id, twin, d, (session, step)[,
-cap])`` (``cap``: learn at most this many of the steps it may, ``twins/catchup.py``; absent:
-all of them, as a replay must), ``("commit", twin)``,
+(steps, seconds)])`` (learn at most that many of the steps it may, for at most that long past
+the first two, ``twins/catchup.py``; absent: all of them, as a replay must), ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
 step))``; ``None`` ends the worker."""
 Reply = tuple[Any, ...]
@@ -130,7 +131,8 @@ class LearnerState:
         if kind == "trial":
             rid, name, d, through = msg[1:5]
             key = (int(through[0]), int(through[1]))
-            twin = self._learned(name, key, limit=msg[5] if len(msg) > 5 else None)
+            cap = msg[5] if len(msg) > 5 else (None, None)
+            twin = self._learned(name, key, limit=cap[0], budget=cap[1])
             twin.mid_step, twin.wanted = True, max(twin.wanted, key)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
@@ -178,16 +180,20 @@ class LearnerState:
         return bisect.bisect_right(obs, through, lo=n, key=_key) - n
 
     def _learned(self, name: str, through: tuple[int, int], *, timed: bool = True,
-                 limit: int | None = None) -> _Twin:
+                 limit: int | None = None, budget: float | None = None) -> _Twin:
         """Twin ``name`` with every source step up to ``through`` ((session, step),
-        inclusive) learned, or the first ``limit`` of those it has not (``timed``: for a
-        trial, whose update time it is)."""
+        inclusive) learned, or the first ``limit`` of those it has not, stopping once
+        ``budget`` seconds are spent past the first two (``timed``: for a trial, whose update
+        time it is)."""
         twin = self.twins[name]
         obs = self.observations
         if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
         end = len(obs) if limit is None else min(len(obs), twin.applied + limit)
+        start, stop = twin.applied, None if budget is None else time.perf_counter() + budget
         while twin.applied < end and obs[twin.applied][:2] <= through:
+            if stop is not None and twin.applied - start >= 2 and time.perf_counter() > stop:
+                break
             session, step, d, f = obs[twin.applied]
             twin.applied += 1
             twin.learned = (session, step)

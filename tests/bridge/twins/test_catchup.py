@@ -30,7 +30,7 @@ def test_a_trial_behind_a_backlog_learns_its_cap_and_says_how_far() -> None:
     worker = state()
     for i in range(60):  # a source-only session: 60 steps, none learned yet
         worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
-    reply = worker.handle(("trial", 1, "twin", 0.3, (2, 0), CAP))
+    reply = worker.handle(("trial", 1, "twin", 0.3, (2, 0), (CAP, 60.0)))
     assert reply is not None and reply[0] == "trial"
     assert reply[7] == (1, CAP) and reply[8] == 60 - CAP  # learned through, still behind
     assert not worker.learn_in_background() and reply[7] == worker.twins["twin"].learned
@@ -44,13 +44,24 @@ def test_a_trial_behind_a_backlog_learns_its_cap_and_says_how_far() -> None:
     assert not worker.learn_in_background()  # caught up: nothing asked is left
 
 
+def test_a_trial_past_its_time_budget_still_learns_two_steps() -> None:
+    """A spent budget (a loaded host) stops the trial's learning after two steps: the
+    backlog still shrinks while the twin learns one new step per step."""
+    sd, sf, _ = histories(20)
+    worker = state()
+    for i in range(20):
+        worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
+    reply = worker.handle(("trial", 1, "twin", 0.3, (2, 0), (CAP, 0.0)))
+    assert reply is not None and reply[7] == (1, 2) and reply[8] == 18
+
+
 def test_background_learning_stops_at_what_the_twin_may_learn() -> None:
     """Previous-step: after the twin's trial of step k (through k - 1) the source's step k
     may already be in the worker; it is learned by the next trial, not in the background."""
     sd, sf, _ = histories(10)
     worker = state()
     worker.handle(("observe", 1, 1, float(sd[0]), float(sf[0])))
-    worker.handle(("trial", 1, "twin", 0.1, (1, 0), CAP))
+    worker.handle(("trial", 1, "twin", 0.1, (1, 0), (CAP, 60.0)))
     worker.handle(("observe", 1, 2, float(sd[1]), float(sf[1])))
     worker.handle(("commit", "twin"))
     assert not worker.learn_in_background()
@@ -74,7 +85,7 @@ def test_a_replay_of_the_learned_through_steps_gives_the_same_answers() -> None:
     for k in range(1, 81):  # the pair: source session 2, twin step k, previous-step
         for _ in range(rng.randrange(4)):
             live.learn_in_background()
-        reply = live.handle(("trial", k, "twin", float(td[k]), (2, k - 1), CAP))
+        reply = live.handle(("trial", k, "twin", float(td[k]), (2, k - 1), (CAP, 60.0)))
         assert reply is not None
         answers.append(reply[2])
         assert reply[7] <= (2, k - 1)  # never past what its causality allows
