@@ -50,6 +50,7 @@ CONFIG = """
 [bridge]
 run_dir = "{runs}"
 run_name = "long"
+controller_timeout = {timeout}
 [[sites]]
 name = "damper"
 port = 0
@@ -63,6 +64,7 @@ kind = "updatable"
 learns_from = "damper"
 updater = "{updater}"
 offline = "{offline}"
+learner_deadline = {deadline}
 """
 
 
@@ -135,16 +137,23 @@ def drive(ports: tuple[int, int], steps: int, *, twin: bool, sample: int = 0,
     return trips
 
 
-def long_run(steps: int, without_checkpoint: bool) -> None:
+def config(folder: Path, updater: str, deadline: float) -> Path:
+    """The lab's config (``deadline``: the learner's; the controller timeout 2.5x it)."""
+    cfg = folder / "lab.toml"
+    cfg.write_text(CONFIG.format(runs=folder / "runs", offline=_offline_csv(folder / "offline.csv"),
+                                 updater=updater, deadline=deadline, timeout=2.5 * deadline))
+    return cfg
+
+
+def long_run(steps: int, without_checkpoint: bool, deadline: float) -> None:
     updater = "online_improved"
     with tempfile.TemporaryDirectory(prefix="bench-twin-long-") as tmp:
         folder = Path(tmp)
-        cfg = folder / "lab.toml"
-        cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
+        cfg = config(folder, updater, deadline)
         proc, ports, ready = serve(folder, "--config", str(cfg))
         worker = worker_of(proc.pid)
-        print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step")
+        print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step, "
+              f"learner deadline {deadline:g} s")
         rss: list[tuple[float, float]] = []
 
         def sample(_i: int) -> None:
@@ -197,13 +206,32 @@ def long_run(steps: int, without_checkpoint: bool) -> None:
         for name, remove in variants:
             if remove:
                 checkpoint.unlink(missing_ok=True)
+            begun = time.time()
             second, ports, ready = serve(folder, "--config", str(cfg), "--resume", str(run))
             print(f"ready-after-resume, {name}: {ready:.2f} s (target <= 5)", flush=True)
+            print("  its log, s after the start: " + milestones(folder, begun))
             NANS.clear()
             drive(ports, 5, twin=True, nan_ok=True)
             second.send_signal(signal.SIGKILL)
             second.wait(30)
             print(f"  then 5 steps: the twin answered NaN at {len(NANS)} of them")
+
+
+MILESTONES = {"specimen restored": "one pass over the record read",
+              "resumes from its checkpoint": "checkpoint cut", "RESUMED": "resume point",
+              "live (twins": "worker live"}
+
+
+def milestones(folder: Path, begun: float) -> str:
+    """When the newest bridge log says each resume milestone (its lines' wall times)."""
+    log = max(folder.glob("serve-*.log"), key=lambda p: p.stat().st_mtime)
+    out = []
+    for line in log.read_text().splitlines():
+        for key, name in MILESTONES.items():
+            if key in line:
+                stamp = time.mktime(time.strptime(line[:19], "%Y-%m-%d %H:%M:%S"))
+                out.append(f"{name} {stamp + int(line[20:23]) / 1e3 - begun:.2f}")
+    return ", ".join(out)
 
 
 def _failed(folder: Path, exc: Exception) -> None:
@@ -213,12 +241,10 @@ def _failed(folder: Path, exc: Exception) -> None:
     raise exc
 
 
-def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
+def catch_up(sessions: int, steps: int, pace: float, updater: str, deadline: float) -> None:
     with tempfile.TemporaryDirectory(prefix="bench-twin-catch-up-") as tmp:
         folder = Path(tmp)
-        cfg = folder / "lab.toml"
-        cfg.write_text(CONFIG.format(runs=folder / "runs",
-                                     offline=_offline_csv(folder / "offline.csv"), updater=updater))
+        cfg = config(folder, updater, deadline)
         proc, ports, _ = serve(folder, "--config", str(cfg))
         try:
             for _ in range(sessions):
@@ -238,7 +264,7 @@ def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
               f"{1e3 * pace:g} ms at most), then a pair of 200 steps: "
               f"the twin answered every step; first answer {trips[0]:.1f} ms, max "
               f"{float(trips.max()):.1f} ms, p50 {float(np.median(trips)):.2f} ms "
-              "(deadline 2000 ms)")
+              f"(deadline {1e3 * deadline:g} ms)")
         first = behind[0]["upto"] if behind and behind[0]["step"] == 1 else None
         print(f"  answers learned through less than asked (upto): {len(behind)} of "
               f"{len(updates)}; step 1 learned through source {first or 'all it asked'}; "
@@ -257,13 +283,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--session-steps", type=int, default=2500)
     parser.add_argument("--pace", type=float, default=0.0, help="catch-up: ms per source step")
     parser.add_argument("--updater", default="online_improved", help="catch-up: the updater")
+    parser.add_argument("--learner-deadline", type=float, default=2.0,
+                        help="s (the default's); the controller timeout is 2.5x it")
     args = parser.parse_args(argv)
     _pin(1)
     print(f"load average {os.getloadavg()[0]:.1f}")
     if args.mode == "long":
-        long_run(args.steps, args.without_checkpoint)
+        long_run(args.steps, args.without_checkpoint, args.learner_deadline)
     else:
-        catch_up(args.sessions, args.session_steps, args.pace / 1e3, args.updater)
+        catch_up(args.sessions, args.session_steps, args.pace / 1e3, args.updater,
+                 args.learner_deadline)
 
 
 if __name__ == "__main__":
