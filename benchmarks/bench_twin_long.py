@@ -9,7 +9,9 @@ bilinear source and its ``online_improved`` twin (previous-step), driven over TC
   removed (the whole record replayed). Targets: no HOLD, no NaN; p99 last tenth <= 1.5x the
   first; RSS growth <= 20 MB; ready-after-resume <= 5 s.
 * ``catch-up``: ten source-only sessions of 2,500 steps, then a source + twin session: the
-  twin answers from step 1, each answer within the learner's deadline (2 s).
+  twin answers from step 1, each answer within the learner's deadline (2 s); how many of its
+  answers were learned through less than they asked for (``upto``, ``twins/catchup.py``) and
+  where it caught up.
 
 Everything (the client, the bridge and its learner worker) runs on CPU 1 when the machine has
 it, as under ``taskset -c 1``.
@@ -44,19 +46,23 @@ NANS: list[int] = []
 """The steps the twin answered NaN at (``drive(nan_ok=True)``)."""
 
 
-def lab(folder: Path, updater: str) -> Path:
+def lab(folder: Path, updater: str, deadline: float) -> Path:
     """The source (sim bilinear, yield at 0.75 mm) and its ``updater`` twin with the offline
-    database of ``bench_twin``."""
+    database of ``bench_twin`` (``deadline``: the learner's; the controller timeout 2.5x it)."""
     offline = _offline_csv(folder / "offline.csv")
-    return source_and_twin(folder / "lab.toml", folder / "runs", "long", updater=updater,
-                           fy=15.0, twin=f'offline = "{offline}"\n')
+    path = source_and_twin(folder / "lab.toml", folder / "runs", "long", updater=updater,
+                           fy=15.0, twin=f'offline = "{offline}"\nlearner_deadline = {deadline}\n')
+    path.write_text(path.read_text().replace(
+        'run_name = "long"\n', f'run_name = "long"\ncontroller_timeout = {2.5 * deadline}\n', 1))
+    return path
 
 
 def serve(folder: Path, *args: str) -> tuple[subprocess.Popen[str], tuple[int, ...], float]:
     """A bridge process, its ports and the seconds it took to print its ready line."""
     start = time.perf_counter()
-    proc = start_cli(folder, "serve", *args)
-    ports, _ = started(proc, deadline=600)
+    log = folder / f"serve-{time.monotonic_ns()}.log"
+    proc = start_cli(folder, "serve", *args, stderr=log)
+    ports, _ = started(proc, deadline=600, log=log)  # says why a bridge did not start
     return proc, ports, time.perf_counter() - start
 
 
@@ -105,14 +111,15 @@ def drive(ports: tuple[int, ...], steps: int, *, twin: bool, sample: int = 0,
     return trips
 
 
-def long_run(steps: int, without_checkpoint: bool) -> None:
+def long_run(steps: int, without_checkpoint: bool, deadline: float) -> None:
     updater = "online_improved"
     with tempfile.TemporaryDirectory(prefix="bench-twin-long-") as tmp:
         folder = Path(tmp)
-        cfg = lab(folder, updater)
+        cfg = lab(folder, updater, deadline)
         proc, ports, ready = serve(folder, "--config", str(cfg))
         worker = worker_of(proc.pid)
-        print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step")
+        print(f"start: ready in {ready:.2f} s; {steps} steps, online_improved previous-step, "
+              f"learner deadline {deadline:g} s")
         rss: list[tuple[float, float]] = []
 
         def sample(_i: int) -> None:
@@ -165,13 +172,32 @@ def long_run(steps: int, without_checkpoint: bool) -> None:
         for name, remove in variants:
             if remove:
                 checkpoint.unlink(missing_ok=True)
+            begun = time.time()
             second, ports, ready = serve(folder, "--config", str(cfg), "--resume", str(run))
             print(f"ready-after-resume, {name}: {ready:.2f} s (target <= 5)", flush=True)
+            print("  its log, s after the start: " + milestones(folder, begun))
             NANS.clear()
             drive(ports, 5, twin=True, nan_ok=True)
             second.send_signal(signal.SIGKILL)
             second.wait(30)
             print(f"  then 5 steps: the twin answered NaN at {len(NANS)} of them")
+
+
+MILESTONES = {"specimen restored": "one pass over the record read",
+              "resumes from its checkpoint": "checkpoint cut", "RESUMED": "resume point",
+              "live (twins": "worker live"}
+
+
+def milestones(folder: Path, begun: float) -> str:
+    """When the newest bridge log says each resume milestone (its lines' wall times)."""
+    log = max(folder.glob("serve-*.log"), key=lambda p: p.stat().st_mtime)
+    out = []
+    for line in log.read_text().splitlines():
+        for key, name in MILESTONES.items():
+            if key in line:
+                stamp = time.mktime(time.strptime(line[:19], "%Y-%m-%d %H:%M:%S"))
+                out.append(f"{name} {stamp + int(line[20:23]) / 1e3 - begun:.2f}")
+    return ", ".join(out)
 
 
 def _failed(folder: Path, exc: Exception) -> None:
@@ -181,10 +207,10 @@ def _failed(folder: Path, exc: Exception) -> None:
     raise exc
 
 
-def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
+def catch_up(sessions: int, steps: int, pace: float, updater: str, deadline: float) -> None:
     with tempfile.TemporaryDirectory(prefix="bench-twin-catch-up-") as tmp:
         folder = Path(tmp)
-        cfg = lab(folder, updater)
+        cfg = lab(folder, updater, deadline)
         proc, ports, _ = serve(folder, "--config", str(cfg))
         try:
             for _ in range(sessions):
@@ -195,11 +221,22 @@ def catch_up(sessions: int, steps: int, pace: float, updater: str) -> None:
         finally:
             proc.send_signal(signal.SIGTERM)
             proc.wait(60)
+        (run,) = [p for p in (folder / "runs").iterdir() if p.is_dir()]
+        lines = list(read_record(run))
+        updates = [r for r in lines if r["kind"] == "update" and r.get("site") == "twin1"]
+        behind = [r for r in updates if "upto" in r]
+        caught = [r for r in lines if r.get("event") == "learner-caught-up"]
         print(f"{updater}: {sessions} source-only sessions of {steps} steps (one every "
               f"{1e3 * pace:g} ms at most), then a pair of 200 steps: "
               f"the twin answered every step; first answer {trips[0]:.1f} ms, max "
               f"{float(trips.max()):.1f} ms, p50 {float(np.median(trips)):.2f} ms "
-              "(deadline 2000 ms)")
+              f"(deadline {1e3 * deadline:g} ms)")
+        first = behind[0]["upto"] if behind and behind[0]["step"] == 1 else None
+        print(f"  answers learned through less than asked (upto): {len(behind)} of "
+              f"{len(updates)}; step 1 learned through source {first or 'all it asked'}; "
+              f"last: {behind[-1]['upto'] if behind else '-'}; caught up at twin step "
+              f"{caught[0].get('step', '?') if caught else '-'} "
+              f"({caught[0]['reason'] if caught else 'not within the pair'})")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -212,13 +249,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--session-steps", type=int, default=2500)
     parser.add_argument("--pace", type=float, default=0.0, help="catch-up: ms per source step")
     parser.add_argument("--updater", default="online_improved", help="catch-up: the updater")
+    parser.add_argument("--learner-deadline", type=float, default=2.0,
+                        help="s (the default's); the controller timeout is 2.5x it")
     args = parser.parse_args(argv)
     _pin(1)
     print(f"load average {os.getloadavg()[0]:.1f}")
     if args.mode == "long":
-        long_run(args.steps, args.without_checkpoint)
+        long_run(args.steps, args.without_checkpoint, args.learner_deadline)
     else:
-        catch_up(args.sessions, args.session_steps, args.pace / 1e3, args.updater)
+        catch_up(args.sessions, args.session_steps, args.pace / 1e3, args.updater,
+                 args.learner_deadline)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,8 @@ from .ctl import ControlError, ControlServer, OperatorDesk, socket_path_for
 from .indicators import OnlineMonitor
 from .loops import LoopKind
 from .record import RunRecord
-from .record.recovery import LastCommit, flag_interrupted, last_commits
+from .record.recovery import LastCommit, flag_interrupted
+from .record.scan import ResumeScan
 from .server.connection import SiteListener
 from .server.tcp import TcpConnection
 from .server.tls import TlsConfigError, server_context
@@ -95,16 +96,15 @@ class Bridge:
         cfg = self.config
         run_root = self.run_dir_override or cfg.bridge.run_dir
         resumed: dict[str, LastCommit] = {}
+        scan: ResumeScan | None = None
         if self.resume is not None:
             if not cfg.record.enabled:
                 raise ConfigError("resuming a run needs [record] enabled = true")
             self.record = RunRecord.resume(self.resume, fsync=cfg.record.fsync,
                                            sync_interval=cfg.record.sync_interval,
-                                           min_free_mb=cfg.record.min_free_mb)
-            resumed = last_commits(self.resume)
-            log.warning("run record: %s RESUMED (continues after the last committed step of "
-                        "each site: %s)", self.record.directory,
-                        ", ".join(f"{c.site} step {c.step}" for c in resumed.values()) or "none")
+                                           min_free_mb=cfg.record.min_free_mb,
+                                           read_position=False)
+            scan = ResumeScan(self.resume)  # read once, below, for every kind's readers
         elif cfg.record.enabled:
             self.record = RunRecord.create(
                 run_root, cfg.bridge.run_name,
@@ -121,7 +121,7 @@ class Bridge:
                          else self.record.directory)
         loop = asyncio.get_running_loop()
         context = SiteContext(self.record, cfg.bridge.controller_timeout,
-                              cfg.bridge.controller_recovery, self.resume)
+                              cfg.bridge.controller_recovery, scan)
         try:
             built: dict[str, Site] = {}
             for kind in SITE_KINDS.values():
@@ -130,6 +130,8 @@ class Bridge:
                     group = kind.build(configs, context)
                     self.groups.append(group)
                     built.update(group.sites)
+            if scan is not None and self.record is not None:
+                resumed = self._read_resumed(scan, self.record)
             for group in self.groups:  # before any site listens: controllers, learners
                 await group.start()
             for scfg in cfg.sites:
@@ -187,6 +189,18 @@ class Bridge:
                 await self._abandon_start()
                 raise
         self._attach_taps()
+
+    @staticmethod
+    def _read_resumed(scan: ResumeScan, record: RunRecord) -> dict[str, LastCommit]:
+        """The resumed run's record, read once for every reader the kinds added (specimens,
+        learners) and for where it stops: each site's last committed step."""
+        scan.read()
+        record.continue_at(scan.point.seq, scan.point.t)
+        resumed = scan.last_commits()
+        log.warning("run record: %s RESUMED (continues after the last committed step of "
+                    "each site: %s)", record.directory,
+                    ", ".join(f"{c.site} step {c.step}" for c in resumed.values()) or "none")
+        return resumed
 
     def _listener(self, site: Site) -> SiteListener:
         """What the site's connections share; an open allowlist is said loudly."""

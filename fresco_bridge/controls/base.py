@@ -123,7 +123,7 @@ class InlineController(Controller):
     @abc.abstractmethod
     def reset(self) -> None:
         """Back to the virgin specimen: a new session that starts from zero, and the start of
-        a resume's replay of the record (``sites/experimental_kind.restore_specimens``)."""
+        a resume's replay of the record (``sites/experimental_kind.SpecimenRestore``)."""
 
     @abc.abstractmethod
     def tangent_stiffness_now(self) -> tuple[float, ...]:

@@ -62,6 +62,9 @@ of an updatable site (``twins/``), written right after each of its committed ste
   the updater predicts the source, ``Updater.last_one_step_error``): |F − F̂| of the last
   source step learned for this twin step, F̂ predicted from the source's measured past before
   learning it (kN);
+- ``upto`` (only while the twin's learner is catching up, ``twins/catchup.py``):
+  ``[session, step]``, the source step the answer was learned through when that is short of
+  what the twin's causality asked for (a resume replays exactly that);
 - complete (never inherited); ``site``/``session``/``t`` as on every line; a step whose last
   trial the learner did not answer (the site HOLDs) has none.
 
@@ -224,10 +227,13 @@ class LineEncoder:
         return body
 
     @staticmethod
-    def update(step: int, through: int, seconds: float, error: float | None) -> str:
+    def update(step: int, through: int, seconds: float, error: float | None,
+               upto: tuple[int, int] | None = None) -> str:
         """The body of an update line (format 5)."""
         body = f',"step":{step},"through":{through},"secs":{num(seconds)}'
-        return body if error is None else f'{body},"err":{num(error)}'
+        if error is not None:
+            body += f',"err":{num(error)}'
+        return body if upto is None else f'{body},"upto":[{upto[0]},{upto[1]}]'
 
     @staticmethod
     def correction(step: int, target: Sequence[float], outcome: str, residual: float,

@@ -16,6 +16,7 @@ import json
 import logging
 import os
 import socket
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -73,31 +74,60 @@ class LastCommit:
     time: float
 
 
-def last_commits(run_dir: Path) -> dict[str, LastCommit]:
-    """Per site, the last committed step of the record (torn tail ignored)."""
-    out: dict[str, LastCommit] = {}
-    sessions: dict[str, int] = {}
-    for rec in _lines(run_dir):
+class ResumePoint:
+    """Where a record stops, read line by line (one pass, shared with other readers:
+    ``record/scan.py``): the last line's sequence number and time, and per site its last
+    session and committed step. It needs only the commit and event lines (every session
+    opens with an event line) and the last line."""
+
+    KINDS = ("commit", "event")
+
+    def __init__(self) -> None:
+        self.seq = 0
+        self.t = 0.0
+        self._commits: dict[str, LastCommit] = {}
+        self._sessions: dict[str, int] = {}
+
+    def line(self, rec: dict[str, Any]) -> None:
+        """A commit or event line (``KINDS``)."""
         site, session = str(rec.get("site", "")), int(rec.get("session", 0))
-        sessions[site] = max(sessions.get(site, 0), session)
+        if session > self._sessions.get(site, -1):
+            self._sessions[site] = session
         if rec.get("kind") == "commit":
             t = rec.get("time", 0.0)
-            out[site] = LastCommit(site, session, int(rec["step"]),
-                                   float(t) if isinstance(t, int | float) else 0.0)
-    for site, session in sessions.items():  # sessions opened after the last commit count too
-        last = out.get(site)
-        if last is None:
-            out[site] = LastCommit(site, session, 0, 0.0)
-        elif session > last.session:
-            out[site] = LastCommit(site, session, last.step, last.time)
-    return out
+            self._commits[site] = LastCommit(site, session, int(rec["step"]),
+                                             float(t) if isinstance(t, int | float) else 0.0)
+
+    def last_line(self, rec: dict[str, Any]) -> None:
+        """The record's last line (any kind): where the sequence numbers and times go on."""
+        self.seq, self.t = int(rec.get("seq", self.seq)), float(rec.get("t", self.t))
+
+    def last_commits(self) -> dict[str, LastCommit]:
+        """Per site, the last committed step (a session opened after it counts too)."""
+        out = dict(self._commits)
+        for site, session in self._sessions.items():
+            last = out.get(site)
+            if last is None:
+                out[site] = LastCommit(site, session, 0, 0.0)
+            elif session > last.session:
+                out[site] = LastCommit(site, session, last.step, last.time)
+        return out
+
+
+def last_commits(run_dir: Path) -> dict[str, LastCommit]:
+    """Per site, the last committed step of the record (torn tail ignored)."""
+    point = ResumePoint()
+    for rec in _lines(run_dir):
+        if rec.get("kind") in ResumePoint.KINDS:
+            point.line(rec)
+    return point.last_commits()
 
 
 def last_seq_and_time(run_dir: Path) -> tuple[int, float]:
-    seq, t = 0, 0.0
-    for rec in _lines(run_dir):
-        seq, t = int(rec.get("seq", seq)), float(rec.get("t", t))
-    return seq, t
+    point = ResumePoint()
+    for rec in deque(_lines(run_dir), maxlen=1):
+        point.last_line(rec)
+    return point.seq, point.t
 
 
 def _lines(run_dir: Path) -> Iterator[dict[str, Any]]:

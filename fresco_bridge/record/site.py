@@ -89,11 +89,12 @@ class SiteRecorder:
             self._failed(exc)
 
     def update(self, session: int, step: int, through: int, seconds: float,
-               error: float | None) -> None:
+               error: float | None, upto: tuple[int, int] | None = None) -> None:
         """An updatable site's committed ``step``: the source step its answer was learned
-        through, the update time of the step and the source's one-step error
+        through, the update time of the step and the source's one-step error, and the
+        source (session, step) it was learned through when its learner was catching up
         (``RunRecord.update``)."""
-        self._record.update(self.site, session, step, through, seconds, error)
+        self._record.update(self.site, session, step, through, seconds, error, upto)
 
     def correction(self, session: int, step: int, target: tuple[float, ...], outcome: str,
                    residual: float,

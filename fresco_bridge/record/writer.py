@@ -176,9 +176,12 @@ class RunRecord:
     def resume(
         cls, directory: Path, *, fsync: Literal["background", "inline", "off"] = "background",
         sync_interval: float = DEFAULT_SYNC_INTERVAL, min_free_mb: float = DEFAULT_MIN_FREE_MB,
+        read_position: bool = True,
     ) -> RunRecord:
         """Continue the record of an interrupted run: a torn last line is moved aside, the
-        sequence numbers and times go on from the last complete line."""
+        sequence numbers and times go on from the last complete line (``read_position``
+        False: the caller reads the record and says where with ``continue_at`` before the
+        first line is written: ``record/scan.py``)."""
         state = run_state(directory)
         if state == "running":
             raise RecordError(f"{directory}: the run is in use by another running bridge")
@@ -186,7 +189,7 @@ class RunRecord:
             raise RecordError(f"{directory}: not a run directory ({RECORD_FILE} is missing)")
         try:
             cut_torn_tail(directory)
-            seq, t = last_seq_and_time(directory)
+            seq, t = last_seq_and_time(directory) if read_position else (0, 0.0)
             record = cls(directory, fsync=fsync, sync_interval=sync_interval, seq=seq, t=t,
                          min_free_mb=min_free_mb)
             directory.chmod(0o700)
@@ -198,6 +201,15 @@ class RunRecord:
         except OSError as exc:
             raise RecordError(exc.errno, f"cannot resume run {directory}: {exc}") from exc
         return record
+
+    def continue_at(self, seq: int, t: float) -> None:
+        """A resumed record's lines go on after sequence number ``seq`` and time ``t`` (the
+        last line's), set before anything is written."""
+        if self._seq or self._buf:
+            raise RecordError(f"{self.path}: lines were written before the resume position "
+                              "was set")
+        self._seq = seq
+        self._t0 = time.monotonic() - t
 
     # -- appending -------------------------------------------------------------------------
     # A site's trials, measurements and monitor samples wait in memory for its next commit or
@@ -287,7 +299,7 @@ class RunRecord:
         self.flush(sync=True, urgent=True)
 
     def update(self, site: str, session: int, step: int, through: int, seconds: float,
-               error: float | None) -> None:
+               error: float | None, upto: tuple[int, int] | None = None) -> None:
         """An updatable site's committed ``step`` learned through source step ``through`` in
         ``seconds`` of updating, with the source's one-step ``error`` (derived data, after its
         step line: the next commit or event asks for its sync; the site's pending items wait
@@ -296,7 +308,8 @@ class RunRecord:
             return
         t = _monotonic() - self._t0
         self._buf.append(self._enc.line(t, "update", site, session,
-                                        self._enc.update(step, through, seconds, error)))
+                                        self._enc.update(step, through, seconds, error,
+                                                         upto)))
         self._seq += 1
         self.flush()
 

@@ -21,8 +21,6 @@ from ..controls.base import Controller, ControllerError, InlineController
 from ..controls.kind import ControllerConfigBase
 from ..controls.registry import CONTROLLER_KINDS, controller_kind, make_controller
 from ..controls.sim import SimControllerConfig
-from ..record import RecordError
-from ..record.export import read_record
 from ..safety import CorrectionConfig
 from ..setups import make_setup
 from ..tangent import TangentMethod
@@ -108,15 +106,15 @@ class ExperimentalGroup:
             controller_timeout=context.controller_timeout,
             controller_recovery=context.controller_recovery) for cfg in configs}
         self._timeout = context.controller_timeout
-        self._resume = context.resume
+        if context.resume is not None:
+            restore = SpecimenRestore(self._sites, context.resume.directory)
+            context.resume.add(restore.line, restore.end, kinds=SpecimenRestore.KINDS)
 
     @property
     def sites(self) -> Mapping[str, Site]:
         return self._sites
 
     async def start(self) -> None:
-        if self._resume is not None:
-            restore_specimens(self._sites, self._resume)
         for site in self._sites.values():
             try:
                 await asyncio.wait_for(site.controller.connect(), self._timeout)
@@ -140,47 +138,55 @@ class ExperimentalGroup:
                 log.warning("site %s: controller close failed: %s", site.name, exc)
 
 
-def restore_specimens(sites: Mapping[str, ExperimentalSite], run_dir: Path) -> None:
+class SpecimenRestore:
     """``serve --resume``: every in-process specimen (``sim``, ``rig``) gets back the state
-    the interrupted run left it in, by replaying the record's commands in their order: each
-    trial that went to the controller, each commit, a fresh specimen at each new session
-    where the controller resets then. A controller outside the bridge (a real specimen) is
-    where the test left it: resume assumes the lab kept it there (``docs/architecture.md``,
-    "Crash and resume")."""
-    inline: dict[str, tuple[ExperimentalSite, InlineController]] = {
-        name: (site, site.controller) for name, site in sites.items()
-        if isinstance(site.controller, InlineController)}
-    if not inline:
-        return
-    session: dict[str, int] = {}
-    sent: dict[str, tuple[float, ...] | None] = {}
-    counts = dict.fromkeys(inline, 0)
-    try:
-        for rec in read_record(run_dir):
-            name = rec.get("site")
-            entry = inline.get(name) if isinstance(name, str) else None
-            if entry is None or rec["kind"] not in ("trial", "commit"):
-                continue
-            site, controller = entry
+    the interrupted run left it in, by replaying the record's commands in their order (a
+    reader of the resume's one pass over the record, ``record/scan.py``): each trial that
+    went to the controller, each commit, a fresh specimen at each new session where the
+    controller resets then. A controller outside the bridge (a real specimen) is where the
+    test left it: resume assumes the lab kept it there (``docs/architecture.md``, "Crash and
+    resume")."""
+
+    def __init__(self, sites: Mapping[str, ExperimentalSite], run_dir: Path) -> None:
+        self.run_dir = run_dir
+        self._inline: dict[str, tuple[ExperimentalSite, InlineController]] = {
+            name: (site, site.controller) for name, site in sites.items()
+            if isinstance(site.controller, InlineController)}
+        self._session: dict[str, int] = {}
+        self._sent: dict[str, tuple[float, ...] | None] = {}
+        self.counts = dict.fromkeys(self._inline, 0)
+
+    KINDS = ("trial", "commit")
+    """The lines it reads."""
+
+    def line(self, rec: dict[str, Any]) -> None:
+        """A trial or commit line (``KINDS``)."""
+        entry = self._inline.get(rec.get("site", ""))
+        if entry is None:
+            return
+        site, controller = entry
+        try:
             number = int(rec.get("session", 0))
-            if session.get(site.name) != number:
-                if site.name in session and site.resets_on_new_session:
+            if self._session.get(site.name) != number:
+                if site.name in self._session and site.resets_on_new_session:
                     controller.reset()
-                session[site.name], sent[site.name] = number, None
+                self._session[site.name], self._sent[site.name] = number, None
             if rec["kind"] == "trial":
                 command = tuple(float(v) for v in rec["ctrl"])
-                if command != sent[site.name]:  # the site sends a command once
+                if command != self._sent[site.name]:  # the site sends a command once
                     controller.set_ctrl_now(command)
-                    sent[site.name] = command
+                    self._sent[site.name] = command
             else:
                 controller.commit_now()
-                counts[site.name] += 1
-    except (OSError, RecordError, KeyError, ValueError, ControllerError) as exc:
-        raise ConfigError(f"resuming {run_dir}: the in-process specimens could not be "
-                          f"restored from the record: {exc}") from exc
-    for name, steps in counts.items():
-        log.warning("site %s: in-process specimen restored from the record (%d committed "
-                    "step(s) replayed)", name, steps)
+                self.counts[site.name] += 1
+        except (KeyError, ValueError, ControllerError) as exc:
+            raise ConfigError(f"resuming {self.run_dir}: the in-process specimens could not "
+                              f"be restored from the record: {exc}") from exc
+
+    def end(self) -> None:
+        for name, steps in self.counts.items():
+            log.warning("site %s: in-process specimen restored from the record (%d committed "
+                        "step(s) replayed)", name, steps)
 
 
 KIND = SiteKind(

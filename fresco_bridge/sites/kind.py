@@ -19,6 +19,7 @@ from .site_config import SiteConfigBase
 
 if TYPE_CHECKING:
     from ..record import RunRecord
+    from ..record.scan import ResumeScan
     from ..telemetry.metrics import Metrics
     from .base import Site
 
@@ -45,8 +46,10 @@ class SiteContext:
     controller_timeout: float
     """``bridge.controller_timeout``: the deadline of every call a site makes outside."""
     controller_recovery: float
-    resume: Path | None = None
-    """The interrupted run being resumed (its record holds what the sites had done)."""
+    resume: ResumeScan | None = None
+    """The interrupted run being resumed: a kind that needs what its record holds (an
+    in-process specimen's commands, a learner's history) adds a reader to it when its group
+    is built; the daemon reads the record once for all, before any group starts."""
 
 
 class SiteGroup(Protocol):

@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..config_model import ConfigError
-from ..record.export import read_record
 from ..sites import controlled_site
 from ..sites.base import Site
 from ..updating.base import UpdaterError
@@ -25,7 +24,7 @@ if TYPE_CHECKING:
     from ..sites.kind import SiteContext
     from .config import UpdatableSiteConfig
 
-__all__ = ["build_twins", "preload_from_record", "twin_spec", "wire_twins"]
+__all__ = ["RecordedHistory", "build_twins", "twin_spec", "wire_twins"]
 
 
 def twin_spec(cfg: UpdatableSiteConfig) -> TwinSpec:
@@ -109,7 +108,7 @@ def wire_twins(learners: Mapping[str, Learner], twins: Mapping[str, Site],
 
 @dataclass
 class _Replayed:
-    """One learner's history being rebuilt from a record (``preload_from_record``)."""
+    """One learner's history being rebuilt from a record (``RecordedHistory``)."""
 
     log: list[Message] = field(default_factory=list)
     source_session: int = 0
@@ -126,52 +125,75 @@ class _Replayed:
         self.commits += 1
 
 
-def preload_from_record(learners: Mapping[str, Learner], run_dir: Path,
-                        configs: Sequence[UpdatableSiteConfig]) -> None:
-    """Each learner starts where the interrupted run ``run_dir`` stopped: the source's
-    committed steps keyed by (session, step) and each twin's committed trials with how far
-    each learned (the source's session open then; through the twin's step if its update line
-    says same-step, else the step before), in the record's order (the order the bridge saw
-    them), so the twins' answers after ``--resume`` equal an uninterrupted run's."""
-    same_step = {c.name for c in configs if c.causality == "same-step"}
-    by_source = {learner.source: _Replayed() for learner in learners.values()}
-    of_twin = {t.name: by_source[learner.source] for learner in learners.values()
-               for t in learner.spec.twins}
-    last_trial: dict[tuple[str, int], dict[str, Any]] = {}
-    last_daq: dict[tuple[str, int], dict[str, Any]] = {}
-    for rec in read_record(run_dir):
-        kind, site = rec["kind"], str(rec.get("site", ""))
+class RecordedHistory:
+    """Each learner starts where the interrupted run stopped (a reader of the resume's one
+    pass over the record, ``record/scan.py``): the source's committed steps keyed by
+    (session, step) and each twin's committed trials with how far each learned (its update
+    line's ``upto`` if it has one, else the source's session open then, through the twin's
+    step if its update line says same-step, else the step before), in the record's order
+    (the order the bridge saw them), so the twins' answers after ``--resume`` equal an
+    uninterrupted run's."""
+
+    def __init__(self, learners: Mapping[str, Learner], run_dir: Path,
+                 configs: Sequence[UpdatableSiteConfig]) -> None:
+        self.learners = learners
+        self.run_dir = run_dir
+        self._same_step = {c.name for c in configs if c.causality == "same-step"}
+        self._by_source = {learner.source: _Replayed() for learner in learners.values()}
+        self._of_twin = {t.name: self._by_source[learner.source]
+                         for learner in learners.values() for t in learner.spec.twins}
+        self._last_trial: dict[tuple[str, int], dict[str, Any]] = {}
+        self._last_daq: dict[tuple[str, int], dict[str, Any]] = {}
+
+    KINDS = ("trial", "daq", "commit", "event", "update")
+    """The lines it reads."""
+
+    def line(self, rec: dict[str, Any]) -> None:
+        """A line of one of ``KINDS`` (``read_record``'s complete dicts)."""
+        kind, site = rec["kind"], rec.get("site", "")
+        if site not in self._by_source and site not in self._of_twin:
+            return
         key = (site, int(rec.get("session", 0)))
         if kind == "trial":
-            last_trial[key] = rec
-            last_daq.pop(key, None)
+            self._last_trial[key] = rec
+            self._last_daq.pop(key, None)
         elif kind == "daq":
-            last_daq[key] = rec
-        elif kind == "event" and site in by_source and rec.get("event") == "session-open":
-            by_source[site].source_session = key[1]
-        elif kind == "commit" and key in last_trial and key in last_daq:
-            step = int(rec["step"])
-            if site in by_source:
-                src = by_source[site]
-                d, f = float(last_daq[key]["disp"][0]), float(last_daq[key]["force"][0])
-                src.source_session, src.source_step = key[1], step
-                if math.isfinite(d) and math.isfinite(f):
-                    src.log.append(("observe", key[1], step, d, f))
-            elif site in of_twin:
-                replayed = of_twin[site]
-                if site in replayed.awaiting:  # a commit without its update line
-                    replayed.twin_committed(site)
-                replayed.awaiting[site] = (float(last_trial[key]["ctrl"][0]), step)
-        elif kind == "update" and site in of_twin and site in of_twin[site].awaiting:
-            replayed = of_twin[site]
+            self._last_daq[key] = rec
+        elif kind == "event" and site in self._by_source and rec.get("event") == "session-open":
+            self._by_source[site].source_session = key[1]
+        elif kind == "commit" and key in self._last_trial and key in self._last_daq:
+            self._committed(site, key, int(rec["step"]))
+        elif kind == "update" and site in self._of_twin and site in self._of_twin[site].awaiting:
+            replayed = self._of_twin[site]
+            upto = rec.get("upto")
+            if upto is not None:  # learned less than it asked for: exactly this far
+                replayed.twin_committed(site, (int(upto[0]), int(upto[1])))
+                return
             step = replayed.awaiting[site][1]
-            same = site in same_step and int(rec.get("through", -1)) == step
+            same = site in self._same_step and int(rec.get("through", -1)) == step
             replayed.twin_committed(site, (replayed.source_session, step if same else step - 1))
-    for learner in learners.values():
-        replayed = by_source[learner.source]
-        for twin in list(replayed.awaiting):
-            replayed.twin_committed(twin)
-        learner.preload(replayed.log, source_step=replayed.source_step,
-                        commits=replayed.commits,
-                        checkpoint=load_checkpoint(run_dir, learner.spec))
-        learner.source_session = replayed.source_session
+
+    def _committed(self, site: str, key: tuple[str, int], step: int) -> None:
+        if site in self._by_source:
+            src = self._by_source[site]
+            daq = self._last_daq[key]
+            d, f = float(daq["disp"][0]), float(daq["force"][0])
+            src.source_session, src.source_step = key[1], step
+            if math.isfinite(d) and math.isfinite(f):
+                src.log.append(("observe", key[1], step, d, f))
+        else:
+            replayed = self._of_twin[site]
+            if site in replayed.awaiting:  # a commit without its update line
+                replayed.twin_committed(site)
+            replayed.awaiting[site] = (float(self._last_trial[key]["ctrl"][0]), step)
+
+    def end(self) -> None:
+        for learner in self.learners.values():
+            replayed = self._by_source[learner.source]
+            for twin in list(replayed.awaiting):
+                replayed.twin_committed(twin)
+            learner.preload(replayed.log, source_step=replayed.source_step,
+                            commits=replayed.commits,
+                            checkpoint=load_checkpoint(self.run_dir, learner.spec))
+            learner.source_session = replayed.source_session
+            replayed.log = []

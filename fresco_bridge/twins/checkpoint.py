@@ -4,7 +4,7 @@ it, instead of the whole record (ready-after-resume bounded whatever the run's l
 
 A checkpoint says how much of the run it covers as counts the record can be checked against:
 the source's observations and each twin's commits. On resume, the record's history (rebuilt by
-``build.preload_from_record``) is cut after those counts; a checkpoint the record does not
+``build.RecordedHistory``) is cut after those counts; a checkpoint the record does not
 reach (the bridge was killed between the snapshot and the record's write), one written for
 other updaters, or an unreadable one is not used: the whole record is replayed, as before.
 The file is written privately and atomically (``record.rundir.write_private``), off the event
@@ -31,9 +31,10 @@ __all__ = ["Checkpoint", "CheckpointWriter", "checkpoint_path", "history_after",
 
 log = logging.getLogger("fresco_bridge.twins")
 
-MAGIC = b"fresco-bridge learner checkpoint 2\n"
+MAGIC = b"fresco-bridge learner checkpoint 3\n"
 """The file's first line: a checkpoint of another format is not read (2: ``online_improved``
-keeps its do-no-harm errors as running means, which a version-1 state cannot resume)."""
+keeps its do-no-harm errors as running means, which a version-1 state cannot resume; 3: each
+twin's background-learning state, ``twins/catchup.py``)."""
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,9 @@ class TwinController(Controller):
         """The worker's update time of the twin's current step (the last answer's)."""
         self.one_step_error: float | None = None
         """The source's one-step error of the twin's current step (the last answer's)."""
+        self.upto: tuple[int, int] | None = None
+        """The source (session, step) the last answer was learned through, when that is
+        short of what it asked for (its learner catching up: ``twins/catchup.py``)."""
         self._answered = False
         """Whether the last trial was answered by the learner (else no update line)."""
         self._committed: tuple[int, float] | None = None
@@ -107,13 +110,14 @@ class TwinController(Controller):
                           and moves else (False, None))
         self._answered = False
         try:
-            force, tangent, through, seconds, error = await self.learner.trial(
+            force, tangent, through, seconds, error, upto = await self.learner.trial(
                 self.twin, disp[0], step=site.step + 1 if site is not None else 1,
                 same_step=same, measured=measured)
         except LearnerError as exc:
             raise ControllerError(f"twin {self.twin}: {exc}") from None
         self._d, self._force, self._tangent = disp[0], force, tangent
         self.trained_through, self.update_seconds, self.one_step_error = through, seconds, error
+        self.upto = upto
         self._answered = True
         self.same_step_steps += same
 
@@ -170,7 +174,7 @@ class TwinController(Controller):
         site = self._site
         if self._answered and site is not None and site.recorder is not None:
             site.recorder.update(session, step, self.trained_through, self.update_seconds,
-                                 self.one_step_error)
+                                 self.one_step_error, self.upto)
 
     async def tangent_stiffness(self) -> tuple[float, ...]:
         if self._tangent is None:

@@ -32,13 +32,14 @@ class TwinGroup:
     """The updatable sites of one bridge: one learner per source, one site per twin."""
 
     def __init__(self, configs: Sequence[UpdatableSiteConfig], context: SiteContext) -> None:
-        from .build import build_twins
+        from .build import RecordedHistory, build_twins
 
         self.learners: dict[str, Learner]
         self.learners, self._sites, self._controllers, self._feeds = build_twins(configs,
                                                                                  context)
-        self._resume = context.resume
-        self._configs = list(configs)
+        if context.resume is not None:  # the learners' histories, from the resume's one pass
+            history = RecordedHistory(self.learners, context.resume.directory, configs)
+            context.resume.add(history.line, history.end, kinds=RecordedHistory.KINDS)
 
     @property
     def sites(self) -> Mapping[str, Site]:
@@ -46,11 +47,8 @@ class TwinGroup:
 
     async def start(self) -> None:
         """Every learner's worker built and ready (a resumed run's first caught up)."""
-        from .build import preload_from_record
         from .learner import LearnerError
 
-        if self._resume is not None:
-            preload_from_record(self.learners, self._resume, self._configs)
         results = await asyncio.gather(*(learner.start() for learner in self.learners.values()),
                                        return_exceptions=True)
         for source, result in zip(self.learners, results, strict=True):

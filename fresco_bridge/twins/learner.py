@@ -21,13 +21,13 @@ import itertools
 import logging
 import math
 import pickle
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from ..site_output import CommittedStep, SiteNotice
 from ..telemetry.schema import SiteStatus
 from ..worker_output import OUTPUT, relay_output
+from .catchup import CatchUpEvents, trial_cap
 from .channel import WorkerChannel
 from .checkpoint import Checkpoint, CheckpointWriter, history_counts, resume_point
 from .worker import LearnerSpec, LearnerState, Message, Reply
@@ -83,8 +83,6 @@ class Learner:
         self._asked_at = 0
         """The absolute log position of the last snapshot asked."""
         self._ahead = 0
-        self._learning: deque[asyncio.Future[tuple[Any, ...]]] = deque()
-        """Background learning asked of the worker and not answered yet, in order."""
         self.twins_active: Callable[[], bool] = lambda: True
         """Whether a twin of this source is in a session (set by the wiring); while none is,
         the source's steps are learned as they come (``LEARN_AHEAD``)."""
@@ -105,6 +103,7 @@ class Learner:
         self._last_committed: tuple[int, int, float, float] = (0, 0, math.nan, math.nan)
         """The source's last committed (session, step, d, F)."""
         self._sinks: list[EventSink] = []
+        self.catch_up = CatchUpEvents(source, self._event)
         self._ids = itertools.count(1)
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._held: list[Message] = []
@@ -252,7 +251,6 @@ class Learner:
             if not fut.done():
                 fut.set_exception(LearnerError(f"learner lost: {reason}"))
         self._pending.clear()
-        self._learning.clear()
         self._event("learner-lost", f"learner of {self.source} lost: {reason}",
                     losses=self.losses)
         if self._freezes:
@@ -295,28 +293,9 @@ class Learner:
         self._put(("snapshot", rid))
 
     def _learn_ahead(self, through: tuple[int, int]) -> None:
-        """Have the worker learn through ``through`` now (its answer is awaited by the next
-        trial: background learning is not that trial's work, and its own deadline starts
-        once it is done)."""
-        assert self._loop is not None
-        rid = next(self._ids)
-        fut: asyncio.Future[tuple[Any, ...]] = self._loop.create_future()
-        self._pending[rid] = fut
-        self._learning.append(fut)
-        self._put(("learn", rid, through))
-
-    async def _caught_up(self) -> None:
-        """Wait until the background learning asked before is done, each batch within the
-        deadline of the one before it (the worker progresses; a silent one is lost)."""
-        while self._learning:
-            fut = self._learning[0]
-            try:
-                await asyncio.wait_for(asyncio.shield(fut), self.deadline)
-            except TimeoutError:
-                self._lose(f"no progress in the background learning within {self.deadline:g} s")
-                raise LearnerError(f"learner lost: {self.reason}") from None
-            if self._learning and self._learning[0] is fut:
-                self._learning.popleft()
+        """Let the worker learn through ``through`` in the background (no answer: a trial
+        never waits for it, ``twins/catchup.py``)."""
+        self._put(("learn", 0, through))
 
     def _trim(self, position: int) -> None:
         """The snapshot covers the log up to ``position`` (absolute): drop what is behind."""
@@ -462,23 +441,24 @@ class Learner:
         return (self.source_session, step if same_step else step - 1)
 
     async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
-                    measured: Measured = None) -> tuple[float, float, int, float, float | None]:
+                    measured: Measured = None
+                    ) -> tuple[float, float, int, float, float | None, tuple[int, int] | None]:
         """The twin's (force, tangent) at ``d`` (its ``step``), the source step it learned
-        through, the update time and the source's one-step error of the twin's current step
-        (``LearnerState``). With ``same_step`` it learns the source's step ``step`` too: the
-        committed one, or ``measured``, that step's trial measurement, learned tentatively
-        (trained on only if it is the one committed)."""
+        through, the update time, the source's one-step error of the twin's current step
+        (``LearnerState``) and the source (session, step) it was learned through when that is
+        short of what it asked for (catching up: ``twins/catchup.py``; else None). With
+        ``same_step`` it learns the source's step ``step`` too: the committed one, or
+        ``measured``, that step's trial measurement, learned tentatively (trained on only if
+        it is the one committed; not learned while committed steps before it are not)."""
         through = self.through(step, same_step=same_step or measured is not None)
         if self.state != "live":
             return self._frozen_trial(twin, d, through)
         self._last_trial[twin] = (d, through, measured)
         self._answered_locally.discard(twin)
-        msg = ("trial", twin, d, through) if measured is None else \
-            ("trial", twin, d, through, measured)
+        msg: Message = ("trial", twin, d, through, measured)
         try:
-            await self._caught_up()
-            force, tangent, trained, seconds, error, tentative = await self._request(
-                msg, self.deadline)
+            force, tangent, trained, seconds, error, tentative, upto, behind = \
+                await self._request((*msg, trial_cap(self.deadline)), self.deadline)
         except LearnerError:
             if self.state == "live":  # the twin refused this trial: no loss
                 raise
@@ -487,7 +467,12 @@ class Learner:
             self.update_observer(float(seconds))  # each twin's newly learned step(s), once
         self._through[twin] = self.trained_through = int(trained)
         self._tentative[twin] = bool(tentative)
-        return float(force), float(tangent), self.trained_through, float(seconds), error
+        upto = (int(upto[0]), int(upto[1]))
+        self._last_trial[twin] = (d, upto, measured if tentative else None)  # what a replay
+        # learns: exactly what this answer did (its tentative step only if it used it)
+        self.catch_up.answered(twin, step, int(behind), upto)
+        return (float(force), float(tangent), self.trained_through, float(seconds), error,
+                upto if behind else None)
 
     def _frozen(self, twin: str) -> LearnerState:
         """The local copy, if twin ``twin`` may answer from it; else LearnerError."""
@@ -497,15 +482,15 @@ class Learner:
         return self._local
 
     def _frozen_trial(self, twin: str, d: float, through: tuple[int, int]
-                      ) -> tuple[float, float, int, float, float | None]:
+                      ) -> tuple[float, float, int, float, float | None, tuple[int, int] | None]:
         local = self._frozen(twin)
-        self._last_trial[twin] = (d, through, None)
         self._answered_locally.add(twin)
         reply = local.handle(("trial", 0, twin, d, through))
         assert reply is not None
         if reply[0] == "error":
             raise LearnerError(reply[2])
-        return float(reply[2]), float(reply[3]), int(reply[4]), float(reply[5]), reply[6]
+        self._last_trial[twin] = (d, through, None)  # a new worker learns as if never lost
+        return float(reply[2]), float(reply[3]), int(reply[4]), float(reply[5]), reply[6], None
 
     def commit(self, twin: str) -> None:
         """The twin's last trial becomes its committed state."""
@@ -524,6 +509,9 @@ class Learner:
             self._send(trial)  # answered locally: the worker has not seen this trial
         self._send(("commit", twin))
         self._commits += 1
+        if self.state == "live" and self.catch_up.behind(twin) and self._channel is not None:
+            self._channel.post(self._held)  # the commit now: the backlog is learned meanwhile
+            self._held = []
         if self._freezes and self.state == "live" \
                 and self._commits % (SNAPSHOT_EVERY * len(self.spec.twins)) == 0:
             self._ask_snapshot()

@@ -24,11 +24,14 @@ iterations), or a later trial does not allow it (the twin fell back to previous-
 updater returns to the rollback point and re-learns the committed steps since. The point is
 kept while steps are learned and re-taken before a tentative step once ``REBASE`` committed
 steps lie behind it: one snapshot per session's first same-step trial and one per ``REBASE``
-steps after, and a re-learning bounded by ``REBASE`` steps.
+steps after, and a re-learning bounded by ``REBASE`` steps. A trial catching up a backlog
+(``twins/catchup.py``) learns a tentative step only once every committed step before it is
+learned; short of that, it answers previous-step-like and says how far it learned.
 """
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import logging
 import math
@@ -39,6 +42,7 @@ import os
 import pickle
 import queue
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -60,16 +64,22 @@ deadline) at one snapshot per this many same-step steps."""
 
 Message = tuple[Any, ...]
 """``("observe", session, step, d, f)`` (a committed step),
-``("trial", id, twin, d, (session, step)[, (d, f) | None])`` (the optional last item: the
-source's trial measurement of step ``(session, step)``, not committed yet: same-step),
-``("commit", twin)``,
+``("trial", id, twin, d, (session, step)[, measured[, cap]])``: ``measured`` is ``(d, f)``, the
+source's trial measurement of step ``(session, step)``, not committed yet (same-step: learned
+tentatively), or None; ``cap`` is ``(steps, seconds)``: learn at most that many of the committed
+steps it may and has not learned before, for at most that long past the first two
+(``twins/catchup.py``), or None: all of them, as a replay must. A tentative step is learned only
+once every committed step before it is. ``("commit", twin)``,
 ``("initial", id, twin)``, ``("sync", id)``, ``("snapshot", id)``, ``("learn", id, (session,
-step))``; ``None`` ends the worker."""
+step))`` (background learning, no reply); ``None`` ends the worker."""
 Reply = tuple[Any, ...]
-"""``("trial", id, force, tangent, trained_through, update_seconds,
-one_step_error, tentative)`` (``tentative``: the answer used the source's trial measurement of
-step ``trained_through``, learned ahead of its commit), ``("initial", id, tangent)``,
-``("sync", id, trained_through)``, ``("learned", id)``, ``("snapshot", id, pickled
+"""``("trial", id, force, tangent, trained_through, update_seconds, one_step_error,
+tentative, (session, step) learned through, unlearned)``: ``tentative``, the answer used the
+source's trial measurement of step ``trained_through``, learned ahead of its commit; learned
+through: the (session, step) the answer's model was learned through, the tentative step
+included (what a replay of this trial asks for); ``unlearned``: the committed steps it asked for
+and has not learned (catching up). ``("initial", id, tangent)``,
+``("sync", id, trained_through)``, ``("snapshot", id, pickled
 LearnerState)``, ``("error", id, reason)``, ``("ready",)``, ``("fatal", reason)``."""
 
 
@@ -110,7 +120,8 @@ class _Twin:
     """The twin step (its commits so far) ``update_seconds`` and ``one_step_error`` belong
     to."""
     learned: tuple[int, int] = (0, 0)
-    """The (session, step) of the last committed observation learned."""
+    """The (session, step) of the last committed observation applied (learned or rejected;
+    a tentative step is not one)."""
     tentative: tuple[int, int, float, float] | None = None
     """``(session, step, d, F)``: the source's trial measurement learned ahead of its commit."""
     base: tuple[bytes, int, int, tuple[int, int]] | None = None
@@ -118,6 +129,11 @@ class _Twin:
     ``learned`` then (committed observations only behind it)."""
     since_base: int = 0
     """Committed observations learned since the rollback point."""
+    wanted: tuple[int, int] = (0, 0)
+    """How far the twin may learn in the background: the farthest ``through`` asked of it."""
+    mid_step: bool = False
+    """A trial since the last commit: nothing is learned in the background until the commit
+    (a replay learns a step's steps at its committed trial: ``twins/catchup.py``)."""
 
 
 @dataclass
@@ -144,11 +160,15 @@ class LearnerState:
             twin = self.twins[msg[1]]
             twin.updater.twin.commit()
             twin.commits += 1
+            twin.mid_step = False
             return None
         if kind == "trial":
             rid, name, d, through = msg[1:5]
+            key = (int(through[0]), int(through[1]))
             measured = msg[5] if len(msg) > 5 else None
-            twin = self._learned(name, (int(through[0]), int(through[1])), measured)
+            cap = msg[6] if len(msg) > 6 and msg[6] is not None else (None, None)
+            twin = self._learned(name, key, measured, limit=cap[0], budget=cap[1])
+            twin.mid_step, twin.wanted = True, max(twin.wanted, key)
             try:
                 force, tangent = twin.updater.twin.set_trial(float(d))
             except (ValueError, ArithmeticError) as exc:
@@ -156,9 +176,11 @@ class LearnerState:
             if not (math.isfinite(force) and math.isfinite(tangent)):
                 return ("error", rid, f"the twin answered non-finite force {force!r} / tangent "
                         f"{tangent!r} at d = {d!r}")
-            used = twin.tentative is not None and twin.tentative[:2] == tuple(through)
+            used = twin.tentative is not None and twin.tentative[:2] == key
             return ("trial", rid, force, tangent, twin.trained_through, twin.update_seconds,
-                    twin.one_step_error, used)
+                    twin.one_step_error, used,
+                    twin.learned if twin.tentative is None else twin.tentative[:2],
+                    self._unlearned(twin, key))
         if kind == "initial":
             _, rid, name = msg
             return ("initial", rid, float(self.twins[name].updater.twin.initial_tangent))
@@ -167,31 +189,59 @@ class LearnerState:
                 return ("snapshot", msg[1], pickle.dumps(self, pickle.HIGHEST_PROTOCOL))
             except (pickle.PicklingError, AttributeError, TypeError) as exc:
                 return ("error", msg[1], f"no snapshot: the updaters do not pickle ({exc})")
-        if kind == "learn":  # steps no twin can ask for later: learned now, in the background
-            _, rid, (session, step) = msg
-            for name in self.twins:
-                self._learned(name, (int(session), int(step)), timed=False)
-            return ("learned", rid)
+        if kind == "learn":  # steps no twin can ask for later: learned in the background
+            key = (int(msg[2][0]), int(msg[2][1]))
+            for twin in self.twins.values():
+                twin.wanted = max(twin.wanted, key)
+            return None
         if kind == "sync":
             through = min((t.trained_through for t in self.twins.values()), default=0)
             return ("sync", msg[1], through)
         raise ValueError(f"unknown learner message {kind!r}")
 
+    def learn_in_background(self) -> bool:
+        """One source step learned for each twin between its steps that may learn it
+        (``wanted``); whether any such step is left (``twins/catchup.py``). A commit met there
+        confirms a tentative step or rolls back to its point, as in a trial."""
+        left = False
+        for name, twin in self.twins.items():
+            if twin.mid_step or self._unlearned(twin, twin.wanted) == 0:
+                continue
+            self._learned(name, twin.wanted, timed=False, limit=1)
+            left = left or self._unlearned(twin, twin.wanted) > 0
+        return left
+
+    def _unlearned(self, twin: _Twin, through: tuple[int, int]) -> int:
+        """The committed source steps up to ``through`` the twin has not learned yet."""
+        obs, n = self.observations, twin.applied
+        if n >= len(obs) or obs[n][:2] > through:
+            return 0
+        return bisect.bisect_right(obs, through, lo=n, key=_key) - n
+
     def _learned(self, name: str, through: tuple[int, int],
-                 measured: tuple[float, float] | None = None, *, timed: bool = True) -> _Twin:
+                 measured: tuple[float, float] | None = None, *, timed: bool = True,
+                 limit: int | None = None, budget: float | None = None) -> _Twin:
         """Twin ``name`` with every committed source step up to ``through`` ((session, step),
-        inclusive) learned and, with ``measured`` (the source's trial measurement of step
-        ``through``, not committed yet), that one tentatively (``timed``: for a trial, whose
-        update time it is)."""
+        inclusive) learned, or the first ``limit`` of those it had not learned, stopping once
+        ``budget`` seconds are spent past the first two (steps re-learned after a rollback
+        count for neither: it had learned them); then, with ``measured`` (the source's trial
+        measurement of step ``through``, not committed yet) and nothing committed before it
+        left unlearned, that one tentatively (``timed``: for a trial, whose update time it
+        is)."""
         twin = self.twins[name]
         obs = self.observations
         if timed and twin.timed_step != twin.commits:  # a new twin step: its own update time
             twin.timed_step, twin.update_seconds, twin.one_step_error = twin.commits, 0.0, None
+        before = twin.applied
         tent = twin.tentative
         if tent is not None and (tent[:2] > through or (
                 measured is not None and tent[:2] == through and tent[2:] != tuple(measured))):
             self._roll_back(twin)  # the trial does not allow it: previous-step, or another read
-        while twin.applied < len(obs) and obs[twin.applied][:2] <= through:
+        end = len(obs) if limit is None else min(len(obs), before + limit)
+        stop = None if budget is None else time.perf_counter() + budget
+        while twin.applied < end and obs[twin.applied][:2] <= through:
+            if stop is not None and twin.applied - before >= 2 and time.perf_counter() > stop:
+                break
             session, step, d, f = obs[twin.applied]
             tent = twin.tentative
             if tent is not None and tent[:2] == (session, step):
@@ -209,7 +259,8 @@ class LearnerState:
             self._observe(twin, step, d, f, timed=timed)
         if twin.tentative is None and twin.base is not None and twin.since_base >= REBASE:
             twin.base = None  # taken again before the next tentative step (trimming goes on)
-        if measured is not None and twin.tentative is None and twin.learned < through:
+        if measured is not None and twin.tentative is None and twin.learned < through \
+                and self._unlearned(twin, through) == 0:  # only behind every committed step
             if twin.base is None:
                 twin.base = (snapshot(twin.updater), twin.applied, twin.trained_through,
                              twin.learned)
@@ -263,6 +314,10 @@ class LearnerState:
                     t.base = (t.base[0], t.base[1] - learned, *t.base[2:])
 
 
+def _key(obs: tuple[int, int, float, float]) -> tuple[int, int]:
+    return obs[0], obs[1]
+
+
 def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Message] | None],
                 outbox: multiprocessing.queues.Queue[Reply], start: bytes | None = None) -> None:
     """The worker process: build (or start from the snapshot ``start``), say ready, then
@@ -283,11 +338,14 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
             return
         outbox.put(("ready",))
         parent = multiprocessing.parent_process()
+        background = False
         while True:
             try:
-                batch = inbox.get(timeout=1.0)
+                batch = inbox.get_nowait() if background else inbox.get(timeout=1.0)
             except queue.Empty:
-                if parent is not None and not parent.is_alive():
+                if background:  # nothing asked: a step of the backlog, then look again
+                    background = state.learn_in_background()
+                elif parent is not None and not parent.is_alive():
                     break  # the bridge was killed: no orphan worker
                 continue
             if batch is None:
@@ -296,6 +354,7 @@ def worker_main(spec: LearnerSpec, inbox: multiprocessing.queues.Queue[list[Mess
                 reply = _handled(state, msg)
                 if reply is not None:
                     outbox.put(reply)
+            background = True  # whether there is anything to learn: the next empty inbox says
         del limits
     finally:
         end_output()  # its last lines of fd 2 before the channel closes

@@ -24,10 +24,10 @@ class FakeLearner:
 
     async def trial(self, twin: str, d: float, *, step: int, same_step: bool = False,
                     measured: tuple[float, float] | None = None
-                    ) -> tuple[float, float, int, float, float | None]:
+                    ) -> tuple[float, float, int, float, float | None, tuple[int, int] | None]:
         if self.lost:
             raise LearnerError("learner of damper is lost")
-        return 10.0 * d, 10.0, 7, 0.001, None
+        return 10.0 * d, 10.0, 7, 0.001, None, None
 
     def commit(self, twin: str) -> None:
         if self.lost:

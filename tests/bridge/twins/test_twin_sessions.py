@@ -71,23 +71,33 @@ def test_sessions_after_a_source_only_one_learn_what_one_long_session_would(
     assert updates[25:27] == [(2, 1, 25), (2, 2, 1)]  # all of the earlier session, then k-1
 
 
-def test_a_long_source_only_session_is_learned_as_it_comes_not_at_the_pairs_first_trial(
+def test_after_source_only_sessions_the_twin_answers_from_step_1_within_its_deadline(
         tmp_path: Path) -> None:
-    """3,000 source steps with no twin in session, then a pair with a 0.3 s learner deadline:
-    the steps were learned while they came (in the background), so the twin answers from
-    its step 1 within its deadline (learning them all at its first trial would miss it)."""
+    """Four source-only sessions of 750 steps, then a pair: the twin answers from its step 1
+    within its learner deadline (its trial learns at most ``CATCH_UP`` of the backlog, the
+    rest is learned between its steps); each answer's update line says how far it was
+    learned, never past what previous-step allows, and one that learned less than it asked
+    for says so (``upto``, a ``learner-behind`` event)."""
     pytest.importorskip("filterpy")
-    toml = TOML.replace("[telemetry]\nmetrics_port = 0\n", "") + "learner_deadline = 0.3\n"
+    toml = TOML.replace("[telemetry]\nmetrics_port = 0\n", "")
     with RunningBridge(toml, tmp_path) as bridge:
-        _source_only(bridge.ports["damper"], 1, 3000)
-        _pair(bridge.ports, 3001, 10)
+        for first in (1, 751, 1501, 2251):
+            _source_only(bridge.ports["damper"], first, 750)
+        _pair(bridge.ports, 3001, 40)
         run_dir = bridge.run_dir
-    events = load_run(run_dir).events
-    assert not [e for e in events if e["event"].startswith("learner-") or e["event"] == "hold"]
+    run = load_run(run_dir)
+    assert not [e for e in run.events if e["event"] in ("hold", "learner-lost")]
     twin = [s for s in committed_steps(run_dir) if s.site == "twin1"]
-    assert len(twin) == 10 and all(math.isfinite(s.meas_force[0]) for s in twin)
-    updates = load_run(run_dir).updates
-    assert updates[0]["through"] == 3000
+    assert len(twin) == 40 and all(math.isfinite(s.meas_force[0]) for s in twin)
+    keys = []
+    for u in run.updates:  # twin step k of source session 5 may learn through (5, k - 1)
+        upto = u.get("upto")
+        key = (5, u["step"] - 1) if upto is None else tuple(upto)
+        assert key <= (5, u["step"] - 1) and (upto is None or key[1] == u["through"])
+        keys.append(key)
+    assert keys == sorted(keys)
+    behind = [e for e in run.events if e["event"] == "learner-behind"]
+    assert bool(behind) == any("upto" in u for u in run.updates)
 
 
 def test_the_log_is_trimmed_behind_the_snapshot_and_a_new_worker_starts_from_it(

@@ -211,7 +211,9 @@ def test_a_tentative_trial_committed_differently_is_replaced_by_the_commit() -> 
         assert reply is not None and reply[4] == i + 1 and reply[7] is True
         worker.handle(("commit", "twin"))
         worker.handle(("observe", 1, i + 1, float(sd[i]), float(sf[i])))
-    worker.handle(("learn", 0, (1, sd.size)))
+    worker.handle(("learn", 0, (1, sd.size)))  # the last commit, learned in the background
+    while worker.learn_in_background():
+        pass
     committed = make_updater("online_ukf", **UKF)
     for d, f in zip(sd, sf, strict=True):
         committed.observe(float(d), float(f))
