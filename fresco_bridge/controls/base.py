@@ -62,6 +62,11 @@ class Controller(abc.ABC):
     The outer-loop correction (``sites/correction_loop.py``) reads it when a site asks for
     ``measured = "external"``."""
 
+    def in_process(self) -> InlineController | None:
+        """This controller as an in-process one whose specimen the bridge holds (resume
+        replays the record's commands into it), or None: a specimen outside the bridge."""
+        return None
+
     async def connect(self) -> None:  # noqa: B027 - optional hook
         """Open the link to the controller (no-op for in-process controllers)."""
 
@@ -107,6 +112,9 @@ class InlineController(Controller):
     """
 
     inline = True
+
+    def in_process(self) -> InlineController:
+        return self
 
     @abc.abstractmethod
     def set_ctrl_now(self, disp: tuple[float, ...]) -> None:

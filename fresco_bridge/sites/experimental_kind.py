@@ -150,8 +150,8 @@ class SpecimenRestore:
     def __init__(self, sites: Mapping[str, ExperimentalSite], run_dir: Path) -> None:
         self.run_dir = run_dir
         self._inline: dict[str, tuple[ExperimentalSite, InlineController]] = {
-            name: (site, site.controller) for name, site in sites.items()
-            if isinstance(site.controller, InlineController)}
+            name: (site, inline) for name, site in sites.items()
+            if (inline := site.controller.in_process()) is not None}
         self._session: dict[str, int] = {}
         self._sent: dict[str, tuple[float, ...] | None] = {}
         self.counts = dict.fromkeys(self._inline, 0)
